@@ -1,0 +1,184 @@
+//! Conversion of user height maps (any common format) into the `R32Float` mip chain that the
+//! height pass samples with mip selection.
+
+use bevy::{
+    asset::RenderAssetUsages,
+    image::Image,
+    render::render_resource::{Extent3d, TextureDimension, TextureFormat},
+};
+
+/// Reads channel 0 of every texel of mip level 0 as `f32`: normalized formats map to `[0, 1]`,
+/// float formats are taken as they are. sRGB-tagged data is read raw: a height map is data,
+/// not colour. Returns the values and notes worth a one-time warning.
+pub fn height_values(image: &Image) -> Result<(Vec<f32>, Vec<String>), String> {
+    use TextureFormat as F;
+    let format = image.texture_descriptor.format;
+    let (w, h) = (image.width(), image.height());
+    if w == 0 || h == 0 {
+        return Err("the image is empty (0 texels)".into());
+    }
+    let data = image
+        .data
+        .as_ref()
+        .ok_or("the image has no CPU-side data (RenderAssetUsages::RENDER_WORLD only?)")?;
+    let n = (w * h) as usize;
+    let mut notes = Vec::new();
+    if format.is_srgb() {
+        notes.push(format!(
+            "{format:?} is sRGB-tagged; its values are used as linear heights (load height maps \
+             with `is_srgb: false` to silence this)"
+        ));
+    }
+    let unorm8 = |stride: usize, channel: usize| -> Vec<f32> {
+        (0..n).map(|i| data[i * stride + channel] as f32 / 255.0).collect()
+    };
+    let u16_at = |o: usize| u16::from_le_bytes([data[o], data[o + 1]]);
+    let unorm16 = |stride: usize| -> Vec<f32> {
+        (0..n).map(|i| u16_at(i * stride) as f32 / 65535.0).collect()
+    };
+    let f16s = |stride: usize| -> Vec<f32> {
+        (0..n).map(|i| half_to_f32(u16_at(i * stride))).collect()
+    };
+    let f32s = |stride: usize| -> Vec<f32> {
+        (0..n)
+            .map(|i| {
+                let o = i * stride;
+                f32::from_le_bytes([data[o], data[o + 1], data[o + 2], data[o + 3]])
+            })
+            .collect()
+    };
+    let bytes_per_texel = format
+        .block_copy_size(None)
+        .ok_or_else(|| format!("{format:?} is not a supported height-map format"))?
+        as usize;
+    if format.is_compressed() || data.len() < n * bytes_per_texel {
+        return Err(format!("{format:?} is not a supported height-map format"));
+    }
+    let values = match format {
+        F::R8Unorm | F::R8Uint | F::Rg8Unorm | F::Rgba8Unorm | F::Rgba8UnormSrgb => {
+            unorm8(bytes_per_texel, 0)
+        }
+        F::Bgra8Unorm | F::Bgra8UnormSrgb => unorm8(4, 2),
+        F::R16Unorm | F::R16Uint | F::Rg16Unorm | F::Rgba16Unorm | F::Rgba16Uint => {
+            unorm16(bytes_per_texel)
+        }
+        F::R16Float | F::Rg16Float | F::Rgba16Float => f16s(bytes_per_texel),
+        F::R32Float | F::Rg32Float | F::Rgba32Float => f32s(bytes_per_texel),
+        other => return Err(format!("{other:?} is not a supported height-map format")),
+    };
+    let mut bad = 0;
+    let values = values
+        .into_iter()
+        .map(|v| {
+            if v.is_finite() {
+                v
+            } else {
+                bad += 1;
+                0.0
+            }
+        })
+        .collect();
+    if bad > 0 {
+        notes.push(format!("{bad} texels are NaN or infinite; they read as 0"));
+    }
+    Ok((values, notes))
+}
+
+/// The height map as an `R32Float` image with a full box-filtered mip chain, so that the height
+/// pass can choose the level that matches the pixel footprint (minification must not alias).
+pub fn height_map_mip_chain(image: &Image) -> Result<(Image, Vec<String>), String> {
+    let (values, notes) = height_values(image)?;
+    let (w, h) = (image.width(), image.height());
+    let levels = 32 - w.max(h).leading_zeros();
+    let mut data: Vec<u8> = bytemuck::cast_slice(&values).to_vec();
+    let (mut level, mut lw, mut lh) = (values, w, h);
+    for _ in 1..levels {
+        let (nw, nh) = ((lw / 2).max(1), (lh / 2).max(1));
+        let mut next = Vec::with_capacity((nw * nh) as usize);
+        for y in 0..nh {
+            for x in 0..nw {
+                let at = |dx: u32, dy: u32| {
+                    let sx = (2 * x + dx).min(lw - 1);
+                    let sy = (2 * y + dy).min(lh - 1);
+                    level[(sy * lw + sx) as usize]
+                };
+                next.push(0.25 * (at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1)));
+            }
+        }
+        data.extend_from_slice(bytemuck::cast_slice(&next));
+        (level, lw, lh) = (next, nw, nh);
+    }
+    let mut out = Image::new_uninit(
+        Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        TextureFormat::R32Float,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    out.texture_descriptor.mip_level_count = levels;
+    out.data = Some(data);
+    Ok((out, notes))
+}
+
+/// IEEE 754 binary16 → f32.
+pub(crate) fn half_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exp = (h >> 10) & 0x1f;
+    let frac = (h & 0x3ff) as f32;
+    match exp {
+        0 => sign * frac * 2f32.powi(-24),
+        31 => {
+            if frac == 0.0 {
+                sign * f32::INFINITY
+            } else {
+                f32::NAN
+            }
+        }
+        e => sign * (1.0 + frac / 1024.0) * 2f32.powi(e as i32 - 15),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(format: TextureFormat, w: u32, h: u32, data: Vec<u8>) -> Image {
+        Image::new(
+            Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+            TextureDimension::D2,
+            data,
+            format,
+            RenderAssetUsages::default(),
+        )
+    }
+
+    #[test]
+    fn reads_gray_rgba_16_bit_and_float_formats() {
+        let g8 = image(TextureFormat::R8Unorm, 2, 1, vec![0, 255]);
+        assert_eq!(height_values(&g8).unwrap().0, vec![0.0, 1.0]);
+        let rgba = image(TextureFormat::Rgba8UnormSrgb, 1, 1, vec![51, 0, 0, 255]);
+        let (v, notes) = height_values(&rgba).unwrap();
+        assert_eq!(v, vec![0.2]);
+        assert_eq!(notes.len(), 1, "sRGB data is noted, not decoded");
+        let g16 = image(TextureFormat::R16Unorm, 1, 1, 65535u16.to_le_bytes().to_vec());
+        assert_eq!(height_values(&g16).unwrap().0, vec![1.0]);
+        let h16 = image(TextureFormat::R16Float, 1, 1, 0x3800u16.to_le_bytes().to_vec());
+        assert_eq!(height_values(&h16).unwrap().0, vec![0.5]);
+        let f = image(TextureFormat::R32Float, 2, 1, bytemuck::cast_slice(&[0.25f32, f32::NAN]).to_vec());
+        let (v, notes) = height_values(&f).unwrap();
+        assert_eq!(v, vec![0.25, 0.0]);
+        assert_eq!(notes.len(), 1);
+        let bad = image(TextureFormat::Depth32Float, 1, 1, vec![0; 4]);
+        assert!(height_values(&bad).is_err());
+    }
+
+    #[test]
+    fn mip_chain_of_a_non_square_map() {
+        let values: Vec<f32> = (0..8 * 2).map(|i| (i % 2) as f32).collect();
+        let img = image(TextureFormat::R32Float, 8, 2, bytemuck::cast_slice(&values).to_vec());
+        let (mips, _) = height_map_mip_chain(&img).unwrap();
+        assert_eq!(mips.texture_descriptor.mip_level_count, 4); // 8×2, 4×1, 2×1, 1×1
+        let data: &[f32] = bytemuck::cast_slice(mips.data.as_ref().unwrap());
+        assert_eq!(data.len(), 16 + 4 + 2 + 1);
+        assert!(data[16..].iter().all(|v| (v - 0.5).abs() < 1e-6), "box filter averages");
+    }
+}

@@ -1,0 +1,98 @@
+//! # bevy_mesostructure
+//!
+//! Real-time lighting of the detailed surface that a low-polygon mesh with a height map stands
+//! for: ambient occlusion among the bumps, their shadows and one-bounce colour bleeding, on
+//! dynamic and deforming meshes, with no precomputation. It implements Wang, Yang, Ma and Zhao,
+//! "Real-Time Global Illumination Rendering for Mesostructure Surface Based on Gradient Map"
+//! (Journal of Software 22(10), 2011): a screen-space height map (MHM), its gradient map (MHGM)
+//! and per-pixel local apex sets, from which the lighting terms follow.
+//!
+//! ## Quick start
+//! ```no_run
+//! use bevy::prelude::*;
+//! use bevy_mesostructure::prelude::*;
+//!
+//! fn main() {
+//!     App::new()
+//!         .add_plugins((DefaultPlugins, MesostructurePlugin))
+//!         .add_systems(Startup, setup)
+//!         .run();
+//! }
+//!
+//! fn setup(
+//!     mut commands: Commands,
+//!     mut meshes: ResMut<Assets<Mesh>>,
+//!     mut materials: ResMut<Assets<StandardMaterial>>,
+//!     asset_server: Res<AssetServer>,
+//! ) {
+//!     commands.spawn((
+//!         Camera3d::default(),
+//!         Msaa::Off,
+//!         Mesostructure::default(),
+//!         Transform::from_xyz(0.0, 2.0, 3.0).looking_at(Vec3::ZERO, Vec3::Y),
+//!     ));
+//!     commands.spawn((
+//!         Mesh3d(meshes.add(Sphere::new(1.0))),
+//!         MeshMaterial3d(materials.add(Color::WHITE)),
+//!         MesostructureMaterial {
+//!             height_map: asset_server.load("height_maps/bricks.png"),
+//!             scale: 0.1,
+//!             ..default()
+//!         },
+//!     ));
+//! }
+//! ```
+//!
+//! ## What runs
+//! Per camera with [`Mesostructure`], between Bevy's prepass and its main pass: the height pass
+//! (only meshes with [`MesostructureMaterial`]), the gradient pass and the apex pass; see
+//! [`render`]. [`reference`] is the same method in plain Rust, the oracle of the GPU tests.
+//!
+//! ## Bad input
+//! Missing or still-loading height maps, unsupported formats, meshes without UVs or normals,
+//! scales that are not finite and positive, MSAA on the camera, zero-sized viewports: each gets
+//! one warning, and the mesh or camera renders as it would without the plugin.
+
+#![warn(missing_docs)]
+
+pub mod height_map_import;
+pub mod height_maps;
+pub mod material;
+pub mod reference;
+pub mod render;
+pub mod settings;
+mod warn_once;
+
+use bevy::{prelude::*, render::{extract_component::ExtractComponentPlugin, sync_component::SyncComponentPlugin}};
+
+pub use material::MesostructureMaterial;
+pub use render::capture::{CapturedFrame, MesostructureCapture, MesostructureCaptures};
+pub use settings::{Mesostructure, MesostructureDebugView};
+
+/// Everything an app needs.
+pub mod prelude {
+    pub use crate::{
+        height_maps::HeightMap, Mesostructure, MesostructureDebugView, MesostructureMaterial,
+        MesostructurePlugin,
+    };
+}
+
+/// Adds mesostructure lighting: put [`Mesostructure`] on a camera and
+/// [`MesostructureMaterial`] on meshes.
+#[derive(Default)]
+pub struct MesostructurePlugin;
+
+impl Plugin for MesostructurePlugin {
+    fn build(&self, app: &mut App) {
+        app.register_type::<Mesostructure>()
+            .register_type::<MesostructureMaterial>()
+            .init_resource::<warn_once::WarnedOnce>()
+            .init_resource::<material::HeightMapMips>()
+            .add_plugins((
+                SyncComponentPlugin::<Mesostructure>::default(),
+                ExtractComponentPlugin::<material::PreparedMesostructure>::default(),
+            ))
+            .add_systems(PostUpdate, material::prepare_mesostructure_materials);
+        render::build(app);
+    }
+}

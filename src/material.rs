@@ -1,0 +1,172 @@
+//! The per-mesh component and its main-world preparation.
+
+use bevy::{
+    asset::{AssetEvent, LoadState},
+    image::Image,
+    math::Affine2,
+    platform::collections::HashMap,
+    prelude::*,
+    render::extract_component::ExtractComponent,
+};
+
+use crate::{height_map_import::height_map_mip_chain, warn_once::WarnedOnce};
+
+/// Marks a mesh as a mesostructure surface: the low-polygon core mesh plus a height field bound
+/// to it by its UVs (paper eq. 7: `P = P0 + n0 · dis · k`).
+///
+/// The mesh itself is never displaced; the plugin lights it as if it were. The mesh needs
+/// `Mesh::ATTRIBUTE_POSITION`, `ATTRIBUTE_NORMAL` and `ATTRIBUTE_UV_0`; without them it is drawn
+/// as usual, with a one-time warning.
+#[derive(Component, Reflect, Clone, Debug, PartialEq)]
+#[reflect(Component, Default, Clone, Debug, PartialEq)]
+pub struct MesostructureMaterial {
+    /// The height field `dis(u, v)`: 1 = highest. Any single-channel, RGBA (red is used),
+    /// 8-bit, 16-bit or float image; sRGB-tagged images are read as plain data, not decoded.
+    /// Any size, square or not; it tiles (repeat addressing).
+    pub height_map: Handle<Image>,
+    /// `k`: the height of a height-map value of 1, in world units (valid: finite and > 0).
+    /// The paper's valid range for unit-sized objects is 0.05–0.8: below it the structures are
+    /// sub-pixel, above it larger than the object.
+    pub scale: f32,
+    /// Applied to the mesh UVs before the height map is sampled (tiling, offset, rotation).
+    pub uv_transform: Affine2,
+}
+
+impl Default for MesostructureMaterial {
+    /// No height map (nothing happens until one is set), `k = 0.1` (a tenth of a unit-sized
+    /// object, mid-range of the paper's valid scales), identity UVs.
+    fn default() -> Self {
+        Self {
+            height_map: Handle::default(),
+            scale: 0.1,
+            uv_transform: Affine2::IDENTITY,
+        }
+    }
+}
+
+/// What the render world needs of a valid [`MesostructureMaterial`]: inserted by the plugin
+/// once the height map is loaded and converted, removed while the input is invalid.
+#[derive(Component, ExtractComponent, Clone, Debug, PartialEq)]
+pub struct PreparedMesostructure {
+    /// The height map converted to an `R32Float` mip chain.
+    pub height_mips: AssetId<Image>,
+    /// `k`, world units.
+    pub scale: f32,
+    /// UV transform.
+    pub uv_transform: Affine2,
+}
+
+/// Converted height maps, by source image.
+#[derive(Resource, Default)]
+pub struct HeightMapMips(HashMap<AssetId<Image>, Option<Handle<Image>>>);
+
+/// Validates each [`MesostructureMaterial`], converts its height map once, and keeps
+/// [`PreparedMesostructure`] in step.
+pub fn prepare_mesostructure_materials(
+    mut commands: Commands,
+    materials: Query<(Entity, &MesostructureMaterial, Option<&PreparedMesostructure>)>,
+    mut removed: RemovedComponents<MesostructureMaterial>,
+    mut image_events: MessageReader<AssetEvent<Image>>,
+    mut images: ResMut<Assets<Image>>,
+    asset_server: Res<AssetServer>,
+    mut mips: ResMut<HeightMapMips>,
+    mut warned: ResMut<WarnedOnce>,
+) {
+    for entity in removed.read() {
+        if let Ok(mut e) = commands.get_entity(entity) {
+            e.try_remove::<PreparedMesostructure>();
+        }
+    }
+    for event in image_events.read() {
+        if let AssetEvent::Modified { id } | AssetEvent::Removed { id } = event {
+            if let Some(Some(derived)) = mips.0.remove(id) {
+                images.remove(&derived);
+            }
+        }
+    }
+    for (entity, material, prepared) in &materials {
+        let wanted = prepare_one(entity, material, &mut images, &asset_server, &mut mips, &mut warned);
+        match (wanted, prepared) {
+            (Some(w), Some(p)) if &w == p => {}
+            (Some(w), _) => {
+                commands.entity(entity).insert(w);
+            }
+            (None, Some(_)) => {
+                commands.entity(entity).remove::<PreparedMesostructure>();
+            }
+            (None, None) => {}
+        }
+    }
+}
+
+fn prepare_one(
+    entity: Entity,
+    material: &MesostructureMaterial,
+    images: &mut Assets<Image>,
+    asset_server: &AssetServer,
+    mips: &mut HeightMapMips,
+    warned: &mut WarnedOnce,
+) -> Option<PreparedMesostructure> {
+    if !(material.scale.is_finite() && material.scale > 0.0) {
+        warned.warn(format!("scale {entity}"), || {
+            format!(
+                "entity {entity}: MesostructureMaterial::scale is {}, but must be finite and > 0; \
+                 the mesh is drawn without mesostructure until it is fixed",
+                material.scale
+            )
+        });
+        return None;
+    }
+    warned.forget(&format!("scale {entity}"));
+    if !material.uv_transform.is_finite() {
+        warned.warn(format!("uv {entity}"), || {
+            format!("entity {entity}: MesostructureMaterial::uv_transform is not finite; ignored")
+        });
+        return None;
+    }
+    let id = material.height_map.id();
+    if !mips.0.contains_key(&id) {
+        let Some(source) = images.get(id) else {
+            match asset_server.get_load_state(id) {
+                Some(LoadState::Loading) => {}
+                Some(LoadState::Failed(err)) => {
+                    warned.warn(format!("failed {id}"), || {
+                        format!("entity {entity}: the height map failed to load ({err}); \
+                                 the mesh is drawn without mesostructure")
+                    });
+                }
+                _ => {
+                    warned.warn(format!("missing {id}"), || {
+                        format!("entity {entity}: MesostructureMaterial::height_map is not set \
+                                 or not an image asset; the mesh is drawn without mesostructure")
+                    });
+                }
+            }
+            return None;
+        };
+        let derived = match height_map_mip_chain(source) {
+            Ok((image, notes)) => {
+                for note in notes {
+                    warned.warn(format!("note {id} {note}"), || {
+                        format!("height map {id}: {note}")
+                    });
+                }
+                Some(images.add(image))
+            }
+            Err(err) => {
+                warned.warn(format!("convert {id}"), || {
+                    format!("entity {entity}: cannot use the height map: {err}; \
+                             the mesh is drawn without mesostructure")
+                });
+                None
+            }
+        };
+        mips.0.insert(id, derived);
+    }
+    let derived = mips.0.get(&id)?.as_ref()?;
+    Some(PreparedMesostructure {
+        height_mips: derived.id(),
+        scale: material.scale,
+        uv_transform: material.uv_transform,
+    })
+}

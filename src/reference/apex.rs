@@ -1,0 +1,260 @@
+//! Local apex sets f(P) (paper §2.2): gradient ascent over the MHGM.
+
+use super::{GradientMap, ScreenHeightMap, NEIGHBOURS};
+
+/// The most indirect sample directions a pixel may use (the GPU uniform holds this many).
+pub const MAX_APEX_DIRECTIONS: u32 = 16;
+
+/// An apex must rise above P by more than this (world units) to occlude anything; it keeps
+/// flat maps free of apexes.
+pub const APEX_MIN_RISE: f32 = 1.0e-6;
+
+/// Bounds and sampling of the apex search.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ApexSearch {
+    /// Indirect sample directions around P (0..=[`MAX_APEX_DIRECTIONS`]).
+    pub directions: u32,
+    /// Ascent steps (one pixel each) before an ascent gives up; bounds the work per pixel.
+    pub max_steps: u32,
+    /// Smallest distance of the indirect sample points from P, in pixels.
+    pub min_radius: u32,
+    /// Largest distance of the indirect sample points from P, in pixels.
+    pub max_radius: u32,
+}
+
+impl Default for ApexSearch {
+    fn default() -> Self {
+        Self {
+            directions: 8,
+            max_steps: 64,
+            min_radius: 2,
+            max_radius: 32,
+        }
+    }
+}
+
+/// How an ascent ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ApexKind {
+    /// A local maximum of height among the connected neighbours.
+    Local,
+    /// The ascent wanted to leave the visible region M' here: a boundary point B_P.
+    Boundary,
+    /// The step bound was hit; the pixel reached stands in for the apex.
+    Truncated,
+}
+
+/// One apex of a set, in absolute pixel coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Apex {
+    /// Column.
+    pub x: i32,
+    /// Row.
+    pub y: i32,
+    /// How the ascent that found it ended.
+    pub kind: ApexKind,
+}
+
+/// The local apex set f(P) of one pixel.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ApexSet {
+    /// H_P, found by ascending from P itself; `None` where P is already at a local maximum.
+    pub direct: Option<Apex>,
+    /// H_P^i, distinct apexes found by ascending from the sample points around P.
+    pub indirect: Vec<Apex>,
+    /// Whether any ascent of this pixel hit the step bound.
+    pub truncated: bool,
+}
+
+impl ApexSet {
+    /// Number of distinct apexes.
+    pub fn len(&self) -> usize {
+        self.direct.is_some() as usize + self.indirect.len()
+    }
+
+    /// Whether the set is empty.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// All apexes, direct first.
+    pub fn iter(&self) -> impl Iterator<Item = &Apex> {
+        self.direct.iter().chain(self.indirect.iter())
+    }
+}
+
+/// The unit direction `(cos θ_i, sin θ_i)` of each indirect sample, `θ_i = 2π i / n`, as `f32`.
+/// The GPU receives this table, so both sides round the sample points identically.
+pub fn sample_directions(n: u32) -> Vec<[f32; 2]> {
+    (0..n)
+        .map(|i| {
+            let theta = std::f64::consts::TAU * i as f64 / n as f64;
+            [theta.cos() as f32, theta.sin() as f32]
+        })
+        .collect()
+}
+
+/// Quantizes a gradient to the index of the 8-neighbour nearest its direction (22.5° sectors),
+/// or `None` for a zero gradient. Mirrors `quantize_direction` in `apex.wgsl`.
+pub fn quantize_direction(g: [f32; 2]) -> Option<usize> {
+    const TAN_22_5: f32 = 0.414_213_57;
+    let (ax, ay) = (g[0].abs(), g[1].abs());
+    if ax == 0.0 && ay == 0.0 {
+        return None;
+    }
+    let sx = if ax > TAN_22_5 * ay { g[0].signum() as i32 } else { 0 };
+    let sy = if ay > TAN_22_5 * ax { g[1].signum() as i32 } else { 0 };
+    NEIGHBOURS.iter().position(|&o| o == (sx, sy))
+}
+
+/// Follows the gradient upward from `(x, y)` one pixel a step: to the neighbour the quantized
+/// gradient points at while it is connected and higher; else to the highest connected higher
+/// neighbour (ridges, where the quantized direction misses); stops at a local maximum, where the
+/// gradient points out of the visible region (a boundary point), or after `max_steps` steps.
+pub fn ascend(
+    mhm: &ScreenHeightMap,
+    mhgm: &GradientMap,
+    (mut x, mut y): (i32, i32),
+    max_steps: u32,
+) -> (Apex, u32) {
+    let mut steps = 0;
+    loop {
+        let i = mhm.index(x as u32, y as u32);
+        if steps == max_steps {
+            return (Apex { x, y, kind: ApexKind::Truncated }, steps);
+        }
+        let h = mhm.heights[i];
+        let height_of = |dir: usize| {
+            let (ox, oy) = NEIGHBOURS[dir];
+            mhm.heights[mhm.index((x + ox) as u32, (y + oy) as u32)]
+        };
+        let mut next = None;
+        if let Some(dir) = quantize_direction(mhgm.gradients[i]) {
+            if !mhgm.connected(i, dir) {
+                return (Apex { x, y, kind: ApexKind::Boundary }, steps);
+            }
+            if height_of(dir) > h {
+                next = Some(dir);
+            }
+        }
+        if next.is_none() {
+            let mut best = h;
+            for dir in 0..8 {
+                if mhgm.connected(i, dir) && height_of(dir) > best {
+                    best = height_of(dir);
+                    next = Some(dir);
+                }
+            }
+        }
+        let Some(dir) = next else {
+            return (Apex { x, y, kind: ApexKind::Local }, steps);
+        };
+        x += NEIGHBOURS[dir].0;
+        y += NEIGHBOURS[dir].1;
+        steps += 1;
+    }
+}
+
+/// The apex set of pixel `(x, y)`. Mirrors `apex.wgsl`:
+/// 1. the direct apex by [`ascend`] from P;
+/// 2. for each direction `θ_i` the sample point `P + floor(r·(cos θ_i, sin θ_i) + 0.5)` with
+///    `r = clamp(chebyshev distance to the direct apex, min_radius, max_radius)` (the set follows
+///    the size of the structures, no hand-set radius), skipped unless it lies on the same object,
+///    and its apex by [`ascend`];
+/// 3. an apex (boundary points included) enters the set if it rises above P by more than
+///    [`APEX_MIN_RISE`] and is not in the set yet.
+pub fn apex_set(
+    mhm: &ScreenHeightMap,
+    mhgm: &GradientMap,
+    search: &ApexSearch,
+    directions: &[[f32; 2]],
+    (x, y): (i32, i32),
+) -> ApexSet {
+    let mut set = ApexSet::default();
+    let i = mhm.index(x as u32, y as u32);
+    if mhm.objects[i] == 0 {
+        return set;
+    }
+    let h0 = mhm.heights[i];
+    let rises = |a: &Apex| mhm.heights[mhm.index(a.x as u32, a.y as u32)] > h0 + APEX_MIN_RISE;
+
+    let (direct, _) = ascend(mhm, mhgm, (x, y), search.max_steps);
+    set.truncated |= direct.kind == ApexKind::Truncated;
+    let mut radius = search.min_radius;
+    if rises(&direct) {
+        let chebyshev = (direct.x - x).unsigned_abs().max((direct.y - y).unsigned_abs());
+        radius = chebyshev.clamp(search.min_radius, search.max_radius.max(search.min_radius));
+        set.direct = Some(direct);
+    }
+    for d in directions.iter().take(search.directions as usize) {
+        let sx = x + (radius as f32 * d[0] + 0.5).floor() as i32;
+        let sy = y + (radius as f32 * d[1] + 0.5).floor() as i32;
+        if !mhm.contains(sx, sy) || mhm.objects[mhm.index(sx as u32, sy as u32)] != mhm.objects[i] {
+            continue;
+        }
+        let (apex, _) = ascend(mhm, mhgm, (sx, sy), search.max_steps);
+        set.truncated |= apex.kind == ApexKind::Truncated;
+        if rises(&apex) && !set.iter().any(|a| a.x == apex.x && a.y == apex.y) {
+            set.indirect.push(apex);
+        }
+    }
+    set
+}
+
+/// The apex sets of every pixel, row-major.
+pub fn apex_sets(mhm: &ScreenHeightMap, mhgm: &GradientMap, search: &ApexSearch) -> Vec<ApexSet> {
+    let directions = sample_directions(search.directions.min(MAX_APEX_DIRECTIONS));
+    let mut sets = Vec::with_capacity((mhm.width * mhm.height) as usize);
+    for y in 0..mhm.height as i32 {
+        for x in 0..mhm.width as i32 {
+            sets.push(apex_set(mhm, mhgm, search, &directions, (x, y)));
+        }
+    }
+    sets
+}
+
+/// GPU layout of one pixel's apex set in the apex buffer: a header word, then one word per apex
+/// (direct first), each `(dx: i16, dy: i16)` relative to P. See [`unpack_apex_set`].
+pub mod packed {
+    /// Bits 0..5 of the header: number of apexes.
+    pub const COUNT_MASK: u32 = 0x3f;
+    /// The first apex is the direct apex.
+    pub const DIRECT_PRESENT: u32 = 1 << 6;
+    /// An ascent of this pixel hit the step bound.
+    pub const TRUNCATED: u32 = 1 << 7;
+    /// Bit `BOUNDARY_SHIFT + slot` marks a boundary point.
+    pub const BOUNDARY_SHIFT: u32 = 8;
+
+    /// Words per pixel for `directions` indirect samples: header, direct apex, indirect apexes.
+    pub const fn stride(directions: u32) -> u32 {
+        2 + directions
+    }
+}
+
+/// Decodes one pixel's apex set from the GPU apex buffer (`words` is its stride-long slice).
+/// Apexes that hit the step bound come back as [`ApexKind::Local`] with `truncated` set.
+pub fn unpack_apex_set(words: &[u32], (x, y): (i32, i32)) -> ApexSet {
+    let header = words[0];
+    let count = (header & packed::COUNT_MASK) as usize;
+    let mut set = ApexSet {
+        truncated: header & packed::TRUNCATED != 0,
+        ..Default::default()
+    };
+    for slot in 0..count.min(words.len() - 1) {
+        let w = words[1 + slot];
+        let dx = (w & 0xffff) as u16 as i16 as i32;
+        let dy = (w >> 16) as u16 as i16 as i32;
+        let kind = if header >> (packed::BOUNDARY_SHIFT + slot as u32) & 1 == 1 {
+            ApexKind::Boundary
+        } else {
+            ApexKind::Local
+        };
+        let apex = Apex { x: x + dx, y: y + dy, kind };
+        if slot == 0 && header & packed::DIRECT_PRESENT != 0 {
+            set.direct = Some(apex);
+        } else {
+            set.indirect.push(apex);
+        }
+    }
+    set
+}

@@ -1,0 +1,154 @@
+//! The gradient map (MHGM, paper §2.1) with one-sided differences and boundary flags.
+
+use super::ScreenHeightMap;
+
+/// Pixel offsets of the 8 neighbours, in the order of the connectivity bits.
+/// `y` grows downwards (texture rows). The GPU shaders use the same table.
+pub const NEIGHBOURS: [(i32, i32); 8] = [
+    (1, 0),
+    (1, 1),
+    (0, 1),
+    (-1, 1),
+    (-1, 0),
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+];
+
+/// The pixel carries a mesostructure surface.
+pub const FLAG_VALID: u32 = 1 << 0;
+/// The pixel touches the screen edge.
+pub const FLAG_SCREEN_EDGE: u32 = 1 << 1;
+/// A neighbour belongs to another object or to no mesostructure surface (silhouette).
+pub const FLAG_OBJECT_EDGE: u32 = 1 << 2;
+/// A neighbour of the same object lies across a depth discontinuity.
+pub const FLAG_DEPTH_EDGE: u32 = 1 << 3;
+/// All boundary kinds: a pixel with any of them is a boundary point of the visible region M'.
+pub const FLAG_BOUNDARY: u32 = FLAG_SCREEN_EDGE | FLAG_OBJECT_EDGE | FLAG_DEPTH_EDGE;
+/// Shift of the 8-bit neighbour connectivity mask (bit `i` = [`NEIGHBOURS`]`[i]` is connected).
+pub const CONNECTIVITY_SHIFT: u32 = 8;
+
+/// How neighbouring depths are judged continuous.
+///
+/// Neighbour `q` of `p` is across a depth discontinuity when
+/// `|d(q) − d(p)| > max(relative · d(p), slope_factor · |d(p) − d(p − (q − p))|)`:
+/// a jump larger than a small fraction of the depth and larger than the slope seen on the
+/// opposite side. Reverse-Z NDC depth is affine in screen space on a plane, so planes at grazing
+/// angles stay connected through the second term.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DepthContinuity {
+    /// Relative depth jump always accepted (fraction of the pixel's NDC depth).
+    pub relative: f32,
+    /// How much steeper than the opposite side a continuous neighbour may be.
+    pub slope_factor: f32,
+}
+
+impl Default for DepthContinuity {
+    fn default() -> Self {
+        Self {
+            relative: 0.02,
+            slope_factor: 3.0,
+        }
+    }
+}
+
+/// The gradient map of a [`ScreenHeightMap`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct GradientMap {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Gradient of height in world units per pixel, `(∂h/∂x, ∂h/∂y)`, y down.
+    pub gradients: Vec<[f32; 2]>,
+    /// `FLAG_*` bits and the connectivity mask.
+    pub flags: Vec<u32>,
+}
+
+impl GradientMap {
+    /// Whether pixel `i` is connected to its neighbour `dir` (an index into [`NEIGHBOURS`]).
+    #[inline]
+    pub fn connected(&self, i: usize, dir: usize) -> bool {
+        self.flags[i] >> (CONNECTIVITY_SHIFT + dir as u32) & 1 == 1
+    }
+
+    /// Whether pixel `i` is a boundary point of the visible region.
+    #[inline]
+    pub fn is_boundary(&self, i: usize) -> bool {
+        self.flags[i] & FLAG_VALID != 0 && self.flags[i] & FLAG_BOUNDARY != 0
+    }
+}
+
+/// Computes the MHGM: per valid pixel, the 8-neighbour connectivity (same object, on screen, no
+/// depth discontinuity), the boundary flags, and the gradient by central differences where both
+/// neighbours on an axis are connected, one-sided differences where one is, and 0 where none is.
+pub fn gradient_map(mhm: &ScreenHeightMap, continuity: DepthContinuity) -> GradientMap {
+    let n = (mhm.width * mhm.height) as usize;
+    let mut gradients = vec![[0.0; 2]; n];
+    let mut flags = vec![0u32; n];
+    for y in 0..mhm.height as i32 {
+        for x in 0..mhm.width as i32 {
+            let i = mhm.index(x as u32, y as u32);
+            let (g, f) = gradient_at(mhm, continuity, x, y);
+            gradients[i] = g;
+            flags[i] = f;
+        }
+    }
+    GradientMap {
+        width: mhm.width,
+        height: mhm.height,
+        gradients,
+        flags,
+    }
+}
+
+/// One pixel of [`gradient_map`]; mirrors `gradient.wgsl`.
+fn gradient_at(mhm: &ScreenHeightMap, c: DepthContinuity, x: i32, y: i32) -> ([f32; 2], u32) {
+    let i = mhm.index(x as u32, y as u32);
+    let object = mhm.objects[i];
+    if object == 0 {
+        return ([0.0, 0.0], 0);
+    }
+    let d0 = mhm.depths[i];
+    let same_object = |qx: i32, qy: i32| {
+        mhm.contains(qx, qy) && mhm.objects[mhm.index(qx as u32, qy as u32)] == object
+    };
+    let mut flags = FLAG_VALID;
+    for (dir, &(ox, oy)) in NEIGHBOURS.iter().enumerate() {
+        let (qx, qy) = (x + ox, y + oy);
+        if !mhm.contains(qx, qy) {
+            flags |= FLAG_SCREEN_EDGE;
+            continue;
+        }
+        if !same_object(qx, qy) {
+            flags |= FLAG_OBJECT_EDGE;
+            continue;
+        }
+        let dq = mhm.depths[mhm.index(qx as u32, qy as u32)];
+        let mut tolerance = c.relative * d0;
+        let (px, py) = (x - ox, y - oy);
+        if same_object(px, py) {
+            let dp = mhm.depths[mhm.index(px as u32, py as u32)];
+            tolerance = tolerance.max(c.slope_factor * (d0 - dp).abs());
+        }
+        if (dq - d0).abs() > tolerance {
+            flags |= FLAG_DEPTH_EDGE;
+            continue;
+        }
+        flags |= 1 << (CONNECTIVITY_SHIFT + dir as u32);
+    }
+    let h0 = mhm.heights[i];
+    let height_at = |dir: usize| {
+        let (ox, oy) = NEIGHBOURS[dir];
+        mhm.heights[mhm.index((x + ox) as u32, (y + oy) as u32)]
+    };
+    let connected = |dir: usize| flags >> (CONNECTIVITY_SHIFT + dir as u32) & 1 == 1;
+    // Axis pairs: +x is neighbour 0, −x is 4, +y is 2, −y is 6.
+    let axis = |plus: usize, minus: usize| match (connected(plus), connected(minus)) {
+        (true, true) => (height_at(plus) - height_at(minus)) * 0.5,
+        (true, false) => height_at(plus) - h0,
+        (false, true) => h0 - height_at(minus),
+        (false, false) => 0.0,
+    };
+    ([axis(0, 4), axis(2, 6)], flags)
+}

@@ -1,0 +1,158 @@
+// Apex pass (paper §2.2): the local apex set f(P) of every mesostructure pixel — the direct
+// apex by gradient ascent from P, indirect apexes by ascents from sample points in
+// `apex_directions` directions, boundary points where an ascent would leave the visible region.
+// Work per pixel is bounded by `(1 + apex_directions) × max_ascent_steps` texel reads.
+// Mirrors `reference::apex_set`.
+
+#import bevy_mesostructure::common::{
+    MesostructureUniform, FLAG_VALID, APEX_DIRECT_PRESENT, APEX_TRUNCATED, APEX_BOUNDARY_SHIFT,
+    APEX_MIN_RISE, neighbour_offset, on_screen, is_connected, pack_offset, sample_direction,
+}
+
+@group(0) @binding(0) var mhm: texture_2d<f32>;
+@group(0) @binding(1) var mhgm: texture_2d<f32>;
+@group(0) @binding(2) var<storage, read_write> apex_sets: array<u32>;
+// [mesostructure pixels, pixels whose search hit the step bound, ascent steps, unused]
+@group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>, 4>;
+@group(0) @binding(4) var<uniform> settings: MesostructureUniform;
+
+const KIND_LOCAL: u32 = 0u;
+const KIND_BOUNDARY: u32 = 1u;
+const KIND_TRUNCATED: u32 = 2u;
+
+struct Ascent {
+    apex: vec2<i32>,
+    kind: u32,
+    steps: u32,
+}
+
+// Index of the 8-neighbour nearest the gradient direction (22.5° sectors); 8 for g = 0.
+fn quantize_direction(g: vec2<f32>) -> u32 {
+    let TAN_22_5 = 0.41421357;
+    let a = abs(g);
+    if a.x == 0.0 && a.y == 0.0 {
+        return 8u;
+    }
+    let s = vec2<i32>(
+        select(0, i32(sign(g.x)), a.x > TAN_22_5 * a.y),
+        select(0, i32(sign(g.y)), a.y > TAN_22_5 * a.x),
+    );
+    for (var dir = 0u; dir < 8u; dir++) {
+        if all(neighbour_offset(dir) == s) {
+            return dir;
+        }
+    }
+    return 8u;
+}
+
+fn ascend(start: vec2<i32>) -> Ascent {
+    var cur = start;
+    for (var steps = 0u; steps < settings.max_ascent_steps; steps++) {
+        let t = textureLoad(mhgm, cur, 0);
+        let flags = u32(t.w);
+        let h = t.z;
+        var next = 8u;
+        let dir = quantize_direction(t.xy);
+        if dir < 8u {
+            if !is_connected(flags, dir) {
+                return Ascent(cur, KIND_BOUNDARY, steps);
+            }
+            if textureLoad(mhgm, cur + neighbour_offset(dir), 0).z > h {
+                next = dir;
+            }
+        }
+        if next == 8u {
+            // Ridges: the quantized direction misses; take the highest higher neighbour.
+            var best = h;
+            for (var d = 0u; d < 8u; d++) {
+                if is_connected(flags, d) {
+                    let hd = textureLoad(mhgm, cur + neighbour_offset(d), 0).z;
+                    if hd > best {
+                        best = hd;
+                        next = d;
+                    }
+                }
+            }
+        }
+        if next == 8u {
+            return Ascent(cur, KIND_LOCAL, steps);
+        }
+        cur += neighbour_offset(next);
+    }
+    return Ascent(cur, KIND_TRUNCATED, settings.max_ascent_steps);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = vec2<i32>(textureDimensions(mhgm));
+    let p = vec2<i32>(id.xy);
+    if !on_screen(p, size) {
+        return;
+    }
+    let base = (id.y * u32(size.x) + id.x) * settings.apex_stride;
+    let c = textureLoad(mhgm, p, 0);
+    if (u32(c.w) & FLAG_VALID) == 0u {
+        apex_sets[base] = 0u;
+        return;
+    }
+    let h0 = c.z;
+    let object = textureLoad(mhm, p, 0).z;
+    var header = 0u;
+    var count = 0u;
+    var truncated = false;
+
+    let direct = ascend(p);
+    var steps = direct.steps;
+    truncated = direct.kind == KIND_TRUNCATED;
+    var radius = settings.min_sample_radius;
+    if textureLoad(mhgm, direct.apex, 0).z > h0 + APEX_MIN_RISE {
+        let d = abs(direct.apex - p);
+        let chebyshev = u32(max(d.x, d.y));
+        radius = clamp(chebyshev, settings.min_sample_radius,
+                       max(settings.max_sample_radius, settings.min_sample_radius));
+        apex_sets[base + 1u] = pack_offset(direct.apex - p);
+        header |= APEX_DIRECT_PRESENT;
+        if direct.kind == KIND_BOUNDARY {
+            header |= 1u << APEX_BOUNDARY_SHIFT;
+        }
+        count = 1u;
+    }
+
+    for (var i = 0u; i < settings.apex_directions; i++) {
+        let s = p + vec2<i32>(floor(f32(radius) * sample_direction(settings, i) + 0.5));
+        if !on_screen(s, size) || textureLoad(mhm, s, 0).z != object {
+            continue;
+        }
+        let a = ascend(s);
+        steps += a.steps;
+        truncated = truncated || a.kind == KIND_TRUNCATED;
+        if !(textureLoad(mhgm, a.apex, 0).z > h0 + APEX_MIN_RISE) {
+            continue;
+        }
+        let packed = pack_offset(a.apex - p);
+        var duplicate = false;
+        for (var j = 0u; j < count; j++) {
+            if apex_sets[base + 1u + j] == packed {
+                duplicate = true;
+                break;
+            }
+        }
+        if duplicate {
+            continue;
+        }
+        apex_sets[base + 1u + count] = packed;
+        if a.kind == KIND_BOUNDARY {
+            header |= 1u << (APEX_BOUNDARY_SHIFT + count);
+        }
+        count += 1u;
+    }
+
+    header |= count;
+    atomicAdd(&stats[0], 1u);
+    atomicAdd(&stats[2], steps);
+    if truncated {
+        header |= APEX_TRUNCATED;
+        atomicAdd(&stats[1], 1u);
+    }
+    apex_sets[base] = header;
+}

@@ -1,0 +1,225 @@
+//! Reading the working images back to the CPU: for tests, tools and the accuracy measurements.
+//! A capture stalls the frame while it waits for the GPU; leave it off in a game.
+
+use std::sync::{Arc, Mutex};
+
+use bevy::{
+    platform::collections::HashMap,
+    prelude::*,
+    render::{
+        render_resource::*,
+        renderer::{RenderContext, RenderDevice, ViewQuery},
+        sync_world::RenderEntity,
+        Extract,
+    },
+};
+
+use super::{ViewMesostructureTextures, CORE_NORMAL_FORMAT, MHGM_FORMAT, MHM_FORMAT};
+use crate::reference::{
+    unpack_apex_set, ApexSet, GradientMap, ScreenHeightMap, FLAG_VALID,
+};
+
+/// Put on a camera with [`Mesostructure`](crate::Mesostructure) to read its working images back
+/// every frame into [`MesostructureCaptures`].
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct MesostructureCapture;
+
+/// The working images of one camera in one frame, read back from the GPU.
+#[derive(Clone, Debug, Default)]
+pub struct CapturedFrame {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// MHM: (height·k, NDC depth, object id, dis) per pixel, row-major.
+    pub mhm: Vec<[f32; 4]>,
+    /// Core normal n0 (world space) and 1.
+    pub core_normal: Vec<[f32; 4]>,
+    /// MHGM: (∂h/∂x, ∂h/∂y, h, flags).
+    pub mhgm: Vec<[f32; 4]>,
+    /// Apex sets, `apex_stride` words per pixel.
+    pub apex_sets: Vec<u32>,
+    /// Words per pixel in `apex_sets`.
+    pub apex_stride: u32,
+    /// Apex-pass counters: mesostructure pixels, pixels whose search hit the step bound,
+    /// ascent steps in all.
+    pub apex_stats: [u32; 3],
+}
+
+impl CapturedFrame {
+    /// The MHM in the form the CPU oracle takes.
+    pub fn screen_height_map(&self) -> ScreenHeightMap {
+        ScreenHeightMap {
+            width: self.width,
+            height: self.height,
+            heights: self.mhm.iter().map(|t| t[0]).collect(),
+            objects: self.mhm.iter().map(|t| t[2] as u32).collect(),
+            depths: self.mhm.iter().map(|t| t[1]).collect(),
+        }
+    }
+
+    /// The MHGM in the form the CPU oracle produces.
+    pub fn gradient_map(&self) -> GradientMap {
+        GradientMap {
+            width: self.width,
+            height: self.height,
+            gradients: self.mhgm.iter().map(|t| [t[0], t[1]]).collect(),
+            flags: self.mhgm.iter().map(|t| t[3] as u32).collect(),
+        }
+    }
+
+    /// The apex set of pixel `(x, y)`.
+    pub fn apex_set(&self, x: u32, y: u32) -> ApexSet {
+        let i = (y * self.width + x) as usize;
+        if self.mhgm[i][3] as u32 & FLAG_VALID == 0 {
+            return ApexSet::default();
+        }
+        let s = self.apex_stride as usize;
+        unpack_apex_set(&self.apex_sets[i * s..(i + 1) * s], (x as i32, y as i32))
+    }
+
+    /// Number of pixels that carry a mesostructure surface.
+    pub fn mesostructure_pixels(&self) -> usize {
+        self.mhm.iter().filter(|t| t[2] != 0.0).count()
+    }
+}
+
+/// The newest [`CapturedFrame`] of each camera with [`MesostructureCapture`].
+#[derive(Resource, Clone, Default)]
+pub struct MesostructureCaptures(Arc<Mutex<HashMap<Entity, CapturedFrame>>>);
+
+impl MesostructureCaptures {
+    /// Takes the newest capture of `camera`, if one arrived since the last call.
+    pub fn take(&self, camera: Entity) -> Option<CapturedFrame> {
+        self.0.lock().ok()?.remove(&camera)
+    }
+}
+
+/// Render-world marker: read this view back; the main-world camera it belongs to.
+#[derive(Component, Clone, Copy)]
+pub struct ExtractedCapture(pub Entity);
+
+/// Marks the render views whose camera asks for a capture.
+pub fn extract_capture_requests(
+    mut commands: Commands,
+    cameras: Extract<Query<(RenderEntity, Entity, Has<MesostructureCapture>), With<crate::Mesostructure>>>,
+) {
+    for (render_entity, entity, capture) in &cameras {
+        let Ok(mut target) = commands.get_entity(render_entity) else {
+            continue;
+        };
+        if capture {
+            target.insert(ExtractedCapture(entity));
+        } else {
+            target.remove::<ExtractedCapture>();
+        }
+    }
+}
+
+struct Readback {
+    buffer: Buffer,
+    padded_row: u32,
+    row: u32,
+}
+
+/// Copies submitted this frame, mapped after submission.
+#[derive(Resource, Default)]
+pub struct PendingCaptures(Vec<(Entity, UVec2, u32, Vec<Readback>)>);
+
+fn copy_texture(ctx: &mut RenderContext, device: &RenderDevice, texture: &Texture, format: TextureFormat) -> Readback {
+    let size = texture.size();
+    let row = size.width * format.block_copy_size(None).unwrap();
+    let padded_row = RenderDevice::align_copy_bytes_per_row(row as usize) as u32;
+    let buffer = device.create_buffer(&BufferDescriptor {
+        label: Some("mesostructure_capture"),
+        size: padded_row as u64 * size.height as u64,
+        usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    ctx.command_encoder().copy_texture_to_buffer(
+        texture.as_image_copy(),
+        TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded_row), rows_per_image: None },
+        },
+        size,
+    );
+    Readback { buffer, padded_row, row }
+}
+
+fn copy_buffer(ctx: &mut RenderContext, device: &RenderDevice, source: &Buffer) -> Readback {
+    let buffer = device.create_buffer(&BufferDescriptor {
+        label: Some("mesostructure_capture"),
+        size: source.size(),
+        usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    ctx.command_encoder().copy_buffer_to_buffer(source, 0, &buffer, 0, source.size());
+    Readback { buffer, padded_row: source.size() as u32, row: source.size() as u32 }
+}
+
+/// Core3d system after the apex pass: copies the working images into mappable buffers.
+pub fn copy_capture(
+    view: ViewQuery<(&ViewMesostructureTextures, &ExtractedCapture)>,
+    device: Res<RenderDevice>,
+    mut pending: ResMut<PendingCaptures>,
+    mut ctx: RenderContext,
+) {
+    let (t, capture) = view.into_inner();
+    let readbacks = vec![
+        copy_texture(&mut ctx, &device, &t.mhm.texture, MHM_FORMAT),
+        copy_texture(&mut ctx, &device, &t.core_normal.texture, CORE_NORMAL_FORMAT),
+        copy_texture(&mut ctx, &device, &t.mhgm.texture, MHGM_FORMAT),
+        copy_buffer(&mut ctx, &device, &t.apex_sets),
+        copy_buffer(&mut ctx, &device, &t.apex_stats),
+    ];
+    pending.0.push((capture.0, t.size, t.apex_stride, readbacks));
+}
+
+fn read(device: &RenderDevice, r: &Readback, rows: u32) -> Vec<u8> {
+    let slice = r.buffer.slice(..);
+    slice.map_async(MapMode::Read, |result| {
+        if let Err(err) = result {
+            error!("bevy_mesostructure: capture readback failed: {err}");
+        }
+    });
+    let _ = device.poll(PollType::wait_indefinitely());
+    let data = slice.get_mapped_range();
+    let mut out = Vec::with_capacity((r.row * rows) as usize);
+    for y in 0..rows as usize {
+        let start = y * r.padded_row as usize;
+        out.extend_from_slice(&data[start..start + r.row as usize]);
+    }
+    drop(data);
+    r.buffer.unmap();
+    out
+}
+
+/// After the frame is submitted: waits for the copies and hands the results to the main world.
+pub fn map_captures(
+    mut pending: ResMut<PendingCaptures>,
+    device: Res<RenderDevice>,
+    captures: Res<MesostructureCaptures>,
+) {
+    for (camera, size, apex_stride, readbacks) in pending.0.drain(..) {
+        let floats = |bytes: Vec<u8>| -> Vec<[f32; 4]> { bytemuck::cast_slice(&bytes).to_vec() };
+        let halves: Vec<u16> = bytemuck::cast_slice(&read(&device, &readbacks[1], size.y)).to_vec();
+        let stats: Vec<u32> = bytemuck::cast_slice(&read(&device, &readbacks[4], 1)).to_vec();
+        let frame = CapturedFrame {
+            width: size.x,
+            height: size.y,
+            mhm: floats(read(&device, &readbacks[0], size.y)),
+            core_normal: halves
+                .chunks_exact(4)
+                .map(|c| std::array::from_fn(|i| crate::height_map_import::half_to_f32(c[i])))
+                .collect(),
+            mhgm: floats(read(&device, &readbacks[2], size.y)),
+            apex_sets: bytemuck::cast_slice(&read(&device, &readbacks[3], 1)).to_vec(),
+            apex_stride,
+            apex_stats: [stats[0], stats[1], stats[2]],
+        };
+        if let Ok(mut map) = captures.0.lock() {
+            map.insert(camera, frame);
+        }
+    }
+}

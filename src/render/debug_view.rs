@@ -1,0 +1,134 @@
+//! Debug views: the MHM, MHGM and apex sets drawn into the camera's output.
+
+use bevy::{
+    core_pipeline::FullscreenShader,
+    prelude::*,
+    render::{
+        diagnostic::RecordDiagnostics,
+        render_resource::{binding_types::*, *},
+        renderer::{RenderContext, ViewQuery},
+        view::ViewTarget,
+    },
+};
+
+use super::{ViewMesostructureBindGroups, ViewMesostructureUniformOffset};
+use crate::settings::{ExtractedMesostructure, MesostructureDebugView, MesostructureUniform};
+
+/// Layout, shaders and per-format pipelines of the debug views.
+#[derive(Resource)]
+pub struct DebugViewPipeline {
+    /// MHM, MHGM, apex buffer (read), settings.
+    pub layout: BindGroupLayoutDescriptor,
+    fullscreen: FullscreenShader,
+    shader: Handle<Shader>,
+}
+
+/// Creates the debug-view layout (render startup).
+pub fn init_debug_view_pipeline(
+    mut commands: Commands,
+    fullscreen: Res<FullscreenShader>,
+    asset_server: Res<AssetServer>,
+) {
+    let layout = BindGroupLayoutDescriptor::new(
+        "mesostructure_debug_view_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::FRAGMENT,
+            (
+                texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_2d(TextureSampleType::Float { filterable: false }),
+                storage_buffer_read_only_sized(false, None),
+                uniform_buffer::<MesostructureUniform>(true),
+            ),
+        ),
+    );
+    commands.insert_resource(DebugViewPipeline {
+        layout,
+        fullscreen: fullscreen.clone(),
+        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "debug_view.wgsl"),
+    });
+}
+
+impl SpecializedRenderPipeline for DebugViewPipeline {
+    type Key = TextureFormat;
+
+    fn specialize(&self, format: TextureFormat) -> RenderPipelineDescriptor {
+        RenderPipelineDescriptor {
+            label: Some("mesostructure_debug_view_pipeline".into()),
+            layout: vec![self.layout.clone()],
+            vertex: self.fullscreen.to_vertex_state(),
+            fragment: Some(FragmentState {
+                shader: self.shader.clone(),
+                entry_point: Some("fragment".into()),
+                targets: vec![Some(ColorTargetState {
+                    format,
+                    blend: None,
+                    write_mask: ColorWrites::ALL,
+                })],
+                ..default()
+            }),
+            ..default()
+        }
+    }
+}
+
+/// The debug-view pipeline of a view, specialized for its output format.
+#[derive(Component)]
+pub struct ViewDebugViewPipeline(pub CachedRenderPipelineId);
+
+/// Specializes the debug-view pipeline for each view that shows one.
+pub fn prepare_debug_view_pipelines(
+    mut commands: Commands,
+    pipeline_cache: Res<PipelineCache>,
+    mut pipelines: ResMut<SpecializedRenderPipelines<DebugViewPipeline>>,
+    pipeline: Res<DebugViewPipeline>,
+    views: Query<(Entity, &ViewTarget, &ExtractedMesostructure)>,
+) {
+    for (entity, target, settings) in &views {
+        if settings.0.debug_view == MesostructureDebugView::None {
+            commands.entity(entity).remove::<ViewDebugViewPipeline>();
+            continue;
+        }
+        let id = pipelines.specialize(&pipeline_cache, &pipeline, target.main_texture_format());
+        commands.entity(entity).insert(ViewDebugViewPipeline(id));
+    }
+}
+
+/// Core3d system: draws the chosen debug view over the output, after tonemapping.
+pub fn debug_view_pass(
+    view: ViewQuery<(
+        &ViewTarget,
+        &ViewDebugViewPipeline,
+        &ViewMesostructureBindGroups,
+        &ViewMesostructureUniformOffset,
+        &bevy::render::camera::ExtractedCamera,
+    )>,
+    pipeline_cache: Res<PipelineCache>,
+    mut ctx: RenderContext,
+) {
+    let (target, pipeline_id, bind_groups, offset, camera) = view.into_inner();
+    let Some(pipeline) = pipeline_cache.get_render_pipeline(pipeline_id.0) else {
+        return;
+    };
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let span = diagnostics.time_span(ctx.command_encoder(), "mesostructure/debug_view");
+    ctx.command_encoder().push_debug_group("mesostructure/debug_view");
+    {
+        let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+            label: Some("mesostructure_debug_view_pass"),
+            color_attachments: &[Some(target.get_color_attachment())],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        if let Some(viewport) = camera.viewport.as_ref() {
+            pass.set_camera_viewport(viewport);
+        }
+        pass.set_render_pipeline(pipeline);
+        pass.set_bind_group(0, &bind_groups.debug_view, &[offset.0]);
+        pass.draw(0..3, 0..1);
+    }
+    ctx.command_encoder().pop_debug_group();
+    span.end(ctx.command_encoder());
+}

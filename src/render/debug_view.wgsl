@@ -1,0 +1,80 @@
+// Debug views of the intermediate images, drawn over the camera's output after tonemapping so
+// that a screenshot shows them. Pixels without a mesostructure surface keep the scene.
+
+#import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
+#import bevy_mesostructure::common::{
+    MesostructureUniform, FLAG_VALID, FLAG_SCREEN_EDGE, FLAG_OBJECT_EDGE, FLAG_DEPTH_EDGE,
+    FLAG_BOUNDARY, APEX_COUNT_MASK, APEX_DIRECT_PRESENT, APEX_TRUNCATED, unpack_offset,
+}
+
+@group(0) @binding(0) var mhm: texture_2d<f32>;
+@group(0) @binding(1) var mhgm: texture_2d<f32>;
+@group(0) @binding(2) var<storage, read> apex_sets: array<u32>;
+@group(0) @binding(3) var<uniform> settings: MesostructureUniform;
+
+const VIEW_HEIGHT: u32 = 1u;
+const VIEW_GRADIENT: u32 = 2u;
+const VIEW_APEX_DISTANCE: u32 = 3u;
+const VIEW_APEX_COUNT: u32 = 4u;
+const VIEW_BOUNDARY: u32 = 5u;
+
+// Dark blue → teal → yellow.
+fn ramp(t: f32) -> vec3<f32> {
+    let x = clamp(t, 0.0, 1.0);
+    return mix(mix(vec3(0.05, 0.05, 0.35), vec3(0.1, 0.6, 0.55), min(x * 2.0, 1.0)),
+               vec3(1.0, 0.9, 0.1), max(x * 2.0 - 1.0, 0.0));
+}
+
+@fragment
+fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    let p = vec2<i32>(floor(in.position.xy));
+    let size = vec2<i32>(textureDimensions(mhgm));
+    if any(p >= size) {
+        discard;
+    }
+    let g = textureLoad(mhgm, p, 0);
+    let flags = u32(g.w);
+    if (flags & FLAG_VALID) == 0u {
+        discard;
+    }
+    let base = (u32(p.y) * u32(size.x) + u32(p.x)) * settings.apex_stride;
+    let header = apex_sets[base];
+    var color = vec3<f32>(0.0);
+    switch settings.debug_view {
+        case VIEW_HEIGHT: {
+            color = vec3(textureLoad(mhm, p, 0).w);
+        }
+        case VIEW_GRADIENT: {
+            let len = length(g.xy);
+            color = select(vec3(0.5 + 0.5 * g.xy / len, 0.25), vec3(0.5), len == 0.0);
+        }
+        case VIEW_APEX_DISTANCE: {
+            if (header & APEX_DIRECT_PRESENT) != 0u {
+                let d = length(vec2<f32>(unpack_offset(apex_sets[base + 1u])));
+                color = ramp(d / 32.0);
+            }
+        }
+        case VIEW_APEX_COUNT: {
+            let count = header & APEX_COUNT_MASK;
+            if (header & APEX_TRUNCATED) != 0u {
+                color = vec3(1.0, 0.0, 1.0);
+            } else if count > 0u {
+                color = vec3(0.15 + 0.85 * f32(count) / f32(settings.apex_directions + 1u));
+            }
+        }
+        case VIEW_BOUNDARY: {
+            color = vec3(0.15);
+            if (flags & FLAG_BOUNDARY) != 0u {
+                color = vec3(
+                    select(0.0, 1.0, (flags & FLAG_OBJECT_EDGE) != 0u),
+                    select(0.0, 1.0, (flags & FLAG_DEPTH_EDGE) != 0u),
+                    select(0.0, 1.0, (flags & FLAG_SCREEN_EDGE) != 0u),
+                );
+            }
+        }
+        default: {
+            discard;
+        }
+    }
+    return vec4<f32>(color, 1.0);
+}

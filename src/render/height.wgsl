@@ -1,0 +1,72 @@
+// Height pass (paper §2.1, eq. 7): per visible pixel of a mesostructure mesh, the height
+// `dis · k` fetched through the UVs, the NDC depth, the object id and the core normal n0.
+// The vertex stage is Bevy's mesh vertex shader, so skinned, morphed and CPU-deformed meshes
+// land exactly on their prepass depth.
+
+#import bevy_pbr::forward_io::VertexOutput
+
+struct HeightMaterial {
+    // Columns of the 2×2 UV matrix: (x_axis.x, x_axis.y, y_axis.x, y_axis.y).
+    uv_axes: vec4<f32>,
+    uv_translation: vec2<f32>,
+    scale: f32,
+    object_id: f32,
+}
+
+@group(3) @binding(0) var height_mips: texture_2d<f32>;
+@group(3) @binding(1) var<uniform> material: HeightMaterial;
+
+struct HeightOutput {
+    // (dis · k in world units, NDC depth, object id, dis)
+    @location(0) mhm: vec4<f32>,
+    // (n0 in world space, 1)
+    @location(1) core_normal: vec4<f32>,
+}
+
+fn height_texel(p: vec2<i32>, level: i32, size: vec2<i32>) -> f32 {
+    // Repeat addressing: height maps tile.
+    let wrapped = ((p % size) + size) % size;
+    return textureLoad(height_mips, wrapped, level).r;
+}
+
+// Bilinear filtering by hand: the mip chain is R32Float, which need not be filterable.
+fn height_bilinear(uv: vec2<f32>, level: i32) -> f32 {
+    let size = vec2<i32>(textureDimensions(height_mips, level));
+    let p = uv * vec2<f32>(size) - 0.5;
+    let base = floor(p);
+    let f = p - base;
+    let i = vec2<i32>(base);
+    let h00 = height_texel(i, level, size);
+    let h10 = height_texel(i + vec2(1, 0), level, size);
+    let h01 = height_texel(i + vec2(0, 1), level, size);
+    let h11 = height_texel(i + vec2(1, 1), level, size);
+    return mix(mix(h00, h10, f.x), mix(h01, h11, f.x), f.y);
+}
+
+@fragment
+fn fragment(in: VertexOutput) -> HeightOutput {
+#ifdef VERTEX_UVS_A
+    let uv = mat2x2<f32>(material.uv_axes.xy, material.uv_axes.zw) * in.uv + material.uv_translation;
+#else
+    let uv = vec2<f32>(0.0);
+#endif
+    // Mip selection from the pixel footprint in texels (trilinear), as the hardware would.
+    let size0 = vec2<f32>(textureDimensions(height_mips, 0));
+    let dx = dpdx(uv) * size0;
+    let dy = dpdy(uv) * size0;
+    let rho2 = max(dot(dx, dx), dot(dy, dy));
+    let last = f32(textureNumLevels(height_mips) - 1u);
+    let lod = clamp(0.5 * log2(max(rho2, 1e-12)), 0.0, last);
+    let l0 = floor(lod);
+    let l1 = min(l0 + 1.0, last);
+    let dis = mix(height_bilinear(uv, i32(l0)), height_bilinear(uv, i32(l1)), lod - l0);
+
+    var out: HeightOutput;
+    out.mhm = vec4<f32>(dis * material.scale, in.position.z, material.object_id, dis);
+#ifdef VERTEX_NORMALS
+    out.core_normal = vec4<f32>(normalize(in.world_normal), 1.0);
+#else
+    out.core_normal = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+#endif
+    return out;
+}

@@ -1,0 +1,379 @@
+//! The render-world side: per-view working images, the passes and their ordering.
+//!
+//! Per camera with [`Mesostructure`], each frame, between Bevy's prepass and main pass:
+//! [`height`] (raster, custom phase) → [`gradient`] (compute) → [`apex`] (compute); the
+//! [`debug_view`] pass draws over the output after tonemapping when a debug view is chosen.
+
+pub mod apex;
+pub mod capture;
+pub mod debug_view;
+pub mod gradient;
+pub mod height;
+
+use bevy::{
+    camera::Camera3d,
+    core_pipeline::{
+        core_3d::main_opaque_pass_3d, prepass::DepthPrepass, schedule::Core3d, tonemapping::tonemapping,
+        Core3dSystems,
+    },
+    image::ToExtents,
+    pbr::MeshPipelineSystems,
+    platform::collections::HashSet,
+    prelude::*,
+    render::{
+        batching::gpu_preprocessing::batch_and_prepare_sorted_render_phase,
+        camera::ExtractedCamera,
+        render_phase::{
+            sort_phase_system, AddRenderCommand, DrawFunctions, SortedRenderPhasePlugin,
+            ViewSortedRenderPhases,
+        },
+        render_resource::*,
+        renderer::{RenderDevice, RenderQueue},
+        sync_world::RenderEntity,
+        texture::{CachedTexture, TextureCache},
+        view::{Msaa, RetainedViewEntity},
+        Extract, ExtractSchedule, Render, RenderApp, RenderDebugFlags, RenderStartup, RenderSystems,
+    },
+    shader::load_shader_library,
+};
+
+use crate::{
+    settings::{ExtractedMesostructure, Mesostructure, MesostructureUniform},
+    warn_once::WarnedOnce,
+};
+
+/// MHM: (height·k, NDC depth, object id, dis).
+pub const MHM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
+/// Core normal n0 (world space).
+pub const CORE_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
+/// MHGM: (∂h/∂x, ∂h/∂y, h, flags).
+pub const MHGM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
+
+/// The working images of one view.
+#[derive(Component)]
+pub struct ViewMesostructureTextures {
+    /// Screen-space height map.
+    pub mhm: CachedTexture,
+    /// Core normals.
+    pub core_normal: CachedTexture,
+    /// Gradient map.
+    pub mhgm: CachedTexture,
+    /// Apex sets, `apex_stride` words per pixel (see `reference::packed`).
+    pub apex_sets: Buffer,
+    /// Apex-pass counters: mesostructure pixels, pixels that hit the step bound, ascent steps.
+    pub apex_stats: Buffer,
+    /// Size in pixels (the render target's).
+    pub size: UVec2,
+    /// Words per pixel in `apex_sets`.
+    pub apex_stride: u32,
+}
+
+/// Bind groups of the compute passes and the debug view of one view.
+#[derive(Component)]
+pub struct ViewMesostructureBindGroups {
+    /// Gradient pass.
+    pub gradient: BindGroup,
+    /// Apex pass.
+    pub apex: BindGroup,
+    /// Debug view.
+    pub debug_view: BindGroup,
+}
+
+/// Offset of this view's [`MesostructureUniform`] in [`MesostructureUniforms`].
+#[derive(Component, Clone, Copy)]
+pub struct ViewMesostructureUniformOffset(pub u32);
+
+/// The settings of all views, one dynamic uniform buffer.
+#[derive(Resource, Default)]
+pub struct MesostructureUniforms(pub DynamicUniformBuffer<MesostructureUniform>);
+
+pub(crate) fn build(app: &mut App) {
+    load_shader_library!(app, "common.wgsl");
+    bevy::asset::embedded_asset!(app, "height.wgsl");
+    bevy::asset::embedded_asset!(app, "gradient.wgsl");
+    bevy::asset::embedded_asset!(app, "apex.wgsl");
+    bevy::asset::embedded_asset!(app, "debug_view.wgsl");
+
+    app.add_plugins(SortedRenderPhasePlugin::<height::HeightPhaseItem, bevy::pbr::MeshPipeline>::new(
+        RenderDebugFlags::default(),
+    ));
+    let captures = capture::MesostructureCaptures::default();
+    app.insert_resource(captures.clone());
+    let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+        return;
+    };
+    render_app
+        .insert_resource(captures)
+        .init_resource::<capture::PendingCaptures>()
+        .init_resource::<WarnedOnce>()
+        .init_resource::<MesostructureUniforms>()
+        .init_resource::<height::HeightMaterialBindGroups>()
+        .init_resource::<SpecializedMeshPipelines<height::HeightPassPipeline>>()
+        .init_resource::<SpecializedRenderPipelines<debug_view::DebugViewPipeline>>()
+        .init_resource::<DrawFunctions<height::HeightPhaseItem>>()
+        .init_resource::<ViewSortedRenderPhases<height::HeightPhaseItem>>()
+        .add_render_command::<height::HeightPhaseItem, height::DrawHeight>()
+        .add_systems(
+            RenderStartup,
+            (
+                height::init_height_pass_pipeline.after(MeshPipelineSystems),
+                gradient::init_gradient_pipeline,
+                apex::init_apex_pipeline,
+                debug_view::init_debug_view_pipeline,
+            ),
+        )
+        .add_systems(
+            ExtractSchedule,
+            (extract_mesostructure_cameras, extract_height_phases, capture::extract_capture_requests),
+        )
+        .add_systems(
+            Render,
+            (
+                height::queue_height_phase.in_set(RenderSystems::QueueMeshes),
+                sort_phase_system::<height::HeightPhaseItem>.in_set(RenderSystems::PhaseSort),
+                debug_view::prepare_debug_view_pipelines.in_set(RenderSystems::Prepare),
+                (prepare_view_textures, prepare_view_uniforms).in_set(RenderSystems::PrepareResources),
+                batch_and_prepare_sorted_render_phase::<height::HeightPhaseItem, height::HeightPassPipeline>
+                    .in_set(RenderSystems::PrepareResources),
+                height::prepare_height_material_bind_groups
+                    .in_set(RenderSystems::PrepareResources)
+                    .before(height::queue_height_phase),
+                prepare_view_bind_groups.in_set(RenderSystems::PrepareBindGroups),
+                capture::map_captures.after(RenderSystems::Render).before(RenderSystems::Cleanup),
+            ),
+        )
+        .add_systems(
+            Core3d,
+            (
+                height::height_pass,
+                gradient::gradient_pass,
+                apex::apex_pass,
+                capture::copy_capture,
+            )
+                .chain()
+                .after(Core3dSystems::Prepass)
+                .before(Core3dSystems::MainPass)
+                .before(main_opaque_pass_3d),
+        )
+        .add_systems(
+            Core3d,
+            debug_view::debug_view_pass
+                .after(tonemapping)
+                .in_set(Core3dSystems::PostProcess),
+        );
+}
+
+/// Copies each camera's settings into the render world after checking what the effect needs;
+/// a camera that cannot have it (MSAA on, zero-sized viewport) loses it with a one-time warning
+/// and renders as without the plugin.
+pub fn extract_mesostructure_cameras(
+    mut commands: Commands,
+    cameras: Extract<
+        Query<(RenderEntity, Entity, &Camera, &Mesostructure, Option<&Msaa>, Has<DepthPrepass>), With<Camera3d>>,
+    >,
+    mut warned: ResMut<WarnedOnce>,
+) {
+    for (render_entity, entity, camera, settings, msaa, has_depth_prepass) in &cameras {
+        let Ok(mut target) = commands.get_entity(render_entity) else {
+            continue;
+        };
+        let size = camera.physical_viewport_size();
+        let usable = if !camera.is_active {
+            false
+        } else if msaa.is_some_and(|m| *m != Msaa::Off) {
+            warned.warn(format!("msaa {entity}"), || {
+                format!(
+                    "camera {entity} has Mesostructure but MSAA is on ({:?}); the effect needs \
+                     Msaa::Off on the camera and is off until then",
+                    msaa.unwrap()
+                )
+            });
+            false
+        } else if !has_depth_prepass {
+            warned.warn(format!("prepass {entity}"), || {
+                format!("camera {entity} has Mesostructure but its DepthPrepass was removed; the effect is off")
+            });
+            false
+        } else if size.is_none_or(|s| s.x == 0 || s.y == 0) {
+            warned.warn(format!("size {entity}"), || {
+                format!("camera {entity} has a zero-sized viewport; the mesostructure effect skips it")
+            });
+            false
+        } else {
+            true
+        };
+        if !usable {
+            target.remove::<<Mesostructure as bevy::render::sync_component::SyncComponent>::Target>();
+            continue;
+        }
+        warned.forget(&format!("msaa {entity}"));
+        warned.forget(&format!("size {entity}"));
+        let (sanitized, changed) = settings.sanitized();
+        if !changed.is_empty() {
+            warned.warn(format!("settings {entity} {changed:?}"), || {
+                format!(
+                    "camera {entity}: Mesostructure fields {changed:?} were out of range or not \
+                     finite; clamped or reset to their defaults"
+                )
+            });
+        }
+        target.insert(ExtractedMesostructure(sanitized));
+    }
+}
+
+/// Per-view phases for cameras with the effect.
+pub fn extract_height_phases(
+    mut phases: ResMut<ViewSortedRenderPhases<height::HeightPhaseItem>>,
+    cameras: Extract<Query<(Entity, &Camera), (With<Camera3d>, With<Mesostructure>)>>,
+    mut live: Local<HashSet<RetainedViewEntity>>,
+) {
+    live.clear();
+    for (entity, camera) in &cameras {
+        if !camera.is_active {
+            continue;
+        }
+        let retained = RetainedViewEntity::new(entity.into(), None, 0);
+        phases.prepare_for_new_frame(retained);
+        live.insert(retained);
+    }
+    phases.retain(|view, _| live.contains(view));
+}
+
+fn prepare_view_textures(
+    mut commands: Commands,
+    mut texture_cache: ResMut<TextureCache>,
+    device: Res<RenderDevice>,
+    views: Query<(Entity, &ExtractedCamera, &ExtractedMesostructure, Option<&ViewMesostructureTextures>)>,
+    mut warned: ResMut<WarnedOnce>,
+) {
+    for (entity, camera, settings, previous) in &views {
+        let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0) else {
+            commands.entity(entity).remove::<ViewMesostructureTextures>();
+            continue;
+        };
+        let apex_stride = crate::reference::packed::stride(settings.0.apex_directions);
+        let apex_bytes = size.x as u64 * size.y as u64 * apex_stride as u64 * 4;
+        if apex_bytes > device.limits().max_storage_buffer_binding_size as u64 {
+            warned.warn(format!("apex buffer {entity} {size}"), || {
+                format!(
+                    "camera {entity}: {size} with {} apex directions needs a {apex_bytes}-byte apex \
+                     buffer, more than this GPU binds; the effect is off (use fewer directions)",
+                    settings.0.apex_directions
+                )
+            });
+            commands.entity(entity).remove::<ViewMesostructureTextures>();
+            continue;
+        }
+        let texture = |cache: &mut TextureCache, label, format, usage| {
+            cache.get(
+                &device,
+                TextureDescriptor {
+                    label: Some(label),
+                    size: size.to_extents(),
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: TextureDimension::D2,
+                    format,
+                    usage,
+                    view_formats: &[],
+                },
+            )
+        };
+        let attachment = TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC;
+        let mhm = texture(&mut texture_cache, "mesostructure_mhm", MHM_FORMAT, attachment);
+        let core_normal = texture(&mut texture_cache, "mesostructure_core_normal", CORE_NORMAL_FORMAT, attachment);
+        let mhgm = texture(
+            &mut texture_cache,
+            "mesostructure_mhgm",
+            MHGM_FORMAT,
+            TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC,
+        );
+        let (apex_sets, apex_stats) = match previous {
+            Some(p) if p.apex_sets.size() == apex_bytes => (p.apex_sets.clone(), p.apex_stats.clone()),
+            _ => (
+                device.create_buffer(&BufferDescriptor {
+                    label: Some("mesostructure_apex_sets"),
+                    size: apex_bytes,
+                    usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }),
+                device.create_buffer(&BufferDescriptor {
+                    label: Some("mesostructure_apex_stats"),
+                    size: 16,
+                    usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC | BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }),
+            ),
+        };
+        commands.entity(entity).insert(ViewMesostructureTextures {
+            mhm,
+            core_normal,
+            mhgm,
+            apex_sets,
+            apex_stats,
+            size,
+            apex_stride,
+        });
+    }
+}
+
+fn prepare_view_uniforms(
+    mut commands: Commands,
+    mut uniforms: ResMut<MesostructureUniforms>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    views: Query<(Entity, &ExtractedMesostructure)>,
+) {
+    let Some(mut writer) = uniforms.0.get_writer(views.iter().len(), &device, &queue) else {
+        return;
+    };
+    for (entity, settings) in &views {
+        let offset = writer.write(&MesostructureUniform::from(&settings.0));
+        commands.entity(entity).insert(ViewMesostructureUniformOffset(offset));
+    }
+}
+
+fn prepare_view_bind_groups(
+    mut commands: Commands,
+    device: Res<RenderDevice>,
+    pipeline_cache: Res<PipelineCache>,
+    uniforms: Res<MesostructureUniforms>,
+    gradient: Res<gradient::GradientPipeline>,
+    apex: Res<apex::ApexPipeline>,
+    debug: Res<debug_view::DebugViewPipeline>,
+    views: Query<(Entity, &ViewMesostructureTextures)>,
+) {
+    let Some(settings) = uniforms.0.binding() else {
+        return;
+    };
+    for (entity, t) in &views {
+        let gradient = device.create_bind_group(
+            "mesostructure_gradient_bind_group",
+            &pipeline_cache.get_bind_group_layout(&gradient.layout),
+            &BindGroupEntries::sequential((&t.mhm.default_view, &t.mhgm.default_view, settings.clone())),
+        );
+        let apex = device.create_bind_group(
+            "mesostructure_apex_bind_group",
+            &pipeline_cache.get_bind_group_layout(&apex.layout),
+            &BindGroupEntries::sequential((
+                &t.mhm.default_view,
+                &t.mhgm.default_view,
+                t.apex_sets.as_entire_binding(),
+                t.apex_stats.as_entire_binding(),
+                settings.clone(),
+            )),
+        );
+        let debug_view = device.create_bind_group(
+            "mesostructure_debug_view_bind_group",
+            &pipeline_cache.get_bind_group_layout(&debug.layout),
+            &BindGroupEntries::sequential((
+                &t.mhm.default_view,
+                &t.mhgm.default_view,
+                t.apex_sets.as_entire_binding(),
+                settings.clone(),
+            )),
+        );
+        commands.entity(entity).insert(ViewMesostructureBindGroups { gradient, apex, debug_view });
+    }
+}
+

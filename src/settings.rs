@@ -1,0 +1,258 @@
+//! The per-camera settings component.
+
+use bevy::{
+    core_pipeline::prepass::DepthPrepass,
+    prelude::*,
+    render::render_resource::ShaderType,
+};
+
+use crate::reference::{ApexSearch, DepthContinuity, MAX_APEX_DIRECTIONS, sample_directions};
+
+/// Mesostructure lighting for a 3D camera: add it next to [`Camera3d`].
+///
+/// Every mesh with a [`MesostructureMaterial`](crate::MesostructureMaterial) that this camera
+/// sees gets a screen-space height map (MHM), its gradient map (MHGM) and per-pixel local apex
+/// sets (paper §2), from which the lighting terms are computed.
+///
+/// Requires [`Msaa::Off`] on the camera (like Bevy's SSAO and deferred rendering); with MSAA on
+/// the effect is switched off for that camera with a one-time warning.
+///
+/// Out-of-range values are clamped to their documented range and non-finite ones replaced by the
+/// default, with a one-time warning; they never reach the GPU.
+#[derive(Component, Reflect, Clone, Debug, PartialEq)]
+#[reflect(Component, Default, Clone, Debug, PartialEq)]
+#[require(DepthPrepass)]
+pub struct Mesostructure {
+    /// What the camera shows: the lit scene, or one of the intermediate images.
+    pub debug_view: MesostructureDebugView,
+    /// Indirect sample directions around each pixel for its apex set (0–16). More directions
+    /// find more of the apexes that occlude a pixel, at a cost linear in the count.
+    pub apex_directions: u32,
+    /// Bound on the steps (one pixel each) of one gradient ascent (1–512): the work per pixel is
+    /// at most `(1 + apex_directions) × max_ascent_steps` texel reads. Where it is hit the
+    /// pixel reached stands in for the apex; the `ApexCount` debug view shows those pixels.
+    pub max_ascent_steps: u32,
+    /// Smallest distance of the indirect sample points from the pixel, in pixels (1–64).
+    pub min_sample_radius: u32,
+    /// Largest distance of the indirect sample points from the pixel, in pixels (1–256).
+    /// Between the two, the distance follows the distance to the direct apex, so the apex set
+    /// adapts to the size of the structures.
+    pub max_sample_radius: u32,
+    /// Relative depth jump (fraction of NDC depth, 0.0001–1) above which two neighbouring pixels
+    /// of the same object count as separated (a depth discontinuity ends the visible region).
+    pub depth_discontinuity: f32,
+}
+
+impl Default for Mesostructure {
+    /// 8 directions (the paper's "several directions", one per 8-neighbour direction), 64 ascent
+    /// steps (enough for structures up to ~64 px across, a quarter of a 256² texture cache),
+    /// sample radius 2–32 px, and a 2 % depth jump, which keeps planes at grazing angles
+    /// connected (the slope test covers them) but separates overlapping parts of one object.
+    fn default() -> Self {
+        Self {
+            debug_view: MesostructureDebugView::None,
+            apex_directions: 8,
+            max_ascent_steps: 64,
+            min_sample_radius: 2,
+            max_sample_radius: 32,
+            depth_discontinuity: 0.02,
+        }
+    }
+}
+
+/// Which image the camera shows instead of (or over) the lit scene.
+#[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[reflect(Default, Clone, Debug, PartialEq, Hash)]
+pub enum MesostructureDebugView {
+    /// The normal picture.
+    #[default]
+    None,
+    /// The height-map value `dis ∈ [0, 1]` seen through the UVs, grey.
+    Height,
+    /// The gradient direction as red/green (0.5 = 0), grey where it is zero.
+    Gradient,
+    /// Distance to the direct apex, in pixels: dark blue (near) to yellow (32 px and more);
+    /// black where the pixel is itself at an apex.
+    ApexDistance,
+    /// Number of apexes in the set: dark (1) to white (all directions); black for none;
+    /// magenta where an ascent hit `max_ascent_steps`.
+    ApexCount,
+    /// Boundary points: red at silhouettes and other objects, green at depth discontinuities,
+    /// blue at the screen edge; dark grey inside the visible region.
+    Boundary,
+}
+
+impl MesostructureDebugView {
+    /// All views, in the order a key cycles them.
+    pub const ALL: [Self; 6] = [
+        Self::None,
+        Self::Height,
+        Self::Gradient,
+        Self::ApexDistance,
+        Self::ApexCount,
+        Self::Boundary,
+    ];
+
+    /// The next view in [`Self::ALL`], wrapping around.
+    pub fn next(self) -> Self {
+        let i = Self::ALL.iter().position(|v| *v == self).unwrap_or(0);
+        Self::ALL[(i + 1) % Self::ALL.len()]
+    }
+
+    /// Shader-side code of the view.
+    pub(crate) fn code(self) -> u32 {
+        Self::ALL.iter().position(|v| *v == self).unwrap_or(0) as u32
+    }
+}
+
+impl Mesostructure {
+    /// A copy with every field inside its documented range; the names of the fields that had
+    /// to be changed.
+    pub fn sanitized(&self) -> (Self, Vec<&'static str>) {
+        let d = Self::default();
+        let mut s = self.clone();
+        let mut changed = Vec::new();
+        let mut clamp_u32 = |v: &mut u32, lo: u32, hi: u32, name| {
+            if *v < lo || *v > hi {
+                *v = (*v).clamp(lo, hi);
+                changed.push(name);
+            }
+        };
+        clamp_u32(&mut s.apex_directions, 0, MAX_APEX_DIRECTIONS, "apex_directions");
+        clamp_u32(&mut s.max_ascent_steps, 1, 512, "max_ascent_steps");
+        clamp_u32(&mut s.min_sample_radius, 1, 64, "min_sample_radius");
+        clamp_u32(&mut s.max_sample_radius, 1, 256, "max_sample_radius");
+        if s.max_sample_radius < s.min_sample_radius {
+            s.max_sample_radius = s.min_sample_radius;
+            changed.push("max_sample_radius");
+        }
+        if !s.depth_discontinuity.is_finite() {
+            s.depth_discontinuity = d.depth_discontinuity;
+            changed.push("depth_discontinuity");
+        } else if !(0.0001..=1.0).contains(&s.depth_discontinuity) {
+            s.depth_discontinuity = s.depth_discontinuity.clamp(0.0001, 1.0);
+            changed.push("depth_discontinuity");
+        }
+        (s, changed)
+    }
+
+    /// The apex search these settings describe (for the CPU oracle).
+    pub fn apex_search(&self) -> ApexSearch {
+        ApexSearch {
+            directions: self.apex_directions,
+            max_steps: self.max_ascent_steps,
+            min_radius: self.min_sample_radius,
+            max_radius: self.max_sample_radius,
+        }
+    }
+
+    /// The depth-continuity test these settings describe (for the CPU oracle).
+    pub fn depth_continuity(&self) -> DepthContinuity {
+        DepthContinuity {
+            relative: self.depth_discontinuity,
+            ..default()
+        }
+    }
+}
+
+/// Render-world copy of a camera's sanitized [`Mesostructure`] settings.
+#[derive(Component, Clone, Debug)]
+pub struct ExtractedMesostructure(pub Mesostructure);
+
+/// The camera settings as the shaders see them (`MesostructureUniform` in `common.wgsl`).
+#[derive(Clone, Copy, Debug, ShaderType)]
+pub struct MesostructureUniform {
+    /// Indirect sample directions.
+    pub apex_directions: u32,
+    /// Step bound of one ascent.
+    pub max_ascent_steps: u32,
+    /// Smallest sample radius, pixels.
+    pub min_sample_radius: u32,
+    /// Largest sample radius, pixels.
+    pub max_sample_radius: u32,
+    /// Relative depth jump of a discontinuity.
+    pub depth_relative: f32,
+    /// Slope factor of the depth-continuity test.
+    pub depth_slope_factor: f32,
+    /// `MesostructureDebugView` code.
+    pub debug_view: u32,
+    /// Words per pixel in the apex buffer.
+    pub apex_stride: u32,
+    /// `(cos θ_i, sin θ_i)` of the sample directions, two per vector.
+    pub directions: [Vec4; 8],
+}
+
+impl From<&Mesostructure> for MesostructureUniform {
+    fn from(s: &Mesostructure) -> Self {
+        let table = sample_directions(s.apex_directions);
+        let mut directions = [Vec4::ZERO; 8];
+        for (i, d) in table.iter().enumerate() {
+            let v = &mut directions[i / 2];
+            if i % 2 == 0 {
+                v.x = d[0];
+                v.y = d[1];
+            } else {
+                v.z = d[0];
+                v.w = d[1];
+            }
+        }
+        let continuity = s.depth_continuity();
+        Self {
+            apex_directions: s.apex_directions,
+            max_ascent_steps: s.max_ascent_steps,
+            min_sample_radius: s.min_sample_radius,
+            max_sample_radius: s.max_sample_radius,
+            depth_relative: continuity.relative,
+            depth_slope_factor: continuity.slope_factor,
+            debug_view: s.debug_view.code(),
+            apex_stride: crate::reference::packed::stride(s.apex_directions),
+            directions,
+        }
+    }
+}
+
+/// Extraction runs our own system (validation, one-time warnings); this impl only lets
+/// `SyncComponentPlugin` remove the render-world components with the main one.
+impl bevy::render::sync_component::SyncComponent for Mesostructure {
+    type Target = (
+        ExtractedMesostructure,
+        crate::render::ViewMesostructureTextures,
+        crate::render::ViewMesostructureBindGroups,
+        crate::render::ViewMesostructureUniformOffset,
+        crate::render::capture::ExtractedCapture,
+    );
+}
+
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sanitize_replaces_nan_and_clamps() {
+        let bad = Mesostructure {
+            apex_directions: 99,
+            max_ascent_steps: 0,
+            max_sample_radius: 1,
+            min_sample_radius: 8,
+            depth_discontinuity: f32::NAN,
+            ..default()
+        };
+        let (s, changed) = bad.sanitized();
+        assert_eq!(s.apex_directions, MAX_APEX_DIRECTIONS);
+        assert_eq!(s.max_ascent_steps, 1);
+        assert_eq!(s.max_sample_radius, 8);
+        assert_eq!(s.depth_discontinuity, 0.02);
+        assert!(changed.contains(&"depth_discontinuity"));
+        assert!(Mesostructure::default().sanitized().1.is_empty());
+    }
+
+    #[test]
+    fn uniform_carries_the_direction_table() {
+        let u = MesostructureUniform::from(&Mesostructure { apex_directions: 4, ..default() });
+        assert!((u.directions[0].x - 1.0).abs() < 1e-6);
+        assert!((u.directions[0].w - 1.0).abs() < 1e-6); // θ_1 = 90°
+        assert_eq!(u.apex_stride, 6);
+        assert_eq!(MesostructureDebugView::Boundary.next(), MesostructureDebugView::None);
+    }
+}
