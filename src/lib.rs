@@ -63,6 +63,8 @@ pub mod render;
 pub mod settings;
 mod warn_once;
 
+pub use warn_once::WarnedOnce;
+
 use bevy::{prelude::*, render::{extract_component::ExtractComponentPlugin, sync_component::SyncComponentPlugin}};
 
 pub use material::MesostructureMaterial;

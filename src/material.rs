@@ -125,6 +125,13 @@ fn prepare_one(
         return None;
     }
     let id = material.height_map.id();
+    if material.height_map == Handle::default() {
+        warned.warn(format!("missing {id} {entity}"), || {
+            format!("entity {entity}: MesostructureMaterial::height_map is not set; the mesh is \
+                     drawn without mesostructure")
+        });
+        return None;
+    }
     if !mips.0.contains_key(&id) {
         let Some(source) = images.get(id) else {
             match asset_server.get_load_state(id) {

@@ -17,6 +17,11 @@ impl WarnedOnce {
         }
     }
 
+    /// The keys of the warnings given so far (for tests: each names its cause).
+    pub fn keys(&self) -> impl Iterator<Item = String> + '_ {
+        self.0.iter().cloned()
+    }
+
     /// Forgets `key`, so that the cause is reported again if it comes back.
     pub fn forget(&mut self, key: &str) {
         self.0.remove(key);

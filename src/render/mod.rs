@@ -21,7 +21,6 @@ use bevy::{
     platform::collections::HashSet,
     prelude::*,
     render::{
-        batching::gpu_preprocessing::batch_and_prepare_sorted_render_phase,
         camera::ExtractedCamera,
         render_phase::{
             sort_phase_system, AddRenderCommand, DrawFunctions, SortedRenderPhasePlugin,
@@ -94,7 +93,9 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "apex.wgsl");
     bevy::asset::embedded_asset!(app, "debug_view.wgsl");
 
-    app.add_plugins(SortedRenderPhasePlugin::<height::HeightPhaseItem, bevy::pbr::MeshPipeline>::new(
+    // The phase plugin adds the batching systems; with our pipeline type as their batch data,
+    // items are never merged (each may bind another height map).
+    app.add_plugins(SortedRenderPhasePlugin::<height::HeightPhaseItem, height::HeightPassPipeline>::new(
         RenderDebugFlags::default(),
     ));
     let captures = capture::MesostructureCaptures::default();
@@ -133,10 +134,8 @@ pub(crate) fn build(app: &mut App) {
                 sort_phase_system::<height::HeightPhaseItem>.in_set(RenderSystems::PhaseSort),
                 debug_view::prepare_debug_view_pipelines.in_set(RenderSystems::Prepare),
                 (prepare_view_textures, prepare_view_uniforms).in_set(RenderSystems::PrepareResources),
-                batch_and_prepare_sorted_render_phase::<height::HeightPhaseItem, height::HeightPassPipeline>
-                    .in_set(RenderSystems::PrepareResources),
                 height::prepare_height_material_bind_groups
-                    .in_set(RenderSystems::PrepareResources)
+                    .in_set(RenderSystems::Queue)
                     .before(height::queue_height_phase),
                 prepare_view_bind_groups.in_set(RenderSystems::PrepareBindGroups),
                 capture::map_captures.after(RenderSystems::Render).before(RenderSystems::Cleanup),

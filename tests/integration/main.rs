@@ -1,1 +1,7 @@
+//! The one integration-test binary (each test binary links all of Bevy): GPU contract tests
+//! against the CPU oracle, deformation, and bad input, all headless on the software driver.
 
+mod bad_input;
+mod contract;
+mod deformation;
+mod harness;

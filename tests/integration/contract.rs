@@ -1,0 +1,222 @@
+//! GPU contract: the real passes, read back, against the CPU oracle fed the same MHM.
+
+use bevy::prelude::*;
+use bevy_mesostructure::{
+    prelude::*,
+    reference::{apex_sets, gradient_map, ApexKind, ApexSet, FLAG_BOUNDARY},
+    CapturedFrame,
+};
+
+use crate::harness::*;
+
+const SIZE: u32 = 128;
+
+/// Tolerances, stated once: the GPU runs exactly the oracle's arithmetic on the same MHM, so
+/// flags must agree on ≥ 99.9 % of pixels and gradients within 1e-6 world units per pixel;
+/// ≥ 99 % of direct apexes within 1 pixel and ≥ 97 % of apex counts equal (a different
+/// rounding of a sample point may change which ascent a direction starts).
+fn compare_with_oracle(frame: &CapturedFrame, settings: &Mesostructure) -> (usize, usize) {
+    let mhm = frame.screen_height_map();
+    let gpu = frame.gradient_map();
+    let cpu = gradient_map(&mhm, settings.depth_continuity());
+    let n = (frame.width * frame.height) as usize;
+    let flag_mismatch = (0..n).filter(|&i| gpu.flags[i] != cpu.flags[i]).count();
+    assert!(
+        flag_mismatch * 1000 <= n,
+        "MHGM flags differ from the oracle on {flag_mismatch} of {n} pixels"
+    );
+    let worst = (0..n)
+        .filter(|&i| gpu.flags[i] == cpu.flags[i])
+        .map(|i| (gpu.gradients[i][0] - cpu.gradients[i][0]).abs().max((gpu.gradients[i][1] - cpu.gradients[i][1]).abs()))
+        .fold(0.0f32, f32::max);
+    assert!(worst <= 1e-6, "MHGM gradient differs from the oracle by {worst}");
+
+    let cpu_sets = apex_sets(&mhm, &cpu, &settings.apex_search());
+    let (mut direct_total, mut direct_close, mut count_equal, mut valid) = (0, 0, 0, 0);
+    for y in 0..frame.height {
+        for x in 0..frame.width {
+            let i = mhm.index(x, y);
+            if mhm.objects[i] == 0 {
+                continue;
+            }
+            valid += 1;
+            let g: ApexSet = frame.apex_set(x, y);
+            let c = &cpu_sets[i];
+            if g.len() == c.len() {
+                count_equal += 1;
+            }
+            if let Some(cd) = c.direct {
+                direct_total += 1;
+                if let Some(gd) = g.direct {
+                    if (gd.x - cd.x).abs() <= 1 && (gd.y - cd.y).abs() <= 1 {
+                        direct_close += 1;
+                    }
+                }
+            }
+        }
+    }
+    assert!(valid > 0);
+    assert!(direct_total > valid / 4, "few direct apexes ({direct_total} of {valid}): is there relief?");
+    assert!(
+        direct_close * 100 >= direct_total * 99,
+        "only {direct_close} of {direct_total} direct apexes within 1 px of the oracle's"
+    );
+    assert!(
+        count_equal * 100 >= valid * 97,
+        "apex counts agree on only {count_equal} of {valid} pixels"
+    );
+    (valid, direct_total)
+}
+
+#[test]
+fn plane_with_rivets_matches_the_oracle_and_the_height_map() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = app();
+    let target = target(&mut app, SIZE, SIZE);
+    let settings = Mesostructure::default();
+    let camera = camera(&mut app, &target, top_down(), settings.clone());
+    let map = HeightMap::rivets(256, 4, 0.35);
+    let height_map = image(&mut app, map.to_image());
+    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
+    let material = unlit(&mut app, Color::WHITE);
+    let k = 0.2;
+    app.world_mut().spawn((plane, material, MesostructureMaterial { height_map, scale: k, ..default() }));
+
+    let frame = capture(&mut app, camera, 20);
+    assert_eq!((frame.width, frame.height), (SIZE, SIZE));
+    assert_eq!(frame.mesostructure_pixels(), (SIZE * SIZE) as usize, "the plane fills the view");
+
+    // The height pass samples the map through the UVs with trilinear mip selection: compare with
+    // the same filter on the CPU at each pixel's UV. Straight down, the footprint is constant:
+    // d(uv)/dx = tan(22.5°)·2·H / (2·SIZE) per pixel. Tolerance 1 % of k.
+    let (mips, _) = bevy_mesostructure::height_map_import::height_map_mip_chain(&map.to_image()).unwrap();
+    let levels: Vec<(u32, Vec<f32>)> = {
+        let all: &[f32] = bytemuck::cast_slice(mips.data.as_ref().unwrap());
+        let (mut out, mut offset, mut size) = (vec![], 0usize, 256u32);
+        for _ in 0..mips.texture_descriptor.mip_level_count {
+            out.push((size, all[offset..offset + (size * size) as usize].to_vec()));
+            offset += (size * size) as usize;
+            size = (size / 2).max(1);
+        }
+        out
+    };
+    let bilinear = |uv: Vec2, level: usize| {
+        let (n, values) = &levels[level];
+        let n = *n as i32;
+        let p = uv * n as f32 - 0.5;
+        let (x0, y0) = (p.x.floor() as i32, p.y.floor() as i32);
+        let (fx, fy) = (p.x - x0 as f32, p.y - y0 as f32);
+        let at = |x: i32, y: i32| values[(y.rem_euclid(n) * n + x.rem_euclid(n)) as usize];
+        let top = at(x0, y0) + (at(x0 + 1, y0) - at(x0, y0)) * fx;
+        let bottom = at(x0, y0 + 1) + (at(x0 + 1, y0 + 1) - at(x0, y0 + 1)) * fx;
+        top + (bottom - top) * fy
+    };
+    let footprint = (std::f32::consts::FRAC_PI_8).tan() * 2.0 * TOP_DOWN_HEIGHT / (2.0 * SIZE as f32) * 256.0;
+    let lod = footprint.log2().max(0.0);
+    let sample = |uv: Vec2| {
+        let l0 = lod.floor() as usize;
+        bilinear(uv, l0) + (bilinear(uv, l0 + 1) - bilinear(uv, l0)) * (lod - l0 as f32)
+    };
+    let mut worst = 0.0f32;
+    for y in (2..SIZE - 2).step_by(3) {
+        for x in (2..SIZE - 2).step_by(3) {
+            let expected = sample(top_down_uv(x, y, SIZE)) * k;
+            let got = frame.mhm[(y * SIZE + x) as usize][0];
+            worst = worst.max((got - expected).abs());
+        }
+    }
+    assert!(worst < 0.01 * k, "MHM height off the height map by {worst} (k = {k})");
+    // Core normal of a plane: +Y.
+    let n = frame.core_normal[(SIZE * SIZE / 2 + SIZE / 2) as usize];
+    assert!((n[1] - 1.0).abs() < 1e-3, "core normal {n:?}");
+
+    let (valid, direct) = compare_with_oracle(&frame, &settings);
+    assert_eq!(frame.apex_stats[0] as usize, valid, "the counter sees every mesostructure pixel");
+    // Rivet tops: every apex is near a rivet centre (uv multiples of 1/4 + 1/8).
+    let mut near_centre = 0;
+    let mut apexes = 0;
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            for a in frame.apex_set(x, y).iter().filter(|a| a.kind == ApexKind::Local) {
+                apexes += 1;
+                let uv = top_down_uv(a.x as u32, a.y as u32, SIZE) * 4.0;
+                let d = (uv - uv.floor() - Vec2::splat(0.5)).length();
+                if d < 0.08 {
+                    near_centre += 1;
+                }
+            }
+        }
+    }
+    assert!(near_centre * 100 >= apexes * 95, "{near_centre} of {apexes} apexes at rivet tops");
+    eprintln!("plane contract: {valid} pixels, {direct} direct apexes, stats {:?}", frame.apex_stats);
+}
+
+#[test]
+fn sphere_with_bricks_matches_the_oracle_with_silhouettes() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = app();
+    let target = target(&mut app, SIZE, SIZE);
+    let settings = Mesostructure::default();
+    let camera = camera(
+        &mut app,
+        &target,
+        Transform::from_xyz(0.0, 0.6, 2.6).looking_at(Vec3::ZERO, Vec3::Y),
+        settings.clone(),
+    );
+    let bricks = image(&mut app, HeightMap::bricks(256, 8, 0.12).to_image());
+    let sphere = mesh(&mut app, Sphere::new(0.8).mesh().uv(32, 18));
+    let material = unlit(&mut app, Color::WHITE);
+    app.world_mut().spawn((sphere, material, MesostructureMaterial { height_map: bricks, scale: 0.05, ..default() }));
+    let frame = capture(&mut app, camera, 20);
+    let pixels = frame.mesostructure_pixels();
+    assert!(pixels > 3000 && pixels < (SIZE * SIZE) as usize, "sphere covers {pixels} pixels");
+    // The silhouette is a boundary: pixels next to the background carry an object-edge flag.
+    let gm = frame.gradient_map();
+    let edge = (0..gm.flags.len()).filter(|&i| gm.flags[i] & FLAG_BOUNDARY != 0).count();
+    assert!(edge > 100, "silhouette boundary pixels: {edge}");
+    compare_with_oracle(&frame, &settings);
+}
+
+#[test]
+fn two_cameras_get_their_own_images_and_debug_views_draw() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = app();
+    let a = target(&mut app, 64, 64);
+    let b = target(&mut app, 96, 64);
+    let cam_a = camera(&mut app, &a, top_down(), Mesostructure::default());
+    let cam_b = camera(
+        &mut app,
+        &b,
+        Transform::from_xyz(0.0, 1.2, 1.6).looking_at(Vec3::ZERO, Vec3::Y),
+        Mesostructure { debug_view: MesostructureDebugView::Height, ..default() },
+    );
+    let map = image(&mut app, HeightMap::sine(128, 4).to_image());
+    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
+    let material = unlit(&mut app, Color::srgb(1.0, 0.0, 0.0));
+    app.world_mut().spawn((plane, material, MesostructureMaterial { height_map: map, scale: 0.1, ..default() }));
+    let fa = capture(&mut app, cam_a, 20);
+    let fb = capture(&mut app, cam_b, 20);
+    assert_eq!((fa.width, fb.width), (64, 96));
+    assert!(fa.mesostructure_pixels() == 64 * 64 && fb.mesostructure_pixels() > 1000);
+    // Camera B shows the height view (grey), camera A the red unlit plane.
+    let shot_a = screenshot(&mut app, &a);
+    let shot_b = screenshot(&mut app, &b);
+    let px = |img: &Image, x: u32, y: u32| {
+        let i = ((y * img.width() + x) * 4) as usize;
+        let d = img.data.as_ref().unwrap();
+        [d[i], d[i + 1], d[i + 2]]
+    };
+    let [r, g, _] = px(&shot_a, 32, 32);
+    assert!(r > 200 && g < 30, "camera A shows the lit scene: {:?}", px(&shot_a, 32, 32));
+    let grey = (0..shot_b.width())
+        .map(|x| px(&shot_b, x, 48))
+        .filter(|p| p[0] == p[1] && p[1] == p[2] && p[0] > 0)
+        .count();
+    assert!(grey > 48, "camera B shows the grey height view ({grey} grey pixels on a row)");
+}

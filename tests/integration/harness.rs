@@ -1,0 +1,162 @@
+//! A headless Bevy app on the software Vulkan driver, and helpers to read back what it drew.
+
+use std::sync::{Arc, Mutex};
+
+use bevy::{
+    asset::RenderAssetUsages,
+    camera::RenderTarget,
+    image::Image,
+    prelude::*,
+    render::{
+        pipelined_rendering::PipelinedRenderingPlugin,
+        render_resource::{TextureFormat, TextureUsages},
+        view::screenshot::{Screenshot, ScreenshotCaptured},
+        RenderApp, RenderPlugin,
+    },
+    window::ExitCondition,
+};
+use bevy_mesostructure::{prelude::*, CapturedFrame, MesostructureCapture, MesostructureCaptures};
+
+/// Whether the GPU tests can run. Without a Vulkan driver they are skipped with a message,
+/// except under CI (`CI=true`), where they must fail instead.
+pub fn gpu_or_skip() -> bool {
+    let has_driver = ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"]
+        .iter()
+        .any(|d| std::fs::read_dir(d).is_ok_and(|mut e| e.next().is_some()));
+    if has_driver || std::env::var("CI").is_ok_and(|v| v == "true") {
+        return true;
+    }
+    eprintln!("SKIPPED: no Vulkan driver (install mesa-vulkan-drivers); set CI=true to make this a failure");
+    false
+}
+
+/// A headless app rendering to images, with the plugin. Logging stays off (one global logger
+/// per process, many apps per test binary) unless `MESOSTRUCTURE_TEST_LOG` is set; warnings are
+/// checked through [`warnings`].
+pub fn app() -> App {
+    let mut app = App::new();
+    let plugins = DefaultPlugins
+        .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
+        .set(RenderPlugin { synchronous_pipeline_compilation: true, ..default() })
+        .disable::<PipelinedRenderingPlugin>();
+    if std::env::var_os("MESOSTRUCTURE_TEST_LOG").is_some() {
+        app.add_plugins(plugins);
+    } else {
+        app.add_plugins(plugins.disable::<bevy::log::LogPlugin>());
+    }
+    app.add_plugins(MesostructurePlugin);
+    app.finish();
+    app.cleanup();
+    app
+}
+
+/// A render-target image of `w × h`.
+pub fn target(app: &mut App, w: u32, h: u32) -> Handle<Image> {
+    let mut image = Image::new_target_texture(w, h, TextureFormat::Rgba8UnormSrgb, None);
+    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+    image.asset_usage = RenderAssetUsages::default();
+    app.world_mut().resource_mut::<Assets<Image>>().add(image)
+}
+
+/// A camera rendering into `target` with the effect and a capture.
+pub fn camera(app: &mut App, target: &Handle<Image>, transform: Transform, settings: Mesostructure) -> Entity {
+    app.world_mut()
+        .spawn((
+            Camera3d::default(),
+            RenderTarget::Image(target.clone().into()),
+            Msaa::Off,
+            bevy::core_pipeline::tonemapping::Tonemapping::None,
+            settings,
+            MesostructureCapture,
+            transform,
+        ))
+        .id()
+}
+
+/// Runs `n` frames, failing on any render error.
+pub fn run(app: &mut App, n: usize) {
+    for _ in 0..n {
+        app.update();
+        if let Some(exit) = app.should_exit() {
+            panic!("the app exited: {exit:?} (a wgpu error?)");
+        }
+    }
+}
+
+/// Runs 4 frames (assets prepared, pipelines compiled), then until `camera` has a capture (at
+/// most `max` more frames); returns the newest.
+pub fn capture(app: &mut App, camera: Entity, max: usize) -> CapturedFrame {
+    let captures = app.world().resource::<MesostructureCaptures>().clone();
+    run(app, 4);
+    captures.take(camera);
+    for _ in 0..max {
+        run(app, 1);
+        if let Some(frame) = captures.take(camera) {
+            return frame;
+        }
+    }
+    panic!("no capture of camera {camera} after {max} frames: were the pipelines compiled?");
+}
+
+/// Runs frames until a screenshot of `target` arrives; returns its RGBA8 pixels.
+pub fn screenshot(app: &mut App, target: &Handle<Image>) -> Image {
+    let slot: Arc<Mutex<Option<Image>>> = Arc::default();
+    let s = slot.clone();
+    app.world_mut()
+        .spawn(Screenshot::image(target.clone()))
+        .observe(move |ev: On<ScreenshotCaptured>| {
+            *s.lock().unwrap() = Some(ev.image.clone());
+        });
+    for _ in 0..10 {
+        run(app, 1);
+        if let Some(image) = slot.lock().unwrap().take() {
+            return image;
+        }
+    }
+    panic!("no screenshot after 10 frames");
+}
+
+/// Keys of the one-time warnings given so far, main and render world together.
+pub fn warnings(app: &App) -> Vec<String> {
+    let mut keys: Vec<String> = app.world().resource::<bevy_mesostructure::WarnedOnce>().keys().collect();
+    if let Some(render) = app.get_sub_app(RenderApp) {
+        keys.extend(render.world().resource::<bevy_mesostructure::WarnedOnce>().keys());
+    }
+    keys
+}
+
+/// A flat-shaded (unlit) material of one colour.
+pub fn unlit(app: &mut App, color: Color) -> MeshMaterial3d<StandardMaterial> {
+    MeshMaterial3d(app.world_mut().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: color,
+        unlit: true,
+        ..default()
+    }))
+}
+
+/// Adds a mesh asset.
+pub fn mesh(app: &mut App, mesh: impl Into<Mesh>) -> Mesh3d {
+    Mesh3d(app.world_mut().resource_mut::<Assets<Mesh>>().add(mesh.into()))
+}
+
+/// Adds an image asset.
+pub fn image(app: &mut App, image: Image) -> Handle<Image> {
+    app.world_mut().resource_mut::<Assets<Image>>().add(image)
+}
+
+/// The camera above the 2×2 plane, looking straight down, screen right = +x, screen down = +z,
+/// and the world point under pixel `(px, py)` of a `size`² image (default 45° vertical fov).
+pub const TOP_DOWN_HEIGHT: f32 = 2.0;
+
+/// Transform of the top-down camera.
+pub fn top_down() -> Transform {
+    Transform::from_xyz(0.0, TOP_DOWN_HEIGHT, 0.0).looking_at(Vec3::ZERO, Vec3::NEG_Z)
+}
+
+/// UV of the 2×2 plane under the centre of pixel `(px, py)` of the top-down camera.
+pub fn top_down_uv(px: u32, py: u32, size: u32) -> Vec2 {
+    let t = (std::f32::consts::FRAC_PI_4 * 0.5).tan() * TOP_DOWN_HEIGHT;
+    let ndc = |p: u32| ((p as f32 + 0.5) / size as f32) * 2.0 - 1.0;
+    let (x, z) = (ndc(px) * t, ndc(py) * t);
+    Vec2::new((x + 1.0) * 0.5, (z + 1.0) * 0.5)
+}
