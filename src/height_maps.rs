@@ -117,10 +117,32 @@ impl HeightMap {
         )
     }
 
-    /// The map as 8-bit grey PNG bytes' worth of pixels (for saving).
-    pub fn to_gray8(&self) -> Vec<u8> {
-        self.values.iter().map(|v| (v * 255.0).round() as u8).collect()
+    /// The map as an 8-bit grey [`Image`] (`R8Unorm`), e.g. to save as PNG.
+    pub fn to_image_gray8(&self) -> Image {
+        Image::new(
+            Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
+            TextureDimension::D2,
+            self.values.iter().map(|v| (v * 255.0).round() as u8).collect(),
+            TextureFormat::R8Unorm,
+            RenderAssetUsages::default(),
+        )
     }
+
+    /// A generator by name: `bricks`, `rivets`, `weave`, `sine`, `stone` or `cone`, at `size`².
+    pub fn by_name(name: &str, size: u32) -> Option<Self> {
+        Some(match name {
+            "bricks" => Self::bricks(size, 8, 0.12),
+            "rivets" => Self::rivets(size, 6, 0.32),
+            "weave" => Self::weave(size, 8),
+            "sine" => Self::sine(size, 6),
+            "stone" => Self::noise(size, 6, 5, 7),
+            "cone" => Self::cone(size, 0.5),
+            _ => return None,
+        })
+    }
+
+    /// The names [`Self::by_name`] knows.
+    pub const NAMES: [&'static str; 6] = ["bricks", "rivets", "weave", "sine", "stone", "cone"];
 }
 
 fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {

@@ -31,7 +31,9 @@ fn height_texel(p: vec2<i32>, level: i32, size: vec2<i32>) -> f32 {
 
 // Bilinear filtering by hand: the mip chain is R32Float, which need not be filterable.
 fn height_bilinear(uv: vec2<f32>, level: i32) -> f32 {
-    let size = vec2<i32>(textureDimensions(height_mips, level));
+    // Level sizes from level 0: a per-pixel (non-uniform) level in textureDimensions reads the
+    // wrong level on some drivers (seen on lavapipe), which then loads out of bounds.
+    let size = max(vec2<i32>(textureDimensions(height_mips)) >> vec2<u32>(u32(level)), vec2(1));
     let p = uv * vec2<f32>(size) - 0.5;
     let base = floor(p);
     let f = p - base;

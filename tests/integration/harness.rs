@@ -34,6 +34,11 @@ pub fn gpu_or_skip() -> bool {
 /// per process, many apps per test binary) unless `MESOSTRUCTURE_TEST_LOG` is set; warnings are
 /// checked through [`warnings`].
 pub fn app() -> App {
+    app_with(|_| {})
+}
+
+/// [`app`], with more plugins added by `more` before the app is finished.
+pub fn app_with(more: impl FnOnce(&mut App)) -> App {
     let mut app = App::new();
     let plugins = DefaultPlugins
         .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
@@ -45,6 +50,7 @@ pub fn app() -> App {
         app.add_plugins(plugins.disable::<bevy::log::LogPlugin>());
     }
     app.add_plugins(MesostructurePlugin);
+    more(&mut app);
     app.finish();
     app.cleanup();
     app
