@@ -18,10 +18,10 @@ use bevy::{
     mesh::VertexAttributeValues,
     prelude::*,
     render::{
+        RenderPlugin,
         pipelined_rendering::PipelinedRenderingPlugin,
         render_resource::{TextureFormat, TextureUsages},
-        view::screenshot::{save_to_disk, Screenshot},
-        RenderPlugin,
+        view::screenshot::{Screenshot, save_to_disk},
     },
     window::ExitCondition,
 };
@@ -67,7 +67,10 @@ fn parse_args() -> Args {
             "--size" => {
                 let v = value();
                 let (w, h) = v.split_once('x').unwrap_or((&v, &v));
-                args.size = UVec2::new(w.parse().expect("--size WxH"), h.parse().expect("--size WxH"));
+                args.size = UVec2::new(
+                    w.parse().expect("--size WxH"),
+                    h.parse().expect("--size WxH"),
+                );
             }
             "--shape" => args.shape = value(),
             "--height-map" => args.height_map = value(),
@@ -77,10 +80,12 @@ fn parse_args() -> Args {
                 args.views = if v == "all" {
                     MesostructureDebugView::ALL.to_vec()
                 } else {
-                    vec![*MesostructureDebugView::ALL
-                        .iter()
-                        .find(|d| view_name(**d) == v)
-                        .unwrap_or_else(|| panic!("unknown view {v}"))]
+                    vec![
+                        *MesostructureDebugView::ALL
+                            .iter()
+                            .find(|d| view_name(**d) == v)
+                            .unwrap_or_else(|| panic!("unknown view {v}")),
+                    ]
                 };
             }
             "--help" | "-h" => {
@@ -105,7 +110,11 @@ fn cube_point(p: Vec3) -> Vec3 {
 
 fn morph(t: f32, m: &Morphing, mesh: &mut Mesh) {
     let w = 0.5 - 0.5 * (t * 0.8).cos();
-    let positions: Vec<[f32; 3]> = m.sphere.iter().map(|p| p.lerp(cube_point(*p), w).to_array()).collect();
+    let positions: Vec<[f32; 3]> = m
+        .sphere
+        .iter()
+        .map(|p| p.lerp(cube_point(*p), w).to_array())
+        .collect();
     let normals: Vec<[f32; 3]> = m
         .sphere
         .iter()
@@ -139,8 +148,15 @@ fn main() {
     let mut app = App::new();
     app.add_plugins(
         DefaultPlugins
-            .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
-            .set(RenderPlugin { synchronous_pipeline_compilation: true, ..default() })
+            .set(WindowPlugin {
+                primary_window: None,
+                exit_condition: ExitCondition::DontExit,
+                ..default()
+            })
+            .set(RenderPlugin {
+                synchronous_pipeline_compilation: true,
+                ..default()
+            })
             .disable::<PipelinedRenderingPlugin>(),
     )
     .add_plugins(MesostructurePlugin)
@@ -149,11 +165,21 @@ fn main() {
     app.cleanup();
 
     let world = app.world_mut();
-    let mut target = Image::new_target_texture(args.size.x, args.size.y, TextureFormat::Rgba8UnormSrgb, None);
+    let mut target = Image::new_target_texture(
+        args.size.x,
+        args.size.y,
+        TextureFormat::Rgba8UnormSrgb,
+        None,
+    );
     target.texture_descriptor.usage |= TextureUsages::COPY_SRC;
     let target = world.resource_mut::<Assets<Image>>().add(target);
-    let map = HeightMap::by_name(&args.height_map, 512)
-        .unwrap_or_else(|| panic!("unknown height map {}; one of {:?}", args.height_map, HeightMap::NAMES));
+    let map = HeightMap::by_name(&args.height_map, 512).unwrap_or_else(|| {
+        panic!(
+            "unknown height map {}; one of {:?}",
+            args.height_map,
+            HeightMap::NAMES
+        )
+    });
     let height_map = world.resource_mut::<Assets<Image>>().add(map.to_image());
 
     let camera = world
@@ -166,18 +192,32 @@ fn main() {
         ))
         .id();
     world.spawn((
-        DirectionalLight { illuminance: 8000.0, shadow_maps_enabled: true, ..default() },
+        DirectionalLight {
+            illuminance: 8000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
         Transform::from_xyz(2.0, 4.0, 1.5).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    let ground = world.resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().size(8.0, 8.0));
-    let ground_material = world.resource_mut::<Assets<StandardMaterial>>().add(Color::srgb(0.35, 0.33, 0.3));
-    world.spawn((Mesh3d(ground), MeshMaterial3d(ground_material), Transform::from_xyz(0.0, -0.85, 0.0)));
+    let ground = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(Plane3d::default().mesh().size(8.0, 8.0));
+    let ground_material = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(Color::srgb(0.35, 0.33, 0.3));
+    world.spawn((
+        Mesh3d(ground),
+        MeshMaterial3d(ground_material),
+        Transform::from_xyz(0.0, -0.85, 0.0),
+    ));
 
-    let brick_red = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-        base_color: Color::srgb(0.75, 0.38, 0.28),
-        perceptual_roughness: 0.8,
-        ..default()
-    });
+    let brick_red = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::srgb(0.75, 0.38, 0.28),
+            perceptual_roughness: 0.8,
+            ..default()
+        });
     let material = MesostructureMaterial {
         height_map,
         scale: args.scale,
@@ -185,19 +225,30 @@ fn main() {
     };
     match args.shape.as_str() {
         "plane" => {
-            let plane = world.resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().size(2.4, 2.4));
-            world.spawn((Mesh3d(plane), MeshMaterial3d(brick_red), MesostructureMaterial {
-                uv_transform: bevy::math::Affine2::IDENTITY,
-                ..material
-            }, Transform::from_xyz(0.0, -0.2, 0.0)));
+            let plane = world
+                .resource_mut::<Assets<Mesh>>()
+                .add(Plane3d::default().mesh().size(2.4, 2.4));
+            world.spawn((
+                Mesh3d(plane),
+                MeshMaterial3d(brick_red),
+                MesostructureMaterial {
+                    uv_transform: bevy::math::Affine2::IDENTITY,
+                    ..material
+                },
+                Transform::from_xyz(0.0, -0.2, 0.0),
+            ));
         }
         shape @ ("sphere" | "morph") => {
             let mut sphere_mesh = Sphere::new(0.8).mesh().uv(96, 48);
             sphere_mesh.asset_usage = RenderAssetUsages::default();
-            let Some(VertexAttributeValues::Float32x3(p)) = sphere_mesh.attribute(Mesh::ATTRIBUTE_POSITION) else {
+            let Some(VertexAttributeValues::Float32x3(p)) =
+                sphere_mesh.attribute(Mesh::ATTRIBUTE_POSITION)
+            else {
                 unreachable!("a sphere has positions")
             };
-            let morphing = Morphing { sphere: p.iter().map(|q| Vec3::from_array(*q)).collect() };
+            let morphing = Morphing {
+                sphere: p.iter().map(|q| Vec3::from_array(*q)).collect(),
+            };
             let handle = world.resource_mut::<Assets<Mesh>>().add(sphere_mesh);
             let mut entity = world.spawn((
                 Mesh3d(handle),
@@ -216,7 +267,17 @@ fn main() {
         let t = frame as f32 / 30.0;
         let world = app.world_mut();
         let mut q = world.query::<(&Morphing, &Mesh3d)>();
-        let updates: Vec<_> = q.iter(world).map(|(m, h)| (Morphing { sphere: m.sphere.clone() }, h.0.clone())).collect();
+        let updates: Vec<_> = q
+            .iter(world)
+            .map(|(m, h)| {
+                (
+                    Morphing {
+                        sphere: m.sphere.clone(),
+                    },
+                    h.0.clone(),
+                )
+            })
+            .collect();
         for (m, h) in updates {
             if let Some(mut mesh) = world.resource_mut::<Assets<Mesh>>().get_mut(&h) {
                 morph(t + PI * 0.6, &m, &mut mesh);
@@ -231,12 +292,19 @@ fn main() {
         app.update();
     }
     for view in &args.views {
-        app.world_mut().get_mut::<Mesostructure>(camera).unwrap().debug_view = *view;
+        app.world_mut()
+            .get_mut::<Mesostructure>(camera)
+            .unwrap()
+            .debug_view = *view;
         for _ in 0..2 {
             app.update();
         }
-        let path = args.out.join(format!("{}_{}.png", args.shape, view_name(*view)));
-        app.world_mut().spawn(Screenshot::image(target.clone())).observe(save_to_disk(path.clone()));
+        let path = args
+            .out
+            .join(format!("{}_{}.png", args.shape, view_name(*view)));
+        app.world_mut()
+            .spawn(Screenshot::image(target.clone()))
+            .observe(save_to_disk(path.clone()));
         for _ in 0..3 {
             app.update();
         }

@@ -30,15 +30,18 @@ pub fn height_values(image: &Image) -> Result<(Vec<f32>, Vec<String>), String> {
         ));
     }
     let unorm8 = |stride: usize, channel: usize| -> Vec<f32> {
-        (0..n).map(|i| data[i * stride + channel] as f32 / 255.0).collect()
+        (0..n)
+            .map(|i| data[i * stride + channel] as f32 / 255.0)
+            .collect()
     };
     let u16_at = |o: usize| u16::from_le_bytes([data[o], data[o + 1]]);
     let unorm16 = |stride: usize| -> Vec<f32> {
-        (0..n).map(|i| u16_at(i * stride) as f32 / 65535.0).collect()
+        (0..n)
+            .map(|i| u16_at(i * stride) as f32 / 65535.0)
+            .collect()
     };
-    let f16s = |stride: usize| -> Vec<f32> {
-        (0..n).map(|i| half_to_f32(u16_at(i * stride))).collect()
-    };
+    let f16s =
+        |stride: usize| -> Vec<f32> { (0..n).map(|i| half_to_f32(u16_at(i * stride))).collect() };
     let f32s = |stride: usize| -> Vec<f32> {
         (0..n)
             .map(|i| {
@@ -109,7 +112,11 @@ pub fn height_map_mip_chain(image: &Image) -> Result<(Image, Vec<String>), Strin
         (level, lw, lh) = (next, nw, nh);
     }
     let mut out = Image::new_uninit(
-        Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
         TextureDimension::D2,
         TextureFormat::R32Float,
         RenderAssetUsages::RENDER_WORLD,
@@ -143,7 +150,11 @@ mod tests {
 
     fn image(format: TextureFormat, w: u32, h: u32, data: Vec<u8>) -> Image {
         Image::new(
-            Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+            Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
             TextureDimension::D2,
             data,
             format,
@@ -159,11 +170,26 @@ mod tests {
         let (v, notes) = height_values(&rgba).unwrap();
         assert_eq!(v, vec![0.2]);
         assert_eq!(notes.len(), 1, "sRGB data is noted, not decoded");
-        let g16 = image(TextureFormat::R16Unorm, 1, 1, 65535u16.to_le_bytes().to_vec());
+        let g16 = image(
+            TextureFormat::R16Unorm,
+            1,
+            1,
+            65535u16.to_le_bytes().to_vec(),
+        );
         assert_eq!(height_values(&g16).unwrap().0, vec![1.0]);
-        let h16 = image(TextureFormat::R16Float, 1, 1, 0x3800u16.to_le_bytes().to_vec());
+        let h16 = image(
+            TextureFormat::R16Float,
+            1,
+            1,
+            0x3800u16.to_le_bytes().to_vec(),
+        );
         assert_eq!(height_values(&h16).unwrap().0, vec![0.5]);
-        let f = image(TextureFormat::R32Float, 2, 1, bytemuck::cast_slice(&[0.25f32, f32::NAN]).to_vec());
+        let f = image(
+            TextureFormat::R32Float,
+            2,
+            1,
+            bytemuck::cast_slice(&[0.25f32, f32::NAN]).to_vec(),
+        );
         let (v, notes) = height_values(&f).unwrap();
         assert_eq!(v, vec![0.25, 0.0]);
         assert_eq!(notes.len(), 1);
@@ -174,11 +200,19 @@ mod tests {
     #[test]
     fn mip_chain_of_a_non_square_map() {
         let values: Vec<f32> = (0..8 * 2).map(|i| (i % 2) as f32).collect();
-        let img = image(TextureFormat::R32Float, 8, 2, bytemuck::cast_slice(&values).to_vec());
+        let img = image(
+            TextureFormat::R32Float,
+            8,
+            2,
+            bytemuck::cast_slice(&values).to_vec(),
+        );
         let (mips, _) = height_map_mip_chain(&img).unwrap();
         assert_eq!(mips.texture_descriptor.mip_level_count, 4); // 8×2, 4×1, 2×1, 1×1
         let data: &[f32] = bytemuck::cast_slice(mips.data.as_ref().unwrap());
         assert_eq!(data.len(), 16 + 4 + 2 + 1);
-        assert!(data[16..].iter().all(|v| (v - 0.5).abs() < 1e-6), "box filter averages");
+        assert!(
+            data[16..].iter().all(|v| (v - 0.5).abs() < 1e-6),
+            "box filter averages"
+        );
     }
 }

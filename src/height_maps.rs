@@ -29,7 +29,11 @@ impl HeightMap {
                 values.push(f(u, v).clamp(0.0, 1.0));
             }
         }
-        Self { width, height, values }
+        Self {
+            width,
+            height,
+            values,
+        }
     }
 
     /// Running bond bricks: `rows` courses of bricks twice as wide as tall, mortar grooves of
@@ -61,7 +65,9 @@ impl HeightMap {
     /// periods across the map.
     pub fn sine(size: u32, periods: u32) -> Self {
         let f = periods.max(1) as f32 * std::f32::consts::TAU;
-        Self::from_fn(size, size, |u, v| 0.25 * ((f * u).sin() + (f * v).sin()) + 0.5)
+        Self::from_fn(size, size, |u, v| {
+            0.25 * ((f * u).sin() + (f * v).sin()) + 0.5
+        })
     }
 
     /// Plain-weave pattern: over-under threads, `threads` per side.
@@ -74,8 +80,18 @@ impl HeightMap {
             let warp_on_top = (iu + iv) % 2 == 0;
             let across = |f: f32| (std::f32::consts::PI * f).sin();
             let along = |f: f32| 0.5 + 0.5 * (std::f32::consts::TAU * (f - 0.25)).sin();
-            let warp = across(fu) * if warp_on_top { along(fv * 0.5 + 0.25) } else { 0.6 };
-            let weft = across(fv) * if warp_on_top { 0.6 } else { along(fu * 0.5 + 0.25) };
+            let warp = across(fu)
+                * if warp_on_top {
+                    along(fv * 0.5 + 0.25)
+                } else {
+                    0.6
+                };
+            let weft = across(fv)
+                * if warp_on_top {
+                    0.6
+                } else {
+                    along(fu * 0.5 + 0.25)
+                };
             warp.max(weft)
         })
     }
@@ -109,7 +125,11 @@ impl HeightMap {
             .flat_map(|v| ((v * 65535.0).round() as u16).to_le_bytes())
             .collect();
         Image::new(
-            Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
+            Extent3d {
+                width: self.width,
+                height: self.height,
+                depth_or_array_layers: 1,
+            },
             TextureDimension::D2,
             data,
             TextureFormat::R16Unorm,
@@ -120,9 +140,16 @@ impl HeightMap {
     /// The map as an 8-bit grey [`Image`] (`R8Unorm`), e.g. to save as PNG.
     pub fn to_image_gray8(&self) -> Image {
         Image::new(
-            Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
+            Extent3d {
+                width: self.width,
+                height: self.height,
+                depth_or_array_layers: 1,
+            },
             TextureDimension::D2,
-            self.values.iter().map(|v| (v * 255.0).round() as u8).collect(),
+            self.values
+                .iter()
+                .map(|v| (v * 255.0).round() as u8)
+                .collect(),
             TextureFormat::R8Unorm,
             RenderAssetUsages::default(),
         )
@@ -151,7 +178,8 @@ fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
 }
 
 fn hash(x: u32, y: u32, seed: u32) -> f32 {
-    let mut h = x.wrapping_mul(0x8da6_b343) ^ y.wrapping_mul(0xd816_3841) ^ seed.wrapping_mul(0xcb1a_b31f);
+    let mut h =
+        x.wrapping_mul(0x8da6_b343) ^ y.wrapping_mul(0xd816_3841) ^ seed.wrapping_mul(0xcb1a_b31f);
     h ^= h >> 13;
     h = h.wrapping_mul(0x5bd1_e995);
     h ^= h >> 15;
@@ -186,9 +214,15 @@ mod tests {
             assert!(map.values.iter().all(|v| (0.0..=1.0).contains(v)));
             let spread = map.values.iter().cloned().fold(f32::MIN, f32::max)
                 - map.values.iter().cloned().fold(f32::MAX, f32::min);
-            assert!(spread > 0.5, "a height map with relief, got spread {spread}");
+            assert!(
+                spread > 0.5,
+                "a height map with relief, got spread {spread}"
+            );
         }
         assert_eq!(HeightMap::noise(32, 4, 3, 9), HeightMap::noise(32, 4, 3, 9));
-        assert_ne!(HeightMap::noise(32, 4, 3, 9), HeightMap::noise(32, 4, 3, 10));
+        assert_ne!(
+            HeightMap::noise(32, 4, 3, 9),
+            HeightMap::noise(32, 4, 3, 10)
+        );
     }
 }

@@ -65,7 +65,10 @@ mod warn_once;
 
 pub use warn_once::WarnedOnce;
 
-use bevy::{prelude::*, render::{extract_component::ExtractComponentPlugin, sync_component::SyncComponentPlugin}};
+use bevy::{
+    prelude::*,
+    render::{extract_component::ExtractComponentPlugin, sync_component::SyncComponentPlugin},
+};
 
 pub use material::MesostructureMaterial;
 pub use render::capture::{CapturedFrame, MesostructureCapture, MesostructureCaptures};
@@ -74,8 +77,8 @@ pub use settings::{Mesostructure, MesostructureDebugView};
 /// Everything an app needs.
 pub mod prelude {
     pub use crate::{
-        height_maps::HeightMap, Mesostructure, MesostructureDebugView, MesostructureMaterial,
-        MesostructurePlugin,
+        Mesostructure, MesostructureDebugView, MesostructureMaterial, MesostructurePlugin,
+        height_maps::HeightMap,
     };
 }
 

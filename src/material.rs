@@ -64,7 +64,11 @@ pub struct HeightMapMips(HashMap<AssetId<Image>, Option<Handle<Image>>>);
 /// [`PreparedMesostructure`] in step.
 pub fn prepare_mesostructure_materials(
     mut commands: Commands,
-    materials: Query<(Entity, &MesostructureMaterial, Option<&PreparedMesostructure>)>,
+    materials: Query<(
+        Entity,
+        &MesostructureMaterial,
+        Option<&PreparedMesostructure>,
+    )>,
     mut removed: RemovedComponents<MesostructureMaterial>,
     mut image_events: MessageReader<AssetEvent<Image>>,
     mut images: ResMut<Assets<Image>>,
@@ -85,7 +89,14 @@ pub fn prepare_mesostructure_materials(
         }
     }
     for (entity, material, prepared) in &materials {
-        let wanted = prepare_one(entity, material, &mut images, &asset_server, &mut mips, &mut warned);
+        let wanted = prepare_one(
+            entity,
+            material,
+            &mut images,
+            &asset_server,
+            &mut mips,
+            &mut warned,
+        );
         match (wanted, prepared) {
             (Some(w), Some(p)) if &w == p => {}
             (Some(w), _) => {
@@ -127,8 +138,10 @@ fn prepare_one(
     let id = material.height_map.id();
     if material.height_map == Handle::default() {
         warned.warn(format!("missing {id} {entity}"), || {
-            format!("entity {entity}: MesostructureMaterial::height_map is not set; the mesh is \
-                     drawn without mesostructure")
+            format!(
+                "entity {entity}: MesostructureMaterial::height_map is not set; the mesh is \
+                     drawn without mesostructure"
+            )
         });
         return None;
     }
@@ -138,14 +151,18 @@ fn prepare_one(
                 Some(LoadState::Loading) => {}
                 Some(LoadState::Failed(err)) => {
                     warned.warn(format!("failed {id}"), || {
-                        format!("entity {entity}: the height map failed to load ({err}); \
-                                 the mesh is drawn without mesostructure")
+                        format!(
+                            "entity {entity}: the height map failed to load ({err}); \
+                                 the mesh is drawn without mesostructure"
+                        )
                     });
                 }
                 _ => {
                     warned.warn(format!("missing {id}"), || {
-                        format!("entity {entity}: MesostructureMaterial::height_map is not set \
-                                 or not an image asset; the mesh is drawn without mesostructure")
+                        format!(
+                            "entity {entity}: MesostructureMaterial::height_map is not set \
+                                 or not an image asset; the mesh is drawn without mesostructure"
+                        )
                     });
                 }
             }
@@ -162,8 +179,10 @@ fn prepare_one(
             }
             Err(err) => {
                 warned.warn(format!("convert {id}"), || {
-                    format!("entity {entity}: cannot use the height map: {err}; \
-                             the mesh is drawn without mesostructure")
+                    format!(
+                        "entity {entity}: cannot use the height map: {err}; \
+                             the mesh is drawn without mesostructure"
+                    )
                 });
                 None
             }

@@ -1,10 +1,6 @@
 //! The per-camera settings component.
 
-use bevy::{
-    core_pipeline::prepass::DepthPrepass,
-    prelude::*,
-    render::render_resource::ShaderType,
-};
+use bevy::{core_pipeline::prepass::DepthPrepass, prelude::*, render::render_resource::ShaderType};
 
 use crate::reference::{ApexSearch, DepthContinuity, MAX_APEX_DIRECTIONS, sample_directions};
 
@@ -118,7 +114,12 @@ impl Mesostructure {
                 changed.push(name);
             }
         };
-        clamp_u32(&mut s.apex_directions, 0, MAX_APEX_DIRECTIONS, "apex_directions");
+        clamp_u32(
+            &mut s.apex_directions,
+            0,
+            MAX_APEX_DIRECTIONS,
+            "apex_directions",
+        );
         clamp_u32(&mut s.max_ascent_steps, 1, 512, "max_ascent_steps");
         clamp_u32(&mut s.min_sample_radius, 1, 64, "min_sample_radius");
         clamp_u32(&mut s.max_sample_radius, 1, 256, "max_sample_radius");
@@ -223,7 +224,6 @@ impl bevy::render::sync_component::SyncComponent for Mesostructure {
     );
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -249,10 +249,16 @@ mod tests {
 
     #[test]
     fn uniform_carries_the_direction_table() {
-        let u = MesostructureUniform::from(&Mesostructure { apex_directions: 4, ..default() });
+        let u = MesostructureUniform::from(&Mesostructure {
+            apex_directions: 4,
+            ..default()
+        });
         assert!((u.directions[0].x - 1.0).abs() < 1e-6);
         assert!((u.directions[0].w - 1.0).abs() < 1e-6); // θ_1 = 90°
         assert_eq!(u.apex_stride, 6);
-        assert_eq!(MesostructureDebugView::Boundary.next(), MesostructureDebugView::None);
+        assert_eq!(
+            MesostructureDebugView::Boundary.next(),
+            MesostructureDebugView::None
+        );
     }
 }

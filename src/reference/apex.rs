@@ -1,6 +1,6 @@
 //! Local apex sets f(P) (paper §2.2): gradient ascent over the MHGM.
 
-use super::{GradientMap, ScreenHeightMap, NEIGHBOURS};
+use super::{GradientMap, NEIGHBOURS, ScreenHeightMap};
 
 /// The most indirect sample directions a pixel may use (the GPU uniform holds this many).
 pub const MAX_APEX_DIRECTIONS: u32 = 16;
@@ -102,8 +102,16 @@ pub fn quantize_direction(g: [f32; 2]) -> Option<usize> {
     if ax == 0.0 && ay == 0.0 {
         return None;
     }
-    let sx = if ax > TAN_22_5 * ay { g[0].signum() as i32 } else { 0 };
-    let sy = if ay > TAN_22_5 * ax { g[1].signum() as i32 } else { 0 };
+    let sx = if ax > TAN_22_5 * ay {
+        g[0].signum() as i32
+    } else {
+        0
+    };
+    let sy = if ay > TAN_22_5 * ax {
+        g[1].signum() as i32
+    } else {
+        0
+    };
     NEIGHBOURS.iter().position(|&o| o == (sx, sy))
 }
 
@@ -121,7 +129,14 @@ pub fn ascend(
     loop {
         let i = mhm.index(x as u32, y as u32);
         if steps == max_steps {
-            return (Apex { x, y, kind: ApexKind::Truncated }, steps);
+            return (
+                Apex {
+                    x,
+                    y,
+                    kind: ApexKind::Truncated,
+                },
+                steps,
+            );
         }
         let h = mhm.heights[i];
         let height_of = |dir: usize| {
@@ -131,7 +146,14 @@ pub fn ascend(
         let mut next = None;
         if let Some(dir) = quantize_direction(mhgm.gradients[i]) {
             if !mhgm.connected(i, dir) {
-                return (Apex { x, y, kind: ApexKind::Boundary }, steps);
+                return (
+                    Apex {
+                        x,
+                        y,
+                        kind: ApexKind::Boundary,
+                    },
+                    steps,
+                );
             }
             if height_of(dir) > h {
                 next = Some(dir);
@@ -147,7 +169,14 @@ pub fn ascend(
             }
         }
         let Some(dir) = next else {
-            return (Apex { x, y, kind: ApexKind::Local }, steps);
+            return (
+                Apex {
+                    x,
+                    y,
+                    kind: ApexKind::Local,
+                },
+                steps,
+            );
         };
         x += NEIGHBOURS[dir].0;
         y += NEIGHBOURS[dir].1;
@@ -182,7 +211,9 @@ pub fn apex_set(
     set.truncated |= direct.kind == ApexKind::Truncated;
     let mut radius = search.min_radius;
     if rises(&direct) {
-        let chebyshev = (direct.x - x).unsigned_abs().max((direct.y - y).unsigned_abs());
+        let chebyshev = (direct.x - x)
+            .unsigned_abs()
+            .max((direct.y - y).unsigned_abs());
         radius = chebyshev.clamp(search.min_radius, search.max_radius.max(search.min_radius));
         set.direct = Some(direct);
     }
@@ -249,7 +280,11 @@ pub fn unpack_apex_set(words: &[u32], (x, y): (i32, i32)) -> ApexSet {
         } else {
             ApexKind::Local
         };
-        let apex = Apex { x: x + dx, y: y + dy, kind };
+        let apex = Apex {
+            x: x + dx,
+            y: y + dy,
+            kind,
+        };
         if slot == 0 && header & packed::DIRECT_PRESENT != 0 {
             set.direct = Some(apex);
         } else {

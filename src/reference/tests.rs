@@ -15,7 +15,13 @@ fn cone_has_one_apex_at_its_tip_from_every_pixel() {
         let r = ((x - 20.5).powi(2) + (y - 20.5).powi(2)).sqrt();
         0.1 * (1.0 - r / 40.0)
     });
-    let (_, sets) = run(&mhm, &ApexSearch { max_steps: 200, ..default_search() });
+    let (_, sets) = run(
+        &mhm,
+        &ApexSearch {
+            max_steps: 200,
+            ..default_search()
+        },
+    );
     for y in 0..41 {
         for x in 0..41 {
             let set = &sets[mhm.index(x, y)];
@@ -60,7 +66,11 @@ fn grid_of_bumps_has_apexes_at_the_peaks() {
             }
         }
     }
-    assert_eq!(with_direct, 64 * 64 - 16, "all but the 16 peaks have a direct apex");
+    assert_eq!(
+        with_direct,
+        64 * 64 - 16,
+        "all but the 16 peaks have a direct apex"
+    );
     // A pixel in the valley between four bumps sees several of them.
     let valley = &sets[mhm.index(16, 16)];
     assert!(valley.len() >= 3, "valley apex set {valley:?}");
@@ -78,11 +88,19 @@ fn flat_map_has_no_apex_and_zero_gradient() {
 fn ramp_that_leaves_the_region_ends_in_boundary_points() {
     // Rising towards +x, cut by the screen edge at x = 31.
     let mhm = ScreenHeightMap::from_fn(32, 16, |x, _| 0.01 * x);
-    let (mhgm, sets) = run(&mhm, &ApexSearch { max_steps: 64, ..default_search() });
+    let (mhgm, sets) = run(
+        &mhm,
+        &ApexSearch {
+            max_steps: 64,
+            ..default_search()
+        },
+    );
     for y in 0..16 {
         assert!(mhgm.is_boundary(mhm.index(31, y)));
         for x in 0..31 {
-            let d = sets[mhm.index(x, y)].direct.expect("uphill pixels have a direct apex");
+            let d = sets[mhm.index(x, y)]
+                .direct
+                .expect("uphill pixels have a direct apex");
             assert_eq!((d.x, d.kind), (31, ApexKind::Boundary), "from ({x}, {y})");
         }
     }
@@ -115,7 +133,10 @@ fn gradient_uses_one_sided_differences_at_depth_discontinuities() {
     let i = mhm.index(7, 3);
     assert_ne!(mhgm.flags[i] & FLAG_DEPTH_EDGE, 0);
     assert!(!mhgm.connected(i, 0));
-    assert!((mhgm.gradients[i][0] - 0.01).abs() < 1e-6, "one-sided, not across the edge");
+    assert!(
+        (mhgm.gradients[i][0] - 0.01).abs() < 1e-6,
+        "one-sided, not across the edge"
+    );
     // Interior: central differences.
     let j = mhm.index(3, 3);
     assert_eq!(mhgm.flags[j] & FLAG_BOUNDARY, 0);
@@ -135,7 +156,13 @@ fn gradient_uses_one_sided_differences_at_depth_discontinuities() {
 #[test]
 fn step_bound_is_reported() {
     let mhm = ScreenHeightMap::from_fn(64, 4, |x, _| 0.001 * x);
-    let (_, sets) = run(&mhm, &ApexSearch { max_steps: 8, ..default_search() });
+    let (_, sets) = run(
+        &mhm,
+        &ApexSearch {
+            max_steps: 8,
+            ..default_search()
+        },
+    );
     assert!(sets[mhm.index(0, 1)].truncated);
     assert!(!sets[mhm.index(60, 1)].truncated);
 }
@@ -159,6 +186,20 @@ fn packed_apex_sets_round_trip() {
         0,
     ];
     let set = unpack_apex_set(&words, (10, 10));
-    assert_eq!(set.direct, Some(Apex { x: 13, y: 8, kind: ApexKind::Local }));
-    assert_eq!(set.indirect, vec![Apex { x: 5, y: 17, kind: ApexKind::Boundary }]);
+    assert_eq!(
+        set.direct,
+        Some(Apex {
+            x: 13,
+            y: 8,
+            kind: ApexKind::Local
+        })
+    );
+    assert_eq!(
+        set.indirect,
+        vec![Apex {
+            x: 5,
+            y: 17,
+            kind: ApexKind::Boundary
+        }]
+    );
 }

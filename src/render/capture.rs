@@ -7,17 +7,15 @@ use bevy::{
     platform::collections::HashMap,
     prelude::*,
     render::{
+        Extract,
         render_resource::*,
         renderer::{RenderContext, RenderDevice, ViewQuery},
         sync_world::RenderEntity,
-        Extract,
     },
 };
 
-use super::{ViewMesostructureTextures, CORE_NORMAL_FORMAT, MHGM_FORMAT, MHM_FORMAT};
-use crate::reference::{
-    unpack_apex_set, ApexSet, GradientMap, ScreenHeightMap, FLAG_VALID,
-};
+use super::{CORE_NORMAL_FORMAT, MHGM_FORMAT, MHM_FORMAT, ViewMesostructureTextures};
+use crate::reference::{ApexSet, FLAG_VALID, GradientMap, ScreenHeightMap, unpack_apex_set};
 
 /// Put on a camera with [`Mesostructure`](crate::Mesostructure) to read its working images back
 /// every frame into [`MesostructureCaptures`].
@@ -102,7 +100,9 @@ pub struct ExtractedCapture(pub Entity);
 /// Marks the render views whose camera asks for a capture.
 pub fn extract_capture_requests(
     mut commands: Commands,
-    cameras: Extract<Query<(RenderEntity, Entity, Has<MesostructureCapture>), With<crate::Mesostructure>>>,
+    cameras: Extract<
+        Query<(RenderEntity, Entity, Has<MesostructureCapture>), With<crate::Mesostructure>>,
+    >,
 ) {
     for (render_entity, entity, capture) in &cameras {
         let Ok(mut target) = commands.get_entity(render_entity) else {
@@ -126,7 +126,12 @@ struct Readback {
 #[derive(Resource, Default)]
 pub struct PendingCaptures(Vec<(Entity, UVec2, u32, Vec<Readback>)>);
 
-fn copy_texture(ctx: &mut RenderContext, device: &RenderDevice, texture: &Texture, format: TextureFormat) -> Readback {
+fn copy_texture(
+    ctx: &mut RenderContext,
+    device: &RenderDevice,
+    texture: &Texture,
+    format: TextureFormat,
+) -> Readback {
     let size = texture.size();
     let row = size.width * format.block_copy_size(None).unwrap();
     let padded_row = RenderDevice::align_copy_bytes_per_row(row as usize) as u32;
@@ -140,11 +145,19 @@ fn copy_texture(ctx: &mut RenderContext, device: &RenderDevice, texture: &Textur
         texture.as_image_copy(),
         TexelCopyBufferInfo {
             buffer: &buffer,
-            layout: TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded_row), rows_per_image: None },
+            layout: TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded_row),
+                rows_per_image: None,
+            },
         },
         size,
     );
-    Readback { buffer, padded_row, row }
+    Readback {
+        buffer,
+        padded_row,
+        row,
+    }
 }
 
 fn copy_buffer(ctx: &mut RenderContext, device: &RenderDevice, source: &Buffer) -> Readback {
@@ -154,26 +167,47 @@ fn copy_buffer(ctx: &mut RenderContext, device: &RenderDevice, source: &Buffer) 
         usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    ctx.command_encoder().copy_buffer_to_buffer(source, 0, &buffer, 0, source.size());
-    Readback { buffer, padded_row: source.size() as u32, row: source.size() as u32 }
+    ctx.command_encoder()
+        .copy_buffer_to_buffer(source, 0, &buffer, 0, source.size());
+    Readback {
+        buffer,
+        padded_row: source.size() as u32,
+        row: source.size() as u32,
+    }
 }
 
 /// Core3d system after the apex pass: copies the working images into mappable buffers.
+/// Views without a mesostructure surface this frame are not captured (their images are stale).
 pub fn copy_capture(
-    view: ViewQuery<(&ViewMesostructureTextures, &ExtractedCapture)>,
+    view: ViewQuery<(
+        &ViewMesostructureTextures,
+        &ExtractedCapture,
+        &bevy::render::view::ExtractedView,
+    )>,
+    phases: Res<bevy::render::render_phase::ViewSortedRenderPhases<super::height::HeightPhaseItem>>,
     device: Res<RenderDevice>,
     mut pending: ResMut<PendingCaptures>,
     mut ctx: RenderContext,
 ) {
-    let (t, capture) = view.into_inner();
+    let (t, capture, extracted_view) = view.into_inner();
+    if !super::view_has_mesostructure(&phases, extracted_view) {
+        return;
+    }
     let readbacks = vec![
         copy_texture(&mut ctx, &device, &t.mhm.texture, MHM_FORMAT),
-        copy_texture(&mut ctx, &device, &t.core_normal.texture, CORE_NORMAL_FORMAT),
+        copy_texture(
+            &mut ctx,
+            &device,
+            &t.core_normal.texture,
+            CORE_NORMAL_FORMAT,
+        ),
         copy_texture(&mut ctx, &device, &t.mhgm.texture, MHGM_FORMAT),
         copy_buffer(&mut ctx, &device, &t.apex_sets),
         copy_buffer(&mut ctx, &device, &t.apex_stats),
     ];
-    pending.0.push((capture.0, t.size, t.apex_stride, readbacks));
+    pending
+        .0
+        .push((capture.0, t.size, t.apex_stride, readbacks));
 }
 
 fn read(device: &RenderDevice, r: &Readback, rows: u32) -> Vec<u8> {

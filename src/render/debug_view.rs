@@ -101,18 +101,24 @@ pub fn debug_view_pass(
         &ViewMesostructureBindGroups,
         &ViewMesostructureUniformOffset,
         &bevy::render::camera::ExtractedCamera,
+        &bevy::render::view::ExtractedView,
     )>,
+    phases: Res<bevy::render::render_phase::ViewSortedRenderPhases<super::height::HeightPhaseItem>>,
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (target, pipeline_id, bind_groups, offset, camera) = view.into_inner();
+    let (target, pipeline_id, bind_groups, offset, camera, extracted_view) = view.into_inner();
+    if !super::view_has_mesostructure(&phases, extracted_view) {
+        return;
+    }
     let Some(pipeline) = pipeline_cache.get_render_pipeline(pipeline_id.0) else {
         return;
     };
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let span = diagnostics.time_span(ctx.command_encoder(), "mesostructure/debug_view");
-    ctx.command_encoder().push_debug_group("mesostructure/debug_view");
+    ctx.command_encoder()
+        .push_debug_group("mesostructure/debug_view");
     {
         let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
             label: Some("mesostructure_debug_view_pass"),

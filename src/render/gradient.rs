@@ -3,13 +3,18 @@
 use bevy::{
     prelude::*,
     render::{
-        diagnostic::RecordDiagnostics,
+        render_phase::ViewSortedRenderPhases,
         render_resource::{binding_types::*, *},
         renderer::{RenderContext, ViewQuery},
+        view::ExtractedView,
     },
 };
 
-use super::{ViewMesostructureBindGroups, ViewMesostructureTextures, ViewMesostructureUniformOffset, MHGM_FORMAT};
+use super::{
+    MHGM_FORMAT, ViewMesostructureBindGroups, ViewMesostructureTextures,
+    ViewMesostructureUniformOffset, dispatch_per_pixel, height::HeightPhaseItem,
+    view_has_mesostructure,
+};
 use crate::settings::MesostructureUniform;
 
 /// Pipeline and layout of the gradient pass.
@@ -51,32 +56,30 @@ pub fn init_gradient_pipeline(
 /// Core3d system: dispatches the gradient pass for the current view, timed as `mesostructure/gradient`.
 pub fn gradient_pass(
     view: ViewQuery<(
+        &ExtractedView,
         &ViewMesostructureTextures,
         &ViewMesostructureBindGroups,
         &ViewMesostructureUniformOffset,
     )>,
+    phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     pipeline: Res<GradientPipeline>,
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (textures, bind_groups, offset) = view.into_inner();
+    let (extracted_view, textures, bind_groups, offset) = view.into_inner();
+    if !view_has_mesostructure(&phases, extracted_view) {
+        return;
+    }
     let Some(compute) = pipeline_cache.get_compute_pipeline(pipeline.pipeline) else {
         return;
     };
-    let diagnostics = ctx.diagnostic_recorder();
-    let diagnostics = diagnostics.as_deref();
-    let span = diagnostics.time_span(ctx.command_encoder(), "mesostructure/gradient");
-    let encoder = ctx.command_encoder();
-    encoder.push_debug_group("mesostructure/gradient");
-    {
-        let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
-            label: Some("mesostructure_gradient_pass"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(compute);
-        pass.set_bind_group(0, &bind_groups.gradient, &[offset.0]);
-        pass.dispatch_workgroups(textures.size.x.div_ceil(8), textures.size.y.div_ceil(8), 1);
-    }
-    encoder.pop_debug_group();
-    span.end(ctx.command_encoder());
+    dispatch_per_pixel(
+        &mut ctx,
+        "mesostructure/gradient",
+        compute,
+        &bind_groups.gradient,
+        offset.0,
+        textures.size,
+        |_| {},
+    );
 }

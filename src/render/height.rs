@@ -11,7 +11,7 @@ use bevy::{
     ecs::{
         entity::EntityHash,
         query::ROQueryItem,
-        system::{lifetimeless::SRes, SystemParamItem},
+        system::{SystemParamItem, lifetimeless::SRes},
     },
     math::FloatOrd,
     mesh::MeshVertexBufferLayoutRef,
@@ -22,7 +22,10 @@ use bevy::{
     platform::collections::{HashMap, HashSet},
     prelude::*,
     render::{
-        batching::{gpu_preprocessing::UntypedPhaseIndirectParametersBuffers, GetBatchData, GetFullBatchData},
+        batching::{
+            GetBatchData, GetFullBatchData,
+            gpu_preprocessing::UntypedPhaseIndirectParametersBuffers,
+        },
         camera::ExtractedCamera,
         diagnostic::RecordDiagnostics,
         mesh::RenderMesh,
@@ -41,8 +44,10 @@ use bevy::{
 };
 use nonmax::NonMaxU32;
 
-use super::{ViewMesostructureTextures, CORE_NORMAL_FORMAT, MHM_FORMAT};
-use crate::{material::PreparedMesostructure, settings::ExtractedMesostructure, warn_once::WarnedOnce};
+use super::{CORE_NORMAL_FORMAT, MHM_FORMAT, ViewMesostructureTextures};
+use crate::{
+    material::PreparedMesostructure, settings::ExtractedMesostructure, warn_once::WarnedOnce,
+};
 
 /// One mesostructure mesh to draw into the height map of one view.
 pub struct HeightPhaseItem {
@@ -173,7 +178,11 @@ impl SpecializedMeshPipeline for HeightPassPipeline {
             shader_defs,
             entry_point: Some("fragment".into()),
             targets: vec![
-                Some(ColorTargetState { format: MHM_FORMAT, blend: None, write_mask: ColorWrites::ALL }),
+                Some(ColorTargetState {
+                    format: MHM_FORMAT,
+                    blend: None,
+                    write_mask: ColorWrites::ALL,
+                }),
                 Some(ColorTargetState {
                     format: CORE_NORMAL_FORMAT,
                     blend: None,
@@ -307,7 +316,12 @@ pub fn prepare_height_material_bind_groups(
         };
         let t = prepared.uv_transform;
         let offset = groups.uniforms.push(&HeightMaterialUniform {
-            uv_x_axis_y_axis: Vec4::new(t.matrix2.x_axis.x, t.matrix2.x_axis.y, t.matrix2.y_axis.x, t.matrix2.y_axis.y),
+            uv_x_axis_y_axis: Vec4::new(
+                t.matrix2.x_axis.x,
+                t.matrix2.x_axis.y,
+                t.matrix2.y_axis.x,
+                t.matrix2.y_axis.y,
+            ),
             uv_translation: t.translation,
             scale: prepared.scale,
             object_id: object_id(*main_entity),
@@ -409,15 +423,19 @@ pub fn queue_height_phase(
                     mesh.primitive_topology(),
                     mesh.index_format(),
                 );
-            let pipeline_id = match pipelines.specialize(&pipeline_cache, &pipeline, key, &mesh.layout) {
-                Ok(id) => id,
-                Err(err) => {
-                    warned.warn(format!("specialize {:?}", instance.mesh_asset_id()), || {
-                        format!("cannot draw mesh {:?} into the height map: {err}", instance.mesh_asset_id())
-                    });
-                    continue;
-                }
-            };
+            let pipeline_id =
+                match pipelines.specialize(&pipeline_cache, &pipeline, key, &mesh.layout) {
+                    Ok(id) => id,
+                    Err(err) => {
+                        warned.warn(format!("specialize {:?}", instance.mesh_asset_id()), || {
+                            format!(
+                                "cannot draw mesh {:?} into the height map: {err}",
+                                instance.mesh_asset_id()
+                            )
+                        });
+                        continue;
+                    }
+                };
             phase.add_transient(HeightPhaseItem {
                 // Order does not matter: only the fragment at the prepass depth passes.
                 sorting_info: TransparentSortingInfo3d::AlwaysOnTop,
@@ -451,17 +469,25 @@ pub fn height_pass(
     let Some(phase) = phases.get(&extracted_view.retained_view_entity) else {
         return;
     };
+    if phase.items.is_empty() {
+        // No mesostructure surface in view: no pass at all (the later passes skip too).
+        return;
+    }
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let span = diagnostics.time_span(ctx.command_encoder(), "mesostructure/height");
-    ctx.command_encoder().push_debug_group("mesostructure/height");
+    ctx.command_encoder()
+        .push_debug_group("mesostructure/height");
     {
         let clear = |view| {
             Some(RenderPassColorAttachment {
                 view,
                 depth_slice: None,
                 resolve_target: None,
-                ops: Operations { load: LoadOp::Clear(Default::default()), store: StoreOp::Store },
+                ops: Operations {
+                    load: LoadOp::Clear(Default::default()),
+                    store: StoreOp::Store,
+                },
             })
         };
         let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
@@ -472,7 +498,10 @@ pub fn height_pass(
             ],
             depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
                 view: depth.view(),
-                depth_ops: Some(Operations { load: LoadOp::Load, store: StoreOp::Store }),
+                depth_ops: Some(Operations {
+                    load: LoadOp::Load,
+                    store: StoreOp::Store,
+                }),
                 stencil_ops: None,
             }),
             timestamp_writes: None,
@@ -484,10 +513,8 @@ pub fn height_pass(
         {
             pass.set_camera_viewport(&viewport);
         }
-        if !phase.items.is_empty() {
-            if let Err(err) = phase.render(&mut pass, world, view_entity) {
-                error!("bevy_mesostructure: height pass failed: {err:?}");
-            }
+        if let Err(err) = phase.render(&mut pass, world, view_entity) {
+            error!("bevy_mesostructure: height pass failed: {err:?}");
         }
     }
     ctx.command_encoder().pop_debug_group();

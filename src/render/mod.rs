@@ -13,25 +13,26 @@ pub mod height;
 use bevy::{
     camera::Camera3d,
     core_pipeline::{
-        core_3d::main_opaque_pass_3d, prepass::DepthPrepass, schedule::Core3d, tonemapping::tonemapping,
-        Core3dSystems,
+        Core3dSystems, core_3d::main_opaque_pass_3d, prepass::DepthPrepass, schedule::Core3d,
+        tonemapping::tonemapping,
     },
     image::ToExtents,
     pbr::MeshPipelineSystems,
     platform::collections::HashSet,
     prelude::*,
     render::{
+        Extract, ExtractSchedule, Render, RenderApp, RenderDebugFlags, RenderStartup,
+        RenderSystems,
         camera::ExtractedCamera,
         render_phase::{
-            sort_phase_system, AddRenderCommand, DrawFunctions, SortedRenderPhasePlugin,
-            ViewSortedRenderPhases,
+            AddRenderCommand, DrawFunctions, SortedRenderPhasePlugin, ViewSortedRenderPhases,
+            sort_phase_system,
         },
         render_resource::*,
         renderer::{RenderDevice, RenderQueue},
         sync_world::RenderEntity,
         texture::{CachedTexture, TextureCache},
         view::{Msaa, RetainedViewEntity},
-        Extract, ExtractSchedule, Render, RenderApp, RenderDebugFlags, RenderStartup, RenderSystems,
     },
     shader::load_shader_library,
 };
@@ -82,6 +83,48 @@ pub struct ViewMesostructureBindGroups {
 #[derive(Component, Clone, Copy)]
 pub struct ViewMesostructureUniformOffset(pub u32);
 
+/// Whether any mesostructure mesh was queued into the height phase of `view` this frame; the
+/// passes do nothing (and cost nothing) for views without one.
+pub fn view_has_mesostructure(
+    phases: &ViewSortedRenderPhases<height::HeightPhaseItem>,
+    view: &bevy::render::view::ExtractedView,
+) -> bool {
+    phases
+        .get(&view.retained_view_entity)
+        .is_some_and(|phase| !phase.items.is_empty())
+}
+
+/// Records one per-pixel compute pass over a view (8×8 workgroups), labelled with a debug
+/// group and timed with a GPU span named `label`; `before` records commands ahead of it.
+pub(crate) fn dispatch_per_pixel(
+    ctx: &mut bevy::render::renderer::RenderContext,
+    label: &'static str,
+    pipeline: &ComputePipeline,
+    bind_group: &BindGroup,
+    uniform_offset: u32,
+    size: UVec2,
+    before: impl FnOnce(&mut CommandEncoder),
+) {
+    use bevy::render::diagnostic::RecordDiagnostics;
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let span = diagnostics.time_span(ctx.command_encoder(), label);
+    let encoder = ctx.command_encoder();
+    encoder.push_debug_group(label);
+    before(encoder);
+    {
+        let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, bind_group, &[uniform_offset]);
+        pass.dispatch_workgroups(size.x.div_ceil(8), size.y.div_ceil(8), 1);
+    }
+    encoder.pop_debug_group();
+    span.end(ctx.command_encoder());
+}
+
 /// The settings of all views, one dynamic uniform buffer.
 #[derive(Resource, Default)]
 pub struct MesostructureUniforms(pub DynamicUniformBuffer<MesostructureUniform>);
@@ -95,9 +138,10 @@ pub(crate) fn build(app: &mut App) {
 
     // The phase plugin adds the batching systems; with our pipeline type as their batch data,
     // items are never merged (each may bind another height map).
-    app.add_plugins(SortedRenderPhasePlugin::<height::HeightPhaseItem, height::HeightPassPipeline>::new(
-        RenderDebugFlags::default(),
-    ));
+    app.add_plugins(SortedRenderPhasePlugin::<
+        height::HeightPhaseItem,
+        height::HeightPassPipeline,
+    >::new(RenderDebugFlags::default()));
     let captures = capture::MesostructureCaptures::default();
     app.insert_resource(captures.clone());
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
@@ -125,7 +169,11 @@ pub(crate) fn build(app: &mut App) {
         )
         .add_systems(
             ExtractSchedule,
-            (extract_mesostructure_cameras, extract_height_phases, capture::extract_capture_requests),
+            (
+                extract_mesostructure_cameras,
+                extract_height_phases,
+                capture::extract_capture_requests,
+            ),
         )
         .add_systems(
             Render,
@@ -133,12 +181,15 @@ pub(crate) fn build(app: &mut App) {
                 height::queue_height_phase.in_set(RenderSystems::QueueMeshes),
                 sort_phase_system::<height::HeightPhaseItem>.in_set(RenderSystems::PhaseSort),
                 debug_view::prepare_debug_view_pipelines.in_set(RenderSystems::Prepare),
-                (prepare_view_textures, prepare_view_uniforms).in_set(RenderSystems::PrepareResources),
+                (prepare_view_textures, prepare_view_uniforms)
+                    .in_set(RenderSystems::PrepareResources),
                 height::prepare_height_material_bind_groups
                     .in_set(RenderSystems::Queue)
                     .before(height::queue_height_phase),
                 prepare_view_bind_groups.in_set(RenderSystems::PrepareBindGroups),
-                capture::map_captures.after(RenderSystems::Render).before(RenderSystems::Cleanup),
+                capture::map_captures
+                    .after(RenderSystems::Render)
+                    .before(RenderSystems::Cleanup),
             ),
         )
         .add_systems(
@@ -168,7 +219,17 @@ pub(crate) fn build(app: &mut App) {
 pub fn extract_mesostructure_cameras(
     mut commands: Commands,
     cameras: Extract<
-        Query<(RenderEntity, Entity, &Camera, &Mesostructure, Option<&Msaa>, Has<DepthPrepass>), With<Camera3d>>,
+        Query<
+            (
+                RenderEntity,
+                Entity,
+                &Camera,
+                &Mesostructure,
+                Option<&Msaa>,
+                Has<DepthPrepass>,
+            ),
+            With<Camera3d>,
+        >,
     >,
     mut warned: ResMut<WarnedOnce>,
 ) {
@@ -195,14 +256,17 @@ pub fn extract_mesostructure_cameras(
             false
         } else if size.is_none_or(|s| s.x == 0 || s.y == 0) {
             warned.warn(format!("size {entity}"), || {
-                format!("camera {entity} has a zero-sized viewport; the mesostructure effect skips it")
+                format!(
+                    "camera {entity} has a zero-sized viewport; the mesostructure effect skips it"
+                )
             });
             false
         } else {
             true
         };
         if !usable {
-            target.remove::<<Mesostructure as bevy::render::sync_component::SyncComponent>::Target>();
+            target
+                .remove::<<Mesostructure as bevy::render::sync_component::SyncComponent>::Target>();
             continue;
         }
         warned.forget(&format!("msaa {entity}"));
@@ -242,12 +306,19 @@ fn prepare_view_textures(
     mut commands: Commands,
     mut texture_cache: ResMut<TextureCache>,
     device: Res<RenderDevice>,
-    views: Query<(Entity, &ExtractedCamera, &ExtractedMesostructure, Option<&ViewMesostructureTextures>)>,
+    views: Query<(
+        Entity,
+        &ExtractedCamera,
+        &ExtractedMesostructure,
+        Option<&ViewMesostructureTextures>,
+    )>,
     mut warned: ResMut<WarnedOnce>,
 ) {
     for (entity, camera, settings, previous) in &views {
         let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0) else {
-            commands.entity(entity).remove::<ViewMesostructureTextures>();
+            commands
+                .entity(entity)
+                .remove::<ViewMesostructureTextures>();
             continue;
         };
         let apex_stride = crate::reference::packed::stride(settings.0.apex_directions);
@@ -260,7 +331,9 @@ fn prepare_view_textures(
                     settings.0.apex_directions
                 )
             });
-            commands.entity(entity).remove::<ViewMesostructureTextures>();
+            commands
+                .entity(entity)
+                .remove::<ViewMesostructureTextures>();
             continue;
         }
         let texture = |cache: &mut TextureCache, label, format, usage| {
@@ -278,17 +351,33 @@ fn prepare_view_textures(
                 },
             )
         };
-        let attachment = TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC;
-        let mhm = texture(&mut texture_cache, "mesostructure_mhm", MHM_FORMAT, attachment);
-        let core_normal = texture(&mut texture_cache, "mesostructure_core_normal", CORE_NORMAL_FORMAT, attachment);
+        let attachment = TextureUsages::RENDER_ATTACHMENT
+            | TextureUsages::TEXTURE_BINDING
+            | TextureUsages::COPY_SRC;
+        let mhm = texture(
+            &mut texture_cache,
+            "mesostructure_mhm",
+            MHM_FORMAT,
+            attachment,
+        );
+        let core_normal = texture(
+            &mut texture_cache,
+            "mesostructure_core_normal",
+            CORE_NORMAL_FORMAT,
+            attachment,
+        );
         let mhgm = texture(
             &mut texture_cache,
             "mesostructure_mhgm",
             MHGM_FORMAT,
-            TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC,
+            TextureUsages::STORAGE_BINDING
+                | TextureUsages::TEXTURE_BINDING
+                | TextureUsages::COPY_SRC,
         );
         let (apex_sets, apex_stats) = match previous {
-            Some(p) if p.apex_sets.size() == apex_bytes => (p.apex_sets.clone(), p.apex_stats.clone()),
+            Some(p) if p.apex_sets.size() == apex_bytes => {
+                (p.apex_sets.clone(), p.apex_stats.clone())
+            }
             _ => (
                 device.create_buffer(&BufferDescriptor {
                     label: Some("mesostructure_apex_sets"),
@@ -328,7 +417,9 @@ fn prepare_view_uniforms(
     };
     for (entity, settings) in &views {
         let offset = writer.write(&MesostructureUniform::from(&settings.0));
-        commands.entity(entity).insert(ViewMesostructureUniformOffset(offset));
+        commands
+            .entity(entity)
+            .insert(ViewMesostructureUniformOffset(offset));
     }
 }
 
@@ -349,7 +440,11 @@ fn prepare_view_bind_groups(
         let gradient = device.create_bind_group(
             "mesostructure_gradient_bind_group",
             &pipeline_cache.get_bind_group_layout(&gradient.layout),
-            &BindGroupEntries::sequential((&t.mhm.default_view, &t.mhgm.default_view, settings.clone())),
+            &BindGroupEntries::sequential((
+                &t.mhm.default_view,
+                &t.mhgm.default_view,
+                settings.clone(),
+            )),
         );
         let apex = device.create_bind_group(
             "mesostructure_apex_bind_group",
@@ -372,7 +467,10 @@ fn prepare_view_bind_groups(
                 settings.clone(),
             )),
         );
-        commands.entity(entity).insert(ViewMesostructureBindGroups { gradient, apex, debug_view });
+        commands.entity(entity).insert(ViewMesostructureBindGroups {
+            gradient,
+            apex,
+            debug_view,
+        });
     }
 }
-

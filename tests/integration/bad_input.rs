@@ -19,7 +19,11 @@ fn gray_image(format: TextureFormat, w: u32, h: u32, texel: impl Fn(u32, u32) ->
         }
     }
     Image::new(
-        Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
         TextureDimension::D2,
         data,
         format,
@@ -28,7 +32,10 @@ fn gray_image(format: TextureFormat, w: u32, h: u32, texel: impl Fn(u32, u32) ->
 }
 
 fn bump(x: u32, y: u32, w: u32, h: u32) -> f32 {
-    let (u, v) = ((x as f32 + 0.5) / w as f32 - 0.5, (y as f32 + 0.5) / h as f32 - 0.5);
+    let (u, v) = (
+        (x as f32 + 0.5) / w as f32 - 0.5,
+        (y as f32 + 0.5) / h as f32 - 0.5,
+    );
     (1.0 - 4.0 * (u * u + v * v)).max(0.0)
 }
 
@@ -51,42 +58,96 @@ fn odd_height_maps_and_meshes_fall_back_without_panicking() {
     let green = unlit(&mut app, Color::srgb(0.0, 1.0, 0.0));
 
     // Valid formats: 8-bit grey, 16-bit grey, RGBA8 sRGB, R32Float, non-square.
-    let g8 = gray_image(TextureFormat::R8Unorm, 32, 32, |x, y| vec![(bump(x, y, 32, 32) * 255.0) as u8]);
-    let g16 = gray_image(TextureFormat::R16Unorm, 32, 32, |x, y| ((bump(x, y, 32, 32) * 65535.0) as u16).to_le_bytes().to_vec());
+    let g8 = gray_image(TextureFormat::R8Unorm, 32, 32, |x, y| {
+        vec![(bump(x, y, 32, 32) * 255.0) as u8]
+    });
+    let g16 = gray_image(TextureFormat::R16Unorm, 32, 32, |x, y| {
+        ((bump(x, y, 32, 32) * 65535.0) as u16)
+            .to_le_bytes()
+            .to_vec()
+    });
     let rgba = gray_image(TextureFormat::Rgba8UnormSrgb, 32, 32, |x, y| {
         let v = (bump(x, y, 32, 32) * 255.0) as u8;
         vec![v, v, v, 255]
     });
-    let f32s = gray_image(TextureFormat::R32Float, 32, 32, |x, y| bump(x, y, 32, 32).to_le_bytes().to_vec());
-    let wide = gray_image(TextureFormat::R8Unorm, 48, 16, |x, y| vec![(bump(x, y, 48, 16) * 255.0) as u8]);
-    let valid: Vec<Handle<Image>> = [g8, g16, rgba, f32s, wide].into_iter().map(|i| image(&mut app, i)).collect();
+    let f32s = gray_image(TextureFormat::R32Float, 32, 32, |x, y| {
+        bump(x, y, 32, 32).to_le_bytes().to_vec()
+    });
+    let wide = gray_image(TextureFormat::R8Unorm, 48, 16, |x, y| {
+        vec![(bump(x, y, 48, 16) * 255.0) as u8]
+    });
+    let valid: Vec<Handle<Image>> = [g8, g16, rgba, f32s, wide]
+        .into_iter()
+        .map(|i| image(&mut app, i))
+        .collect();
     // Still loading: a handle whose image arrives later.
-    let late = app.world_mut().resource_mut::<Assets<Image>>().reserve_handle();
+    let late = app
+        .world_mut()
+        .resource_mut::<Assets<Image>>()
+        .reserve_handle();
     // Missing on disk, and an unsupported format.
-    let missing: Handle<Image> = app.world().resource::<AssetServer>().load("no/such/height_map.png");
-    let depth = image(&mut app, gray_image(TextureFormat::R8Sint, 4, 4, |_, _| vec![0]));
+    let missing: Handle<Image> = app
+        .world()
+        .resource::<AssetServer>()
+        .load("no/such/height_map.png");
+    let depth = image(
+        &mut app,
+        gray_image(TextureFormat::R8Sint, 4, 4, |_, _| vec![0]),
+    );
 
     let at = |app: &mut App, i: usize, mesh: Mesh3d, material: MesostructureMaterial| {
         let (col, row) = ((i % 6) as f32, (i / 6) as f32);
-        app.world_mut().spawn((
-            mesh,
-            green.clone(),
-            material,
-            Transform::from_xyz(-2.5 + col, 1.0 - row, 0.0),
-        )).id()
+        app.world_mut()
+            .spawn((
+                mesh,
+                green.clone(),
+                material,
+                Transform::from_xyz(-2.5 + col, 1.0 - row, 0.0),
+            ))
+            .id()
     };
     let mut good = Vec::new();
     for (i, h) in valid.iter().enumerate() {
-        good.push(at(&mut app, i, plane.clone(), MesostructureMaterial { height_map: h.clone(), scale: 0.1, ..default() }));
+        good.push(at(
+            &mut app,
+            i,
+            plane.clone(),
+            MesostructureMaterial {
+                height_map: h.clone(),
+                scale: 0.1,
+                ..default()
+            },
+        ));
     }
-    let late_entity = at(&mut app, 5, plane.clone(), MesostructureMaterial { height_map: late.clone(), scale: 0.1, ..default() });
-    let m = |h: &Handle<Image>, scale: f32| MesostructureMaterial { height_map: h.clone(), scale, ..default() };
+    let late_entity = at(
+        &mut app,
+        5,
+        plane.clone(),
+        MesostructureMaterial {
+            height_map: late.clone(),
+            scale: 0.1,
+            ..default()
+        },
+    );
+    let m = |h: &Handle<Image>, scale: f32| MesostructureMaterial {
+        height_map: h.clone(),
+        scale,
+        ..default()
+    };
     at(&mut app, 6, plane.clone(), m(&missing, 0.1));
     at(&mut app, 7, plane.clone(), m(&depth, 0.1));
     at(&mut app, 8, plane.clone(), m(&valid[0], 0.0));
     at(&mut app, 9, plane.clone(), m(&valid[0], -1.0));
     at(&mut app, 10, plane.clone(), m(&valid[0], f32::NAN));
-    at(&mut app, 11, plane.clone(), MesostructureMaterial { scale: 0.1, ..default() }); // no height map
+    at(
+        &mut app,
+        11,
+        plane.clone(),
+        MesostructureMaterial {
+            scale: 0.1,
+            ..default()
+        },
+    ); // no height map
     // Meshes without UVs and without normals.
     let mut no_uv = quad.mesh().build();
     no_uv.remove_attribute(Mesh::ATTRIBUTE_UV_0);
@@ -97,21 +158,50 @@ fn odd_height_maps_and_meshes_fall_back_without_panicking() {
     at(&mut app, 12, no_uv, m(&valid[0], 0.1));
     at(&mut app, 13, no_normals, m(&valid[0], 0.1));
     // A degenerate mesh (no triangles) with the component.
-    let empty = mesh(&mut app, Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
+    let empty = mesh(
+        &mut app,
+        Mesh::new(
+            PrimitiveTopology::TriangleList,
+            RenderAssetUsages::default(),
+        )
         .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, Vec::<[f32; 3]>::new())
-        .with_inserted_indices(Indices::U32(vec![])));
+        .with_inserted_indices(Indices::U32(vec![])),
+    );
     at(&mut app, 14, empty, m(&valid[0], 0.1));
 
     let first = capture(&mut app, camera, 20);
-    let ids: std::collections::BTreeSet<u32> = first.mhm.iter().map(|t| t[2] as u32).filter(|&i| i != 0).collect();
-    let expected: std::collections::BTreeSet<u32> = good.iter().map(|e| e.index_u32() + 1).collect();
-    assert_eq!(ids, expected, "exactly the five valid height maps give mesostructure pixels");
+    let ids: std::collections::BTreeSet<u32> = first
+        .mhm
+        .iter()
+        .map(|t| t[2] as u32)
+        .filter(|&i| i != 0)
+        .collect();
+    let expected: std::collections::BTreeSet<u32> =
+        good.iter().map(|e| e.index_u32() + 1).collect();
+    assert_eq!(
+        ids, expected,
+        "exactly the five valid height maps give mesostructure pixels"
+    );
 
     // The late image arrives: its plane joins.
-    app.world_mut().resource_mut::<Assets<Image>>().insert(late.id(), gray_image(TextureFormat::R8Unorm, 8, 8, |x, y| vec![(bump(x, y, 8, 8) * 255.0) as u8])).unwrap();
+    app.world_mut()
+        .resource_mut::<Assets<Image>>()
+        .insert(
+            late.id(),
+            gray_image(TextureFormat::R8Unorm, 8, 8, |x, y| {
+                vec![(bump(x, y, 8, 8) * 255.0) as u8]
+            }),
+        )
+        .unwrap();
     run(&mut app, 2);
     let second = capture(&mut app, camera, 5);
-    assert!(second.mhm.iter().any(|t| t[2] as u32 == late_entity.index_u32() + 1), "the late height map is used once loaded");
+    assert!(
+        second
+            .mhm
+            .iter()
+            .any(|t| t[2] as u32 == late_entity.index_u32() + 1),
+        "the late height map is used once loaded"
+    );
 
     // Every quad still renders green, mesostructure or not (the degenerate mesh draws nothing).
     let shot = screenshot(&mut app, &target);
@@ -123,12 +213,26 @@ fn odd_height_maps_and_meshes_fall_back_without_panicking() {
         let px = ((-2.5 + col) / (half_h * 1.5) * 0.5 + 0.5) * 192.0;
         let py = (0.5 - (1.0 - row) / half_h * 0.5) * 128.0;
         let o = ((py as u32 * 192 + px as u32) * 4) as usize;
-        assert!(data[o + 1] > 200 && data[o] < 30, "quad {i} is drawn: {:?}", &data[o..o + 3]);
+        assert!(
+            data[o + 1] > 200 && data[o] < 30,
+            "quad {i} is drawn: {:?}",
+            &data[o..o + 3]
+        );
     }
 
     let w = warnings(&app);
-    for key in ["scale", "missing", "failed", "convert", "attributes", "note"] {
-        assert!(w.iter().any(|k| k.starts_with(key)), "a warning about {key}: {w:?}");
+    for key in [
+        "scale",
+        "missing",
+        "failed",
+        "convert",
+        "attributes",
+        "note",
+    ] {
+        assert!(
+            w.iter().any(|k| k.starts_with(key)),
+            "a warning about {key}: {w:?}"
+        );
     }
     // One-time: running on gives no new warnings.
     let count = w.len();
@@ -145,7 +249,15 @@ fn msaa_and_nan_settings_do_not_panic() {
     let map = image(&mut app, HeightMap::sine(64, 2).to_image());
     let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let white = unlit(&mut app, Color::WHITE);
-    app.world_mut().spawn((plane, white, MesostructureMaterial { height_map: map, scale: 0.1, ..default() }));
+    app.world_mut().spawn((
+        plane,
+        white,
+        MesostructureMaterial {
+            height_map: map,
+            scale: 0.1,
+            ..default()
+        },
+    ));
 
     // MSAA on: the effect is off for this camera, the scene renders.
     let t1 = target(&mut app, 64, 64);
@@ -155,24 +267,44 @@ fn msaa_and_nan_settings_do_not_panic() {
     // fails validation on it before any pass of ours runs.)
     // NaN and out-of-range settings: sanitized, the effect runs.
     let t3 = target(&mut app, 64, 64);
-    let nan = camera(&mut app, &t3, top_down(), Mesostructure {
-        depth_discontinuity: f32::NAN,
-        apex_directions: 1000,
-        max_ascent_steps: 0,
+    let nan = camera(
+        &mut app,
+        &t3,
+        top_down(),
+        Mesostructure {
+            depth_discontinuity: f32::NAN,
+            apex_directions: 1000,
+            max_ascent_steps: 0,
+            ..default()
+        },
+    );
+    app.world_mut().entity_mut(nan).insert(Camera {
+        order: 1,
         ..default()
     });
-    app.world_mut().entity_mut(nan).insert(Camera { order: 1, ..default() });
 
     let frame = capture(&mut app, nan, 20);
     assert_eq!(frame.mesostructure_pixels(), 64 * 64);
     assert_eq!(frame.apex_stride, 2 + 16, "apex_directions clamped to 16");
-    let captures = app.world().resource::<bevy_mesostructure::MesostructureCaptures>().clone();
+    let captures = app
+        .world()
+        .resource::<bevy_mesostructure::MesostructureCaptures>()
+        .clone();
     run(&mut app, 2);
     assert!(captures.take(msaa).is_none(), "no effect with MSAA on");
     let shot = screenshot(&mut app, &t1);
-    assert!(shot.data.as_ref().unwrap()[..4].iter().take(3).all(|&c| c > 200), "the MSAA camera still renders the plane");
+    assert!(
+        shot.data.as_ref().unwrap()[..4]
+            .iter()
+            .take(3)
+            .all(|&c| c > 200),
+        "the MSAA camera still renders the plane"
+    );
     let w = warnings(&app);
     for key in ["msaa", "settings"] {
-        assert!(w.iter().any(|k| k.starts_with(key)), "a warning about {key}: {w:?}");
+        assert!(
+            w.iter().any(|k| k.starts_with(key)),
+            "a warning about {key}: {w:?}"
+        );
     }
 }

@@ -2,9 +2,9 @@
 
 use bevy::prelude::*;
 use bevy_mesostructure::{
-    prelude::*,
-    reference::{apex_sets, gradient_map, ApexKind, ApexSet, FLAG_BOUNDARY},
     CapturedFrame,
+    prelude::*,
+    reference::{ApexKind, ApexSet, FLAG_BOUNDARY, apex_sets, gradient_map},
 };
 
 use crate::harness::*;
@@ -27,9 +27,16 @@ fn compare_with_oracle(frame: &CapturedFrame, settings: &Mesostructure) -> (usiz
     );
     let worst = (0..n)
         .filter(|&i| gpu.flags[i] == cpu.flags[i])
-        .map(|i| (gpu.gradients[i][0] - cpu.gradients[i][0]).abs().max((gpu.gradients[i][1] - cpu.gradients[i][1]).abs()))
+        .map(|i| {
+            (gpu.gradients[i][0] - cpu.gradients[i][0])
+                .abs()
+                .max((gpu.gradients[i][1] - cpu.gradients[i][1]).abs())
+        })
         .fold(0.0f32, f32::max);
-    assert!(worst <= 1e-6, "MHGM gradient differs from the oracle by {worst}");
+    assert!(
+        worst <= 1e-6,
+        "MHGM gradient differs from the oracle by {worst}"
+    );
 
     let cpu_sets = apex_sets(&mhm, &cpu, &settings.apex_search());
     let (mut direct_total, mut direct_close, mut count_equal, mut valid) = (0, 0, 0, 0);
@@ -56,7 +63,10 @@ fn compare_with_oracle(frame: &CapturedFrame, settings: &Mesostructure) -> (usiz
         }
     }
     assert!(valid > 0);
-    assert!(direct_total > valid / 4, "few direct apexes ({direct_total} of {valid}): is there relief?");
+    assert!(
+        direct_total > valid / 4,
+        "few direct apexes ({direct_total} of {valid}): is there relief?"
+    );
     assert!(
         direct_close * 100 >= direct_total * 99,
         "only {direct_close} of {direct_total} direct apexes within 1 px of the oracle's"
@@ -82,16 +92,29 @@ fn plane_with_rivets_matches_the_oracle_and_the_height_map() {
     let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let material = unlit(&mut app, Color::WHITE);
     let k = 0.2;
-    app.world_mut().spawn((plane, material, MesostructureMaterial { height_map, scale: k, ..default() }));
+    app.world_mut().spawn((
+        plane,
+        material,
+        MesostructureMaterial {
+            height_map,
+            scale: k,
+            ..default()
+        },
+    ));
 
     let frame = capture(&mut app, camera, 20);
     assert_eq!((frame.width, frame.height), (SIZE, SIZE));
-    assert_eq!(frame.mesostructure_pixels(), (SIZE * SIZE) as usize, "the plane fills the view");
+    assert_eq!(
+        frame.mesostructure_pixels(),
+        (SIZE * SIZE) as usize,
+        "the plane fills the view"
+    );
 
     // The height pass samples the map through the UVs with trilinear mip selection: compare with
     // the same filter on the CPU at each pixel's UV. Straight down, the footprint is constant:
     // d(uv)/dx = tan(22.5°)·2·H / (2·SIZE) per pixel. Tolerance 1 % of k.
-    let (mips, _) = bevy_mesostructure::height_map_import::height_map_mip_chain(&map.to_image()).unwrap();
+    let (mips, _) =
+        bevy_mesostructure::height_map_import::height_map_mip_chain(&map.to_image()).unwrap();
     let levels: Vec<(u32, Vec<f32>)> = {
         let all: &[f32] = bytemuck::cast_slice(mips.data.as_ref().unwrap());
         let (mut out, mut offset, mut size) = (vec![], 0usize, 256u32);
@@ -113,7 +136,8 @@ fn plane_with_rivets_matches_the_oracle_and_the_height_map() {
         let bottom = at(x0, y0 + 1) + (at(x0 + 1, y0 + 1) - at(x0, y0 + 1)) * fx;
         top + (bottom - top) * fy
     };
-    let footprint = (std::f32::consts::FRAC_PI_8).tan() * 2.0 * TOP_DOWN_HEIGHT / (2.0 * SIZE as f32) * 256.0;
+    let footprint =
+        (std::f32::consts::FRAC_PI_8).tan() * 2.0 * TOP_DOWN_HEIGHT / (2.0 * SIZE as f32) * 256.0;
     let lod = footprint.log2().max(0.0);
     let sample = |uv: Vec2| {
         let l0 = lod.floor() as usize;
@@ -127,19 +151,29 @@ fn plane_with_rivets_matches_the_oracle_and_the_height_map() {
             worst = worst.max((got - expected).abs());
         }
     }
-    assert!(worst < 0.01 * k, "MHM height off the height map by {worst} (k = {k})");
+    assert!(
+        worst < 0.01 * k,
+        "MHM height off the height map by {worst} (k = {k})"
+    );
     // Core normal of a plane: +Y.
     let n = frame.core_normal[(SIZE * SIZE / 2 + SIZE / 2) as usize];
     assert!((n[1] - 1.0).abs() < 1e-3, "core normal {n:?}");
 
     let (valid, direct) = compare_with_oracle(&frame, &settings);
-    assert_eq!(frame.apex_stats[0] as usize, valid, "the counter sees every mesostructure pixel");
+    assert_eq!(
+        frame.apex_stats[0] as usize, valid,
+        "the counter sees every mesostructure pixel"
+    );
     // Rivet tops: every apex is near a rivet centre (uv multiples of 1/4 + 1/8).
     let mut near_centre = 0;
     let mut apexes = 0;
     for y in 0..SIZE {
         for x in 0..SIZE {
-            for a in frame.apex_set(x, y).iter().filter(|a| a.kind == ApexKind::Local) {
+            for a in frame
+                .apex_set(x, y)
+                .iter()
+                .filter(|a| a.kind == ApexKind::Local)
+            {
                 apexes += 1;
                 let uv = top_down_uv(a.x as u32, a.y as u32, SIZE) * 4.0;
                 let d = (uv - uv.floor() - Vec2::splat(0.5)).length();
@@ -149,8 +183,14 @@ fn plane_with_rivets_matches_the_oracle_and_the_height_map() {
             }
         }
     }
-    assert!(near_centre * 100 >= apexes * 95, "{near_centre} of {apexes} apexes at rivet tops");
-    eprintln!("plane contract: {valid} pixels, {direct} direct apexes, stats {:?}", frame.apex_stats);
+    assert!(
+        near_centre * 100 >= apexes * 95,
+        "{near_centre} of {apexes} apexes at rivet tops"
+    );
+    eprintln!(
+        "plane contract: {valid} pixels, {direct} direct apexes, stats {:?}",
+        frame.apex_stats
+    );
 }
 
 #[test]
@@ -170,13 +210,26 @@ fn sphere_with_bricks_matches_the_oracle_with_silhouettes() {
     let bricks = image(&mut app, HeightMap::bricks(256, 8, 0.12).to_image());
     let sphere = mesh(&mut app, Sphere::new(0.8).mesh().uv(32, 18));
     let material = unlit(&mut app, Color::WHITE);
-    app.world_mut().spawn((sphere, material, MesostructureMaterial { height_map: bricks, scale: 0.05, ..default() }));
+    app.world_mut().spawn((
+        sphere,
+        material,
+        MesostructureMaterial {
+            height_map: bricks,
+            scale: 0.05,
+            ..default()
+        },
+    ));
     let frame = capture(&mut app, camera, 20);
     let pixels = frame.mesostructure_pixels();
-    assert!(pixels > 3000 && pixels < (SIZE * SIZE) as usize, "sphere covers {pixels} pixels");
+    assert!(
+        pixels > 3000 && pixels < (SIZE * SIZE) as usize,
+        "sphere covers {pixels} pixels"
+    );
     // The silhouette is a boundary: pixels next to the background carry an object-edge flag.
     let gm = frame.gradient_map();
-    let edge = (0..gm.flags.len()).filter(|&i| gm.flags[i] & FLAG_BOUNDARY != 0).count();
+    let edge = (0..gm.flags.len())
+        .filter(|&i| gm.flags[i] & FLAG_BOUNDARY != 0)
+        .count();
     assert!(edge > 100, "silhouette boundary pixels: {edge}");
     compare_with_oracle(&frame, &settings);
 }
@@ -194,12 +247,23 @@ fn two_cameras_get_their_own_images_and_debug_views_draw() {
         &mut app,
         &b,
         Transform::from_xyz(0.0, 1.2, 1.6).looking_at(Vec3::ZERO, Vec3::Y),
-        Mesostructure { debug_view: MesostructureDebugView::Height, ..default() },
+        Mesostructure {
+            debug_view: MesostructureDebugView::Height,
+            ..default()
+        },
     );
     let map = image(&mut app, HeightMap::sine(128, 4).to_image());
     let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let material = unlit(&mut app, Color::srgb(1.0, 0.0, 0.0));
-    app.world_mut().spawn((plane, material, MesostructureMaterial { height_map: map, scale: 0.1, ..default() }));
+    app.world_mut().spawn((
+        plane,
+        material,
+        MesostructureMaterial {
+            height_map: map,
+            scale: 0.1,
+            ..default()
+        },
+    ));
     let fa = capture(&mut app, cam_a, 20);
     let fb = capture(&mut app, cam_b, 20);
     assert_eq!((fa.width, fb.width), (64, 96));
@@ -213,12 +277,19 @@ fn two_cameras_get_their_own_images_and_debug_views_draw() {
         [d[i], d[i + 1], d[i + 2]]
     };
     let [r, g, _] = px(&shot_a, 32, 32);
-    assert!(r > 200 && g < 30, "camera A shows the lit scene: {:?}", px(&shot_a, 32, 32));
+    assert!(
+        r > 200 && g < 30,
+        "camera A shows the lit scene: {:?}",
+        px(&shot_a, 32, 32)
+    );
     let grey = (0..shot_b.width())
         .map(|x| px(&shot_b, x, 48))
         .filter(|p| p[0] == p[1] && p[1] == p[2] && p[0] > 0)
         .count();
-    assert!(grey > 48, "camera B shows the grey height view ({grey} grey pixels on a row)");
+    assert!(
+        grey > 48,
+        "camera B shows the grey height view ({grey} grey pixels on a row)"
+    );
 }
 
 #[test]
@@ -230,19 +301,49 @@ fn each_pass_reports_a_gpu_time_span() {
         app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
     });
     let target = target(&mut app, 64, 64);
-    camera(&mut app, &target, top_down(), Mesostructure { debug_view: MesostructureDebugView::ApexCount, ..default() });
+    camera(
+        &mut app,
+        &target,
+        top_down(),
+        Mesostructure {
+            debug_view: MesostructureDebugView::ApexCount,
+            ..default()
+        },
+    );
     let map = image(&mut app, HeightMap::bricks(64, 4, 0.1).to_image());
     let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let material = unlit(&mut app, Color::WHITE);
-    app.world_mut().spawn((plane, material, MesostructureMaterial { height_map: map, scale: 0.1, ..default() }));
+    app.world_mut().spawn((
+        plane,
+        material,
+        MesostructureMaterial {
+            height_map: map,
+            scale: 0.1,
+            ..default()
+        },
+    ));
     run(&mut app, 8);
     let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
     for pass in ["height", "gradient", "apex", "debug_view"] {
-        let gpu = bevy::diagnostic::DiagnosticPath::new(format!("render/mesostructure/{pass}/elapsed_gpu"));
-        let cpu = bevy::diagnostic::DiagnosticPath::new(format!("render/mesostructure/{pass}/elapsed_cpu"));
-        let value = store.get(&gpu).or(store.get(&cpu)).and_then(|d| d.measurement()).map(|m| m.value);
-        assert!(value.is_some_and(|v| v >= 0.0), "no time span for mesostructure/{pass}");
-        eprintln!("mesostructure/{pass}: gpu {:?} ms", store.get(&gpu).and_then(|d| d.average()));
+        let gpu = bevy::diagnostic::DiagnosticPath::new(format!(
+            "render/mesostructure/{pass}/elapsed_gpu"
+        ));
+        let cpu = bevy::diagnostic::DiagnosticPath::new(format!(
+            "render/mesostructure/{pass}/elapsed_cpu"
+        ));
+        let value = store
+            .get(&gpu)
+            .or(store.get(&cpu))
+            .and_then(|d| d.measurement())
+            .map(|m| m.value);
+        assert!(
+            value.is_some_and(|v| v >= 0.0),
+            "no time span for mesostructure/{pass}"
+        );
+        eprintln!(
+            "mesostructure/{pass}: gpu {:?} ms",
+            store.get(&gpu).and_then(|d| d.average())
+        );
     }
 }
 
@@ -268,7 +369,11 @@ fn oblique_plane_has_no_isolated_height_holes() {
     app.world_mut().spawn((
         plane,
         material,
-        MesostructureMaterial { height_map: map, scale: 0.08, ..default() },
+        MesostructureMaterial {
+            height_map: map,
+            scale: 0.08,
+            ..default()
+        },
         Transform::from_xyz(0.0, -0.2, 0.0),
     ));
     let f = capture(&mut app, camera, 5);
@@ -278,11 +383,64 @@ fn oblique_plane_has_no_isolated_height_holes() {
         for x in 1..w - 1 {
             // Left and right (the holes came in vertical pairs: one 2×2 pixel quad).
             let around = [dis(x - 1, y), dis(x + 1, y)];
-            if f.mhm[(y * w + x) as usize][2] != 0.0 && dis(x, y) < 0.01 && around.iter().all(|&d| d > 0.9) {
+            if f.mhm[(y * w + x) as usize][2] != 0.0
+                && dis(x, y) < 0.01
+                && around.iter().all(|&d| d > 0.9)
+            {
                 holes.push((x, y));
             }
         }
     }
     assert!(f.mesostructure_pixels() > 10_000);
     assert!(holes.is_empty(), "isolated height holes at {holes:?}");
+}
+
+#[test]
+fn passes_cost_nothing_without_mesostructure_on_screen() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = app_with(|app| {
+        app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
+    });
+    let target = target(&mut app, 64, 64);
+    // Looking up, away from the mesostructure plane below.
+    let camera = camera(
+        &mut app,
+        &target,
+        Transform::from_xyz(0.0, 2.0, 0.0).looking_at(Vec3::new(0.0, 5.0, 0.0), Vec3::Z),
+        Mesostructure {
+            debug_view: MesostructureDebugView::Boundary,
+            ..default()
+        },
+    );
+    let map = image(&mut app, HeightMap::bricks(64, 4, 0.1).to_image());
+    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
+    let material = unlit(&mut app, Color::WHITE);
+    app.world_mut().spawn((
+        plane,
+        material,
+        MesostructureMaterial {
+            height_map: map,
+            scale: 0.1,
+            ..default()
+        },
+    ));
+    run(&mut app, 8);
+    let captures = app
+        .world()
+        .resource::<bevy_mesostructure::MesostructureCaptures>()
+        .clone();
+    assert!(captures.take(camera).is_none(), "nothing to capture");
+    let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
+    for pass in ["height", "gradient", "apex", "debug_view"] {
+        let path = bevy::diagnostic::DiagnosticPath::new(format!(
+            "render/mesostructure/{pass}/elapsed_cpu"
+        ));
+        let ran = store.get(&path).and_then(|d| d.measurement()).is_some();
+        assert!(
+            !ran,
+            "mesostructure/{pass} ran with no mesostructure surface on screen"
+        );
+    }
 }

@@ -4,9 +4,9 @@
 use bevy::{
     asset::RenderAssetUsages,
     mesh::{
+        Indices, PrimitiveTopology, VertexAttributeValues,
         morph::{MeshMorphWeights, MorphAttributes},
         skinning::{SkinnedMesh, SkinnedMeshInverseBindposes},
-        Indices, PrimitiveTopology, VertexAttributeValues,
     },
     prelude::*,
 };
@@ -48,7 +48,8 @@ fn grid_mesh(n: u32, size: f32, usage: RenderAssetUsages) -> Mesh {
 
 fn wave(mesh: &mut Mesh, phase: f32) {
     let (base, _, _) = grid(8, 0.8);
-    if let Some(VertexAttributeValues::Float32x3(p)) = mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION) {
+    if let Some(VertexAttributeValues::Float32x3(p)) = mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+    {
         for (q, b) in p.iter_mut().zip(base) {
             q[0] = b[0] * (1.0 + 0.3 * (phase + b[1] * 4.0).sin());
             q[1] = b[1] + 0.1 * (phase + b[0] * 5.0).sin();
@@ -72,35 +73,60 @@ fn skinned_morphed_and_cpu_deformed_meshes_line_up_with_the_prepass() {
     );
     let map = image(&mut app, HeightMap::rivets(64, 4, 0.3).to_image());
     let red = unlit(&mut app, Color::srgb(1.0, 0.0, 0.0));
-    let meso = || MesostructureMaterial { height_map: map.clone(), scale: 0.1, ..default() };
+    let meso = || MesostructureMaterial {
+        height_map: map.clone(),
+        scale: 0.1,
+        ..default()
+    };
 
     // 1. Skinned: a strip bent by its second joint.
     let (p, uv, idx) = grid(4, 0.8);
-    let weights: Vec<[f32; 4]> = p.iter().map(|q| {
-        let t = (0.5 - q[1] / 0.8).clamp(0.0, 1.0); // 0 at the top, 1 at the bottom
-        [1.0 - t, t, 0.0, 0.0]
-    }).collect();
+    let weights: Vec<[f32; 4]> = p
+        .iter()
+        .map(|q| {
+            let t = (0.5 - q[1] / 0.8).clamp(0.0, 1.0); // 0 at the top, 1 at the bottom
+            [1.0 - t, t, 0.0, 0.0]
+        })
+        .collect();
     let count = p.len();
-    let skinned = Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::RENDER_WORLD)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, p)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uv)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0, 0.0, 1.0]; count])
-        .with_inserted_attribute(Mesh::ATTRIBUTE_JOINT_INDEX, VertexAttributeValues::Uint16x4(vec![[0, 1, 0, 0]; count]))
-        .with_inserted_attribute(Mesh::ATTRIBUTE_JOINT_WEIGHT, weights)
-        .with_inserted_indices(Indices::U32(idx));
+    let skinned = Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::RENDER_WORLD,
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, p)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uv)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0, 0.0, 1.0]; count])
+    .with_inserted_attribute(
+        Mesh::ATTRIBUTE_JOINT_INDEX,
+        VertexAttributeValues::Uint16x4(vec![[0, 1, 0, 0]; count]),
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_JOINT_WEIGHT, weights)
+    .with_inserted_indices(Indices::U32(idx));
     let skinned = mesh(&mut app, skinned);
-    let bindposes = app.world_mut().resource_mut::<Assets<SkinnedMeshInverseBindposes>>()
-        .add(vec![Mat4::IDENTITY, Mat4::from_translation(Vec3::new(0.0, 0.4, 0.0))]);
-    let joint_0 = app.world_mut().spawn(Transform::from_xyz(-1.0, 0.0, 0.0)).id();
-    let joint_1 = app.world_mut().spawn(
-        Transform::from_xyz(0.0, -0.4, 0.0).with_rotation(Quat::from_rotation_z(0.7)),
-    ).id();
+    let bindposes = app
+        .world_mut()
+        .resource_mut::<Assets<SkinnedMeshInverseBindposes>>()
+        .add(vec![
+            Mat4::IDENTITY,
+            Mat4::from_translation(Vec3::new(0.0, 0.4, 0.0)),
+        ]);
+    let joint_0 = app
+        .world_mut()
+        .spawn(Transform::from_xyz(-1.0, 0.0, 0.0))
+        .id();
+    let joint_1 = app
+        .world_mut()
+        .spawn(Transform::from_xyz(0.0, -0.4, 0.0).with_rotation(Quat::from_rotation_z(0.7)))
+        .id();
     app.world_mut().entity_mut(joint_0).add_children(&[joint_1]);
     app.world_mut().spawn((
         skinned,
         red.clone(),
         meso(),
-        SkinnedMesh { inverse_bindposes: bindposes, joints: vec![joint_0, joint_1] },
+        SkinnedMesh {
+            inverse_bindposes: bindposes,
+            joints: vec![joint_0, joint_1],
+        },
         Transform::from_xyz(-1.0, 0.0, 0.0),
     ));
 
@@ -108,9 +134,15 @@ fn skinned_morphed_and_cpu_deformed_meshes_line_up_with_the_prepass() {
     let (p, _, _) = grid(8, 0.8);
     let targets: Vec<MorphAttributes> = p
         .iter()
-        .map(|q| MorphAttributes { position: Vec3::new(0.25 * q[1], 0.15, 0.0), ..default() })
+        .map(|q| MorphAttributes {
+            position: Vec3::new(0.25 * q[1], 0.15, 0.0),
+            ..default()
+        })
         .collect();
-    let morphed = mesh(&mut app, grid_mesh(8, 0.8, RenderAssetUsages::RENDER_WORLD).with_morph_targets(targets));
+    let morphed = mesh(
+        &mut app,
+        grid_mesh(8, 0.8, RenderAssetUsages::RENDER_WORLD).with_morph_targets(targets),
+    );
     app.world_mut().spawn((
         morphed,
         red.clone(),
@@ -121,12 +153,20 @@ fn skinned_morphed_and_cpu_deformed_meshes_line_up_with_the_prepass() {
 
     // 3. Deformed on the CPU every frame.
     let deformed = mesh(&mut app, grid_mesh(8, 0.8, RenderAssetUsages::default()));
-    app.world_mut().spawn((deformed.clone(), red, meso(), Transform::from_xyz(1.0, 0.0, 0.0)));
+    app.world_mut().spawn((
+        deformed.clone(),
+        red,
+        meso(),
+        Transform::from_xyz(1.0, 0.0, 0.0),
+    ));
 
     let before = capture(&mut app, camera, 20);
     for frame in 0..4 {
         let mut meshes = app.world_mut().resource_mut::<Assets<Mesh>>();
-        wave(&mut meshes.get_mut(&deformed.0).unwrap(), 1.0 + frame as f32);
+        wave(
+            &mut meshes.get_mut(&deformed.0).unwrap(),
+            1.0 + frame as f32,
+        );
         run(&mut app, 1);
     }
     let shot = screenshot(&mut app, &target);
@@ -134,7 +174,9 @@ fn skinned_morphed_and_cpu_deformed_meshes_line_up_with_the_prepass() {
 
     let data = shot.data.as_ref().unwrap();
     let drawn = |x: u32, y: u32| data[((y * W + x) * 4) as usize] > 128;
-    let meso_px = |f: &bevy_mesostructure::CapturedFrame, x: u32, y: u32| f.mhm[(y * W + x) as usize][2] != 0.0;
+    let meso_px = |f: &bevy_mesostructure::CapturedFrame, x: u32, y: u32| {
+        f.mhm[(y * W + x) as usize][2] != 0.0
+    };
     let (mut both, mut either, mut changed) = (0, 0, 0);
     for y in 0..H {
         for x in 0..W {
@@ -146,8 +188,19 @@ fn skinned_morphed_and_cpu_deformed_meshes_line_up_with_the_prepass() {
     }
     let iou = both as f32 / either.max(1) as f32;
     assert!(either > 1500, "the three meshes cover {either} pixels");
-    assert!(iou > 0.99, "height-pass coverage vs drawn pixels: IoU {iou} ({both}/{either})");
-    assert!(changed > 50, "the CPU deformation shows in the MHM ({changed} pixels changed)");
-    let ids: std::collections::BTreeSet<u32> = after.mhm.iter().map(|t| t[2] as u32).filter(|&i| i != 0).collect();
+    assert!(
+        iou > 0.99,
+        "height-pass coverage vs drawn pixels: IoU {iou} ({both}/{either})"
+    );
+    assert!(
+        changed > 50,
+        "the CPU deformation shows in the MHM ({changed} pixels changed)"
+    );
+    let ids: std::collections::BTreeSet<u32> = after
+        .mhm
+        .iter()
+        .map(|t| t[2] as u32)
+        .filter(|&i| i != 0)
+        .collect();
     assert_eq!(ids.len(), 3, "one object id per mesh: {ids:?}");
 }

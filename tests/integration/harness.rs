@@ -8,14 +8,14 @@ use bevy::{
     image::Image,
     prelude::*,
     render::{
+        RenderApp, RenderPlugin,
         pipelined_rendering::PipelinedRenderingPlugin,
         render_resource::{TextureFormat, TextureUsages},
         view::screenshot::{Screenshot, ScreenshotCaptured},
-        RenderApp, RenderPlugin,
     },
     window::ExitCondition,
 };
-use bevy_mesostructure::{prelude::*, CapturedFrame, MesostructureCapture, MesostructureCaptures};
+use bevy_mesostructure::{CapturedFrame, MesostructureCapture, MesostructureCaptures, prelude::*};
 
 /// Whether the GPU tests can run. Without a Vulkan driver they are skipped with a message,
 /// except under CI (`CI=true`), where they must fail instead.
@@ -26,7 +26,9 @@ pub fn gpu_or_skip() -> bool {
     if has_driver || std::env::var("CI").is_ok_and(|v| v == "true") {
         return true;
     }
-    eprintln!("SKIPPED: no Vulkan driver (install mesa-vulkan-drivers); set CI=true to make this a failure");
+    eprintln!(
+        "SKIPPED: no Vulkan driver (install mesa-vulkan-drivers); set CI=true to make this a failure"
+    );
     false
 }
 
@@ -41,8 +43,15 @@ pub fn app() -> App {
 pub fn app_with(more: impl FnOnce(&mut App)) -> App {
     let mut app = App::new();
     let plugins = DefaultPlugins
-        .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
-        .set(RenderPlugin { synchronous_pipeline_compilation: true, ..default() })
+        .set(WindowPlugin {
+            primary_window: None,
+            exit_condition: ExitCondition::DontExit,
+            ..default()
+        })
+        .set(RenderPlugin {
+            synchronous_pipeline_compilation: true,
+            ..default()
+        })
         .disable::<PipelinedRenderingPlugin>();
     if std::env::var_os("MESOSTRUCTURE_TEST_LOG").is_some() {
         app.add_plugins(plugins);
@@ -65,7 +74,12 @@ pub fn target(app: &mut App, w: u32, h: u32) -> Handle<Image> {
 }
 
 /// A camera rendering into `target` with the effect and a capture.
-pub fn camera(app: &mut App, target: &Handle<Image>, transform: Transform, settings: Mesostructure) -> Entity {
+pub fn camera(
+    app: &mut App,
+    target: &Handle<Image>,
+    transform: Transform,
+    settings: Mesostructure,
+) -> Entity {
     app.world_mut()
         .spawn((
             Camera3d::default(),
@@ -124,25 +138,42 @@ pub fn screenshot(app: &mut App, target: &Handle<Image>) -> Image {
 
 /// Keys of the one-time warnings given so far, main and render world together.
 pub fn warnings(app: &App) -> Vec<String> {
-    let mut keys: Vec<String> = app.world().resource::<bevy_mesostructure::WarnedOnce>().keys().collect();
+    let mut keys: Vec<String> = app
+        .world()
+        .resource::<bevy_mesostructure::WarnedOnce>()
+        .keys()
+        .collect();
     if let Some(render) = app.get_sub_app(RenderApp) {
-        keys.extend(render.world().resource::<bevy_mesostructure::WarnedOnce>().keys());
+        keys.extend(
+            render
+                .world()
+                .resource::<bevy_mesostructure::WarnedOnce>()
+                .keys(),
+        );
     }
     keys
 }
 
 /// A flat-shaded (unlit) material of one colour.
 pub fn unlit(app: &mut App, color: Color) -> MeshMaterial3d<StandardMaterial> {
-    MeshMaterial3d(app.world_mut().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-        base_color: color,
-        unlit: true,
-        ..default()
-    }))
+    MeshMaterial3d(
+        app.world_mut()
+            .resource_mut::<Assets<StandardMaterial>>()
+            .add(StandardMaterial {
+                base_color: color,
+                unlit: true,
+                ..default()
+            }),
+    )
 }
 
 /// Adds a mesh asset.
 pub fn mesh(app: &mut App, mesh: impl Into<Mesh>) -> Mesh3d {
-    Mesh3d(app.world_mut().resource_mut::<Assets<Mesh>>().add(mesh.into()))
+    Mesh3d(
+        app.world_mut()
+            .resource_mut::<Assets<Mesh>>()
+            .add(mesh.into()),
+    )
 }
 
 /// Adds an image asset.
