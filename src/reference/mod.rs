@@ -14,6 +14,7 @@
 
 mod apex;
 mod gradient;
+pub mod ground_truth;
 
 pub use apex::*;
 pub use gradient::*;
