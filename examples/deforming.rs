@@ -7,7 +7,7 @@
 //! ```text
 //! cargo run --example deforming -- [--frames N] [--out DIR] [--size WxH]
 //!     [--shape morph|sphere|plane] [--height-map bricks|rivets|weave|sine|stone|cone]
-//!     [--scale K] [--view none|height|gradient|apex-distance|apex-count|boundary|all]
+//!     [--scale K] [--view none|height|gradient|apex-distance|apex-count|boundary|occlusion|all]
 //! ```
 
 use std::{f32::consts::PI, path::PathBuf};
@@ -35,17 +35,6 @@ struct Args {
     height_map: String,
     scale: f32,
     views: Vec<MesostructureDebugView>,
-}
-
-fn view_name(v: MesostructureDebugView) -> &'static str {
-    match v {
-        MesostructureDebugView::None => "none",
-        MesostructureDebugView::Height => "height",
-        MesostructureDebugView::Gradient => "gradient",
-        MesostructureDebugView::ApexDistance => "apex-distance",
-        MesostructureDebugView::ApexCount => "apex-count",
-        MesostructureDebugView::Boundary => "boundary",
-    }
 }
 
 fn parse_args() -> Args {
@@ -81,9 +70,7 @@ fn parse_args() -> Args {
                     MesostructureDebugView::ALL.to_vec()
                 } else {
                     vec![
-                        *MesostructureDebugView::ALL
-                            .iter()
-                            .find(|d| view_name(**d) == v)
+                        MesostructureDebugView::from_name(&v)
                             .unwrap_or_else(|| panic!("unknown view {v}")),
                     ]
                 };
@@ -299,9 +286,7 @@ fn main() {
         for _ in 0..2 {
             app.update();
         }
-        let path = args
-            .out
-            .join(format!("{}_{}.png", args.shape, view_name(*view)));
+        let path = args.out.join(format!("{}_{}.png", args.shape, view.name()));
         app.world_mut()
             .spawn(Screenshot::image(target.clone()))
             .observe(save_to_disk(path.clone()));

@@ -2,7 +2,9 @@
 
 use bevy::{core_pipeline::prepass::DepthPrepass, prelude::*, render::render_resource::ShaderType};
 
-use crate::reference::{ApexSearch, DepthContinuity, MAX_APEX_DIRECTIONS, sample_directions};
+use crate::reference::{
+    ApexSearch, DepthContinuity, MAX_APEX_DIRECTIONS, OcclusionForm, sample_directions,
+};
 
 /// Mesostructure lighting for a 3D camera: add it next to [`Camera3d`].
 ///
@@ -28,30 +30,35 @@ pub struct Mesostructure {
     /// at most `(1 + apex_directions) × max_ascent_steps` texel reads. Where it is hit the
     /// pixel reached stands in for the apex; the `ApexCount` debug view shows those pixels.
     pub max_ascent_steps: u32,
-    /// Smallest distance of the indirect sample points from the pixel, in pixels (1–64).
-    pub min_sample_radius: u32,
-    /// Largest distance of the indirect sample points from the pixel, in pixels (1–256).
-    /// Between the two, the distance follows the distance to the direct apex, so the apex set
-    /// adapts to the size of the structures.
+    /// How far, in pixels (1–256), each direction's walk from the pixel goes looking for the
+    /// valley beyond which something stands up (the start of its indirect ascent). The walk
+    /// stops where the height first rises, so the apex set adapts to the size of the
+    /// structures; this only bounds it.
     pub max_sample_radius: u32,
     /// Relative depth jump (fraction of NDC depth, 0.0001–1) above which two neighbouring pixels
     /// of the same object count as separated (a depth discontinuity ends the visible region).
     pub depth_discontinuity: f32,
+    /// Compute the mesostructure ambient occlusion from the apex sets (paper §3.1).
+    pub occlusion: bool,
+    /// The integral that turns horizon angles into occlusion: the physically based
+    /// cosine-weighted form (default) or the paper's eq. (6).
+    pub occlusion_form: OcclusionForm,
 }
 
 impl Default for Mesostructure {
     /// 8 directions (the paper's "several directions", one per 8-neighbour direction), 64 ascent
     /// steps (enough for structures up to ~64 px across, a quarter of a 256² texture cache),
-    /// sample radius 2–32 px, and a 2 % depth jump, which keeps planes at grazing angles
+    /// walks of up to 32 px, and a 2 % depth jump, which keeps planes at grazing angles
     /// connected (the slope test covers them) but separates overlapping parts of one object.
     fn default() -> Self {
         Self {
             debug_view: MesostructureDebugView::None,
             apex_directions: 8,
             max_ascent_steps: 64,
-            min_sample_radius: 2,
             max_sample_radius: 32,
             depth_discontinuity: 0.02,
+            occlusion: true,
+            occlusion_form: OcclusionForm::CosineWeighted,
         }
     }
 }
@@ -76,23 +83,44 @@ pub enum MesostructureDebugView {
     /// Boundary points: red at silhouettes and other objects, green at depth discontinuities,
     /// blue at the screen edge; dark grey inside the visible region.
     Boundary,
+    /// The mesostructure ambient occlusion, grey (white = open, black = closed).
+    Occlusion,
 }
 
 impl MesostructureDebugView {
     /// All views, in the order a key cycles them.
-    pub const ALL: [Self; 6] = [
+    pub const ALL: [Self; 7] = [
         Self::None,
         Self::Height,
         Self::Gradient,
         Self::ApexDistance,
         Self::ApexCount,
         Self::Boundary,
+        Self::Occlusion,
     ];
 
     /// The next view in [`Self::ALL`], wrapping around.
     pub fn next(self) -> Self {
         let i = Self::ALL.iter().position(|v| *v == self).unwrap_or(0);
         Self::ALL[(i + 1) % Self::ALL.len()]
+    }
+
+    /// The view's name in kebab case (`apex-distance`), for command lines and file names.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Height => "height",
+            Self::Gradient => "gradient",
+            Self::ApexDistance => "apex-distance",
+            Self::ApexCount => "apex-count",
+            Self::Boundary => "boundary",
+            Self::Occlusion => "occlusion",
+        }
+    }
+
+    /// The view of a [`Self::name`].
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|v| v.name() == name)
     }
 
     /// Shader-side code of the view.
@@ -121,12 +149,7 @@ impl Mesostructure {
             "apex_directions",
         );
         clamp_u32(&mut s.max_ascent_steps, 1, 512, "max_ascent_steps");
-        clamp_u32(&mut s.min_sample_radius, 1, 64, "min_sample_radius");
         clamp_u32(&mut s.max_sample_radius, 1, 256, "max_sample_radius");
-        if s.max_sample_radius < s.min_sample_radius {
-            s.max_sample_radius = s.min_sample_radius;
-            changed.push("max_sample_radius");
-        }
         if !s.depth_discontinuity.is_finite() {
             s.depth_discontinuity = d.depth_discontinuity;
             changed.push("depth_discontinuity");
@@ -142,8 +165,7 @@ impl Mesostructure {
         ApexSearch {
             directions: self.apex_directions,
             max_steps: self.max_ascent_steps,
-            min_radius: self.min_sample_radius,
-            max_radius: self.max_sample_radius,
+            max_walk: self.max_sample_radius,
         }
     }
 
@@ -167,10 +189,10 @@ pub struct MesostructureUniform {
     pub apex_directions: u32,
     /// Step bound of one ascent.
     pub max_ascent_steps: u32,
-    /// Smallest sample radius, pixels.
-    pub min_sample_radius: u32,
-    /// Largest sample radius, pixels.
-    pub max_sample_radius: u32,
+    /// Longest valley walk, pixels.
+    pub max_walk: u32,
+    /// Padding (keeps the WGSL struct's layout explicit).
+    pub _padding: u32,
     /// Relative depth jump of a discontinuity.
     pub depth_relative: f32,
     /// Slope factor of the depth-continuity test.
@@ -179,6 +201,10 @@ pub struct MesostructureUniform {
     pub debug_view: u32,
     /// Words per pixel in the apex buffer.
     pub apex_stride: u32,
+    /// `OcclusionForm` code.
+    pub occlusion_form: u32,
+    /// Whether the occlusion pass runs (1) or not (0).
+    pub occlusion_enabled: u32,
     /// `(cos θ_i, sin θ_i)` of the sample directions, two per vector.
     pub directions: [Vec4; 8],
 }
@@ -201,12 +227,14 @@ impl From<&Mesostructure> for MesostructureUniform {
         Self {
             apex_directions: s.apex_directions,
             max_ascent_steps: s.max_ascent_steps,
-            min_sample_radius: s.min_sample_radius,
-            max_sample_radius: s.max_sample_radius,
+            max_walk: s.max_sample_radius,
+            _padding: 0,
             depth_relative: continuity.relative,
             depth_slope_factor: continuity.slope_factor,
             debug_view: s.debug_view.code(),
             apex_stride: crate::reference::packed::stride(s.apex_directions),
+            occlusion_form: s.occlusion_form.code(),
+            occlusion_enabled: s.occlusion as u32,
             directions,
         }
     }
@@ -233,15 +261,14 @@ mod tests {
         let bad = Mesostructure {
             apex_directions: 99,
             max_ascent_steps: 0,
-            max_sample_radius: 1,
-            min_sample_radius: 8,
+            max_sample_radius: 0,
             depth_discontinuity: f32::NAN,
             ..default()
         };
         let (s, changed) = bad.sanitized();
         assert_eq!(s.apex_directions, MAX_APEX_DIRECTIONS);
         assert_eq!(s.max_ascent_steps, 1);
-        assert_eq!(s.max_sample_radius, 8);
+        assert_eq!(s.max_sample_radius, 1);
         assert_eq!(s.depth_discontinuity, 0.02);
         assert!(changed.contains(&"depth_discontinuity"));
         assert!(Mesostructure::default().sanitized().1.is_empty());
@@ -257,8 +284,11 @@ mod tests {
         assert!((u.directions[0].w - 1.0).abs() < 1e-6); // θ_1 = 90°
         assert_eq!(u.apex_stride, 6);
         assert_eq!(
-            MesostructureDebugView::Boundary.next(),
+            MesostructureDebugView::Occlusion.next(),
             MesostructureDebugView::None
         );
+        for view in MesostructureDebugView::ALL {
+            assert_eq!(MesostructureDebugView::from_name(view.name()), Some(view));
+        }
     }
 }

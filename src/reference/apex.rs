@@ -16,10 +16,8 @@ pub struct ApexSearch {
     pub directions: u32,
     /// Ascent steps (one pixel each) before an ascent gives up; bounds the work per pixel.
     pub max_steps: u32,
-    /// Smallest distance of the indirect sample points from P, in pixels.
-    pub min_radius: u32,
-    /// Largest distance of the indirect sample points from P, in pixels.
-    pub max_radius: u32,
+    /// Longest walk, in pixels, from P towards each direction's valley.
+    pub max_walk: u32,
 }
 
 impl Default for ApexSearch {
@@ -27,8 +25,7 @@ impl Default for ApexSearch {
         Self {
             directions: 8,
             max_steps: 64,
-            min_radius: 2,
-            max_radius: 32,
+            max_walk: 32,
         }
     }
 }
@@ -184,12 +181,107 @@ pub fn ascend(
     }
 }
 
+/// Where the indirect sample of direction `d` starts: walk from P along `d` one pixel at a
+/// time (`P + floor(t·d + 0.5)`) while the height does not rise — down into the valley between
+/// P and whatever lies that way — and start at the first pixel that is higher than the one
+/// before it; returns it and its `t`. `None` if the walk leaves the visible region or goes
+/// `max_walk` pixels without rising (nothing stands up that way). Mirrors `valley_walk` in
+/// `apex.wgsl`.
+pub fn valley_walk(
+    mhm: &ScreenHeightMap,
+    mhgm: &GradientMap,
+    (x, y): (i32, i32),
+    d: [f32; 2],
+    max_walk: u32,
+) -> Option<((i32, i32), u32)> {
+    let (mut px, mut py) = (x, y);
+    let mut previous = mhm.heights[mhm.index(x as u32, y as u32)];
+    for t in 1..=max_walk {
+        let (qx, qy) = line_point((x, y), d, t);
+        if (qx, qy) == (px, py) {
+            continue;
+        }
+        let dir = NEIGHBOURS.iter().position(|&o| o == (qx - px, qy - py))?;
+        if !mhgm.connected(mhm.index(px as u32, py as u32), dir) {
+            return None;
+        }
+        let h = mhm.heights[mhm.index(qx as u32, qy as u32)];
+        if h > previous {
+            return Some(((qx, qy), t));
+        }
+        (px, py, previous) = (qx, qy, h);
+    }
+    None
+}
+
+/// Pixel `t` of the line from P along `d`: `P + floor(t·d + 0.5)`.
+pub fn line_point((x, y): (i32, i32), d: [f32; 2], t: u32) -> (i32, i32) {
+    (
+        x + (t as f32 * d[0] + 0.5).floor() as i32,
+        y + (t as f32 * d[1] + 0.5).floor() as i32,
+    )
+}
+
+/// The apex of direction `d`: from the valley-walk start (pixel `t0` of the line), climb along
+/// the line while the height does not fall, and keep the pixel of steepest rise seen from P,
+/// `(h − h(P)) / t` — the horizon in that direction (paper §3.1 takes `h(θ)` from "the apex in
+/// that direction"). Climbing along the direction rather than the gradient [beyond the paper]
+/// makes the apex the occluder of that direction (see docs/accuracy.md). Boundary if the line
+/// leaves the visible region at that pixel while still rising; truncated after `max_steps`.
+/// Mirrors `line_climb` in `apex.wgsl`.
+pub fn line_climb(
+    mhm: &ScreenHeightMap,
+    mhgm: &GradientMap,
+    p: (i32, i32),
+    d: [f32; 2],
+    (start, t0): ((i32, i32), u32),
+    max_steps: u32,
+) -> Apex {
+    let h0 = mhm.heights[mhm.index(p.0 as u32, p.1 as u32)];
+    let (mut cx, mut cy) = start;
+    let mut previous = mhm.heights[mhm.index(cx as u32, cy as u32)];
+    let mut best = (start, (previous - h0) / t0 as f32);
+    let mut kind = ApexKind::Local;
+    for t in t0 + 1..=t0 + max_steps {
+        let (qx, qy) = line_point(p, d, t);
+        if (qx, qy) == (cx, cy) {
+            continue;
+        }
+        let Some(dir) = NEIGHBOURS.iter().position(|&o| o == (qx - cx, qy - cy)) else {
+            break;
+        };
+        if !mhgm.connected(mhm.index(cx as u32, cy as u32), dir) {
+            if best.0 == (cx, cy) {
+                kind = ApexKind::Boundary;
+            }
+            break;
+        }
+        let h = mhm.heights[mhm.index(qx as u32, qy as u32)];
+        if h < previous {
+            break;
+        }
+        let rise = (h - h0) / t as f32;
+        if rise > best.1 {
+            best = ((qx, qy), rise);
+        }
+        (cx, cy, previous) = (qx, qy, h);
+        if t == t0 + max_steps {
+            kind = ApexKind::Truncated;
+        }
+    }
+    Apex {
+        x: best.0.0,
+        y: best.0.1,
+        kind,
+    }
+}
+
 /// The apex set of pixel `(x, y)`. Mirrors `apex.wgsl`:
-/// 1. the direct apex by [`ascend`] from P;
-/// 2. for each direction `θ_i` the sample point `P + floor(r·(cos θ_i, sin θ_i) + 0.5)` with
-///    `r = clamp(chebyshev distance to the direct apex, min_radius, max_radius)` (the set follows
-///    the size of the structures, no hand-set radius), skipped unless it lies on the same object,
-///    and its apex by [`ascend`];
+/// 1. the direct apex H_P by [`ascend`] (gradient ascent) from P;
+/// 2. for each direction `θ_i` the indirect apex H_P^i: [`valley_walk`] to the sample point
+///    P^i, then [`line_climb`] to the apex of that direction — the nearest structure standing
+///    up that way, however far (up to `max_walk`), so the set adapts to the size of the
+///    structures with no hand-set radius;
 /// 3. an apex (boundary points included) enters the set if it rises above P by more than
 ///    [`APEX_MIN_RISE`] and is not in the set yet.
 pub fn apex_set(
@@ -209,21 +301,14 @@ pub fn apex_set(
 
     let (direct, _) = ascend(mhm, mhgm, (x, y), search.max_steps);
     set.truncated |= direct.kind == ApexKind::Truncated;
-    let mut radius = search.min_radius;
     if rises(&direct) {
-        let chebyshev = (direct.x - x)
-            .unsigned_abs()
-            .max((direct.y - y).unsigned_abs());
-        radius = chebyshev.clamp(search.min_radius, search.max_radius.max(search.min_radius));
         set.direct = Some(direct);
     }
     for d in directions.iter().take(search.directions as usize) {
-        let sx = x + (radius as f32 * d[0] + 0.5).floor() as i32;
-        let sy = y + (radius as f32 * d[1] + 0.5).floor() as i32;
-        if !mhm.contains(sx, sy) || mhm.objects[mhm.index(sx as u32, sy as u32)] != mhm.objects[i] {
+        let Some(start) = valley_walk(mhm, mhgm, (x, y), *d, search.max_walk) else {
             continue;
-        }
-        let (apex, _) = ascend(mhm, mhgm, (sx, sy), search.max_steps);
+        };
+        let apex = line_climb(mhm, mhgm, (x, y), *d, start, search.max_steps);
         set.truncated |= apex.kind == ApexKind::Truncated;
         if rises(&apex) && !set.iter().any(|a| a.x == apex.x && a.y == apex.y) {
             set.indirect.push(apex);

@@ -15,9 +15,11 @@
 mod apex;
 mod gradient;
 pub mod ground_truth;
+mod occlusion;
 
 pub use apex::*;
 pub use gradient::*;
+pub use occlusion::*;
 
 /// The screen-space height map (MHM, paper §2.1) of one view.
 #[derive(Clone, Debug, PartialEq)]

@@ -32,7 +32,10 @@ fn cone_has_one_apex_at_its_tip_from_every_pixel() {
             let direct = set.direct.expect("every other pixel ascends to the tip");
             assert_eq!((direct.x, direct.y), (20, 20), "from ({x}, {y})");
             assert_eq!(direct.kind, ApexKind::Local);
-            assert!(set.iter().all(|a| (a.x, a.y) == (20, 20)), "one apex only");
+            // Each direction's apex rises above P and lies at most at the tip's height.
+            let h = |a: &Apex| mhm.heights[mhm.index(a.x as u32, a.y as u32)];
+            let hp = mhm.heights[mhm.index(x, y)];
+            assert!(set.iter().all(|a| h(a) > hp && h(a) <= h(&direct)));
             assert!(!set.truncated);
         }
     }
@@ -55,10 +58,8 @@ fn grid_of_bumps_has_apexes_at_the_peaks() {
     for y in 0..64 {
         for x in 0..64 {
             let set = &sets[mhm.index(x, y)];
-            for a in set.iter() {
-                assert!(is_peak(a), "apex {a:?} of ({x}, {y}) is not a peak");
-            }
             if let Some(d) = set.direct {
+                assert!(is_peak(&d), "direct apex {d:?} of ({x}, {y}) is not a peak");
                 with_direct += 1;
                 // The direct apex is the peak of the pixel's own bump (nearest peak).
                 let (px, py) = (x as i32 / 16 * 16 + 8, y as i32 / 16 * 16 + 8);
@@ -202,4 +203,187 @@ fn packed_apex_sets_round_trip() {
             kind: ApexKind::Boundary
         }]
     );
+}
+
+/// A top-down orthographic view of the plane y = 0: pixel `(x, y)` sees world
+/// `(x + 0.5, 0, y + 0.5) · texel` (1 pixel = `texel` world units), normals +Y.
+fn top_down_geometry(width: u32, height: u32, texel: f32) -> ViewGeometry {
+    // ndc (−1..1, 1..−1) → world x = (ndc.x + 1)/2 · w·texel, z = (1 − ndc.y)/2 · h·texel.
+    let (sx, sz) = (0.5 * width as f32 * texel, 0.5 * height as f32 * texel);
+    let world_from_clip = bevy::math::Mat4::from_cols(
+        bevy::math::Vec4::new(sx, 0.0, 0.0, 0.0),
+        bevy::math::Vec4::new(0.0, 0.0, -sz, 0.0),
+        bevy::math::Vec4::new(0.0, 0.0, 0.0, 0.0),
+        bevy::math::Vec4::new(sx, 0.0, sz, 1.0),
+    );
+    ViewGeometry {
+        world_from_clip,
+        viewport: bevy::math::Vec4::new(0.0, 0.0, width as f32, height as f32),
+    }
+}
+
+#[test]
+fn occlusion_of_a_flat_map_is_one_and_of_a_v_groove_near_the_closed_form() {
+    let (w, h) = (96u32, 64u32);
+    let view = top_down_geometry(w, h, 1.0);
+    let normals = vec![bevy::math::Vec3::Y; (w * h) as usize];
+    let flat = ScreenHeightMap::from_fn(w, h, |_, _| 0.2);
+    let (flat_gm, sets) = run(&flat, &default_search());
+    for y in 0..h {
+        for x in 0..w {
+            let a = occlusion(
+                &flat,
+                &flat_gm,
+                &normals,
+                &view,
+                &sets[flat.index(x, y)],
+                (x, y),
+                OcclusionForm::CosineWeighted,
+            );
+            assert_eq!(a, 1.0);
+        }
+    }
+    // V-groove along y: ridges 24 px either side of the bottom at x = 48, walls at slope α.
+    // At the bottom the exact cosine-weighted occlusion is cos α (see ground_truth tests);
+    // with 8 sectors and 9 apexes the method comes within 0.03 (25°: 0.892 vs 0.906; 40°:
+    // 0.737 vs 0.766); the test allows 0.05.
+    for slope in [25.0f32, 40.0] {
+        let t = slope.to_radians().tan();
+        let groove = ScreenHeightMap::from_fn(w, h, |x, _| {
+            let d = (x - 48.5).abs();
+            t * if d < 24.0 { d } else { 48.0 - d }
+        });
+        let (groove_gm, sets) = run(
+            &groove,
+            &ApexSearch {
+                max_walk: 24,
+                ..default_search()
+            },
+        );
+        let a = occlusion(
+            &groove,
+            &groove_gm,
+            &normals,
+            &view,
+            &sets[groove.index(48, 32)],
+            (48, 32),
+            OcclusionForm::CosineWeighted,
+        );
+        let exact = slope.to_radians().cos();
+        eprintln!("v-groove {slope}°: method {a:.4}, closed form {exact:.4}");
+        assert!(
+            (a - exact).abs() < 0.05,
+            "slope {slope}: occlusion {a}, closed form {exact}"
+        );
+        assert!(a < 0.97, "the groove bottom is occluded: {a}");
+    }
+}
+
+#[test]
+fn a_plain_slope_is_not_occluded_in_the_cosine_weighted_form() {
+    // A planar ramp: every apex up the slope lies in the surface's own tangent plane.
+    let (w, h) = (64u32, 32u32);
+    let view = top_down_geometry(w, h, 1.0);
+    let normals = vec![bevy::math::Vec3::Y; (w * h) as usize];
+    let ramp = ScreenHeightMap::from_fn(w, h, |x, _| 0.4 * x);
+    let (gm, sets) = run(&ramp, &default_search());
+    let n = mesostructure_normal(&ramp, &gm, &normals, &view, (20, 16));
+    // Height rises along +x in world: the normal leans towards −x.
+    assert!(
+        (n - bevy::math::Vec3::new(-0.4, 1.0, 0.0).normalize()).length() < 1e-4,
+        "{n}"
+    );
+    let cosine = occlusion(
+        &ramp,
+        &gm,
+        &normals,
+        &view,
+        &sets[ramp.index(20, 16)],
+        (20, 16),
+        OcclusionForm::CosineWeighted,
+    );
+    let paper = occlusion(
+        &ramp,
+        &gm,
+        &normals,
+        &view,
+        &sets[ramp.index(20, 16)],
+        (20, 16),
+        OcclusionForm::Paper,
+    );
+    assert!(cosine > 0.999, "a plane occludes nothing: {cosine}");
+    assert!(
+        paper < 0.99,
+        "the paper's form, from the core plane, sees the slope as a horizon: {paper}"
+    );
+}
+
+#[test]
+fn sectors_follow_the_screen_direction() {
+    assert_eq!(sector_of(5, 0), 0);
+    assert_eq!(sector_of(3, 3), 1);
+    assert_eq!(sector_of(0, 4), 2);
+    assert_eq!(sector_of(-2, 0), 4);
+    assert_eq!(sector_of(1, -1), 7);
+}
+
+#[test]
+#[ignore = "experiment: prints the accuracy of the occlusion forms against the ground truth"]
+fn experiment_occlusion_accuracy() {
+    use super::ground_truth::HeightField;
+    use crate::height_maps::HeightMap;
+    let size = 128u32;
+    for (name, map) in [
+        ("bricks", HeightMap::bricks(size, 4, 0.12)),
+        ("stone", HeightMap::noise(size, 16, 4, 7)),
+        ("rivets", HeightMap::rivets(size, 4, 0.3)),
+    ] {
+        // A plane 2 world units wide, seen top-down, one pixel per texel, k = 0.1.
+        let field = HeightField::new(size, size, &map.values, 2.0, 0.1);
+        let mhm =
+            ScreenHeightMap::from_fn(size, size, |x, y| field.sample(bevy::math::Vec2::new(x, y)));
+        let view = top_down_geometry(size, size, 2.0 / size as f32);
+        let normals = vec![bevy::math::Vec3::Y; (size * size) as usize];
+        let (gm, sets) = run(&mhm, &default_search());
+        let (mut truth, mut cosine, mut paper) = (vec![], vec![], vec![]);
+        for y in (8..size - 8).step_by(3) {
+            for x in (8..size - 8).step_by(3) {
+                let p = bevy::math::Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                truth.push(field.ambient_occlusion(p, 8, 16));
+                let set = &sets[mhm.index(x, y)];
+                cosine.push(occlusion(
+                    &mhm,
+                    &gm,
+                    &normals,
+                    &view,
+                    set,
+                    (x, y),
+                    OcclusionForm::CosineWeighted,
+                ));
+                paper.push(occlusion(
+                    &mhm,
+                    &gm,
+                    &normals,
+                    &view,
+                    set,
+                    (x, y),
+                    OcclusionForm::Paper,
+                ));
+            }
+        }
+        let mae = |v: &[f32]| {
+            v.iter()
+                .zip(&truth)
+                .map(|(a, b)| (a - b).abs())
+                .sum::<f32>()
+                / v.len() as f32
+        };
+        eprintln!(
+            "{name}: MAE none {:.4}, cosine-weighted {:.4}, paper eq. 6 {:.4} (mean truth {:.3})",
+            mae(&vec![1.0; truth.len()]),
+            mae(&cosine),
+            mae(&paper),
+            truth.iter().sum::<f32>() / truth.len() as f32
+        );
+    }
 }

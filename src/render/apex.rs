@@ -79,7 +79,7 @@ pub fn apex_pass(
         "mesostructure/apex",
         compute,
         &bind_groups.apex,
-        offset.0,
+        &[offset.0],
         textures.size,
         |encoder| encoder.clear_buffer(&textures.apex_stats, 0, None),
     );

@@ -1,7 +1,9 @@
 // Apex pass (paper §2.2): the local apex set f(P) of every mesostructure pixel — the direct
-// apex by gradient ascent from P, indirect apexes by ascents from sample points in
-// `apex_directions` directions, boundary points where an ascent would leave the visible region.
-// Work per pixel is bounded by `(1 + apex_directions) × max_ascent_steps` texel reads.
+// apex by gradient ascent from P, and for each of `apex_directions` directions the apex of that
+// direction (walk to the valley, climb along the direction to the steepest rise), boundary
+// points where a climb would leave the visible region.
+// Work per pixel is bounded by `(1 + apex_directions) × (max_sample_radius + max_ascent_steps)`
+// texel reads.
 // Mirrors `reference::apex_set`.
 
 #import bevy_mesostructure::common::{
@@ -82,6 +84,87 @@ fn ascend(start: vec2<i32>) -> Ascent {
     return Ascent(cur, KIND_TRUNCATED, settings.max_ascent_steps);
 }
 
+fn line_point(p: vec2<i32>, d: vec2<f32>, t: u32) -> vec2<i32> {
+    return p + vec2<i32>(floor(f32(t) * d + 0.5));
+}
+
+fn neighbour_index(step: vec2<i32>) -> u32 {
+    for (var n = 0u; n < 8u; n++) {
+        if all(neighbour_offset(n) == step) {
+            return n;
+        }
+    }
+    return 8u;
+}
+
+// Start of the indirect sample of direction d: walk from P while the height does not rise,
+// start at the first pixel higher than the one before; (x, y, t), or t = 0 when the walk
+// leaves the visible region or finds nothing rising within max_walk pixels.
+// See `reference::valley_walk`.
+fn valley_walk(p: vec2<i32>, d: vec2<f32>) -> vec3<i32> {
+    var prev = p;
+    var previous = textureLoad(mhgm, p, 0).z;
+    for (var t = 1u; t <= settings.max_walk; t++) {
+        let q = line_point(p, d, t);
+        if all(q == prev) {
+            continue;
+        }
+        let dir = neighbour_index(q - prev);
+        if dir == 8u || !is_connected(u32(textureLoad(mhgm, prev, 0).w), dir) {
+            return vec3(0);
+        }
+        let h = textureLoad(mhgm, q, 0).z;
+        if h > previous {
+            return vec3(q, i32(t));
+        }
+        prev = q;
+        previous = h;
+    }
+    return vec3(0);
+}
+
+// The apex of direction d: climb along the line from the walk's start while the height does
+// not fall; keep the pixel of steepest rise (h − h0) / t. See `reference::line_climb`.
+fn line_climb(p: vec2<i32>, h0: f32, d: vec2<f32>, start: vec3<i32>) -> Ascent {
+    var cur = start.xy;
+    let t0 = u32(start.z);
+    var previous = textureLoad(mhgm, cur, 0).z;
+    var best = cur;
+    var best_rise = (previous - h0) / f32(t0);
+    var kind = KIND_LOCAL;
+    for (var t = t0 + 1u; t <= t0 + settings.max_ascent_steps; t++) {
+        let q = line_point(p, d, t);
+        if all(q == cur) {
+            continue;
+        }
+        let dir = neighbour_index(q - cur);
+        if dir == 8u {
+            break;
+        }
+        if !is_connected(u32(textureLoad(mhgm, cur, 0).w), dir) {
+            if all(best == cur) {
+                kind = KIND_BOUNDARY;
+            }
+            break;
+        }
+        let h = textureLoad(mhgm, q, 0).z;
+        if h < previous {
+            break;
+        }
+        let rise = (h - h0) / f32(t);
+        if rise > best_rise {
+            best = q;
+            best_rise = rise;
+        }
+        cur = q;
+        previous = h;
+        if t == t0 + settings.max_ascent_steps {
+            kind = KIND_TRUNCATED;
+        }
+    }
+    return Ascent(best, kind, t0);
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
     let size = vec2<i32>(textureDimensions(mhgm));
@@ -96,7 +179,6 @@ fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let h0 = c.z;
-    let object = textureLoad(mhm, p, 0).z;
     var header = 0u;
     var count = 0u;
     var truncated = false;
@@ -104,12 +186,7 @@ fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
     let direct = ascend(p);
     var steps = direct.steps;
     truncated = direct.kind == KIND_TRUNCATED;
-    var radius = settings.min_sample_radius;
     if textureLoad(mhgm, direct.apex, 0).z > h0 + APEX_MIN_RISE {
-        let d = abs(direct.apex - p);
-        let chebyshev = u32(max(d.x, d.y));
-        radius = clamp(chebyshev, settings.min_sample_radius,
-                       max(settings.max_sample_radius, settings.min_sample_radius));
         apex_sets[base + 1u] = pack_offset(direct.apex - p);
         header |= APEX_DIRECT_PRESENT;
         if direct.kind == KIND_BOUNDARY {
@@ -119,11 +196,12 @@ fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 
     for (var i = 0u; i < settings.apex_directions; i++) {
-        let s = p + vec2<i32>(floor(f32(radius) * sample_direction(settings, i) + 0.5));
-        if !on_screen(s, size) || textureLoad(mhm, s, 0).z != object {
+        let d = sample_direction(settings, i);
+        let s = valley_walk(p, d);
+        if s.z == 0 {
             continue;
         }
-        let a = ascend(s);
+        let a = line_climb(p, h0, d, s);
         steps += a.steps;
         truncated = truncated || a.kind == KIND_TRUNCATED;
         if !(textureLoad(mhgm, a.apex, 0).z > h0 + APEX_MIN_RISE) {

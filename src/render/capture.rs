@@ -14,8 +14,12 @@ use bevy::{
     },
 };
 
-use super::{CORE_NORMAL_FORMAT, MHGM_FORMAT, MHM_FORMAT, ViewMesostructureTextures};
-use crate::reference::{ApexSet, FLAG_VALID, GradientMap, ScreenHeightMap, unpack_apex_set};
+use super::{
+    CORE_NORMAL_FORMAT, MHGM_FORMAT, MHM_FORMAT, OCCLUSION_FORMAT, ViewMesostructureTextures,
+};
+use crate::reference::{
+    ApexSet, FLAG_VALID, GradientMap, ScreenHeightMap, ViewGeometry, unpack_apex_set,
+};
 
 /// Put on a camera with [`Mesostructure`](crate::Mesostructure) to read its working images back
 /// every frame into [`MesostructureCaptures`].
@@ -42,6 +46,19 @@ pub struct CapturedFrame {
     /// Apex-pass counters: mesostructure pixels, pixels whose search hit the step bound,
     /// ascent steps in all.
     pub apex_stats: [u32; 3],
+    /// Mesostructure ambient occlusion per pixel (1 = open; 1 where not computed).
+    pub occlusion: Vec<f32>,
+    /// How pixels map back to the world in this frame.
+    pub view: ViewGeometry,
+}
+
+impl Default for ViewGeometry {
+    fn default() -> Self {
+        Self {
+            world_from_clip: Mat4::IDENTITY,
+            viewport: Vec4::ZERO,
+        }
+    }
 }
 
 impl CapturedFrame {
@@ -74,6 +91,14 @@ impl CapturedFrame {
         }
         let s = self.apex_stride as usize;
         unpack_apex_set(&self.apex_sets[i * s..(i + 1) * s], (x as i32, y as i32))
+    }
+
+    /// The core normals n0 as vectors.
+    pub fn normals(&self) -> Vec<Vec3> {
+        self.core_normal
+            .iter()
+            .map(|n| Vec3::new(n[0], n[1], n[2]))
+            .collect()
     }
 
     /// Number of pixels that carry a mesostructure surface.
@@ -122,9 +147,17 @@ struct Readback {
     row: u32,
 }
 
+struct PendingCapture {
+    camera: Entity,
+    size: UVec2,
+    apex_stride: u32,
+    view: ViewGeometry,
+    readbacks: Vec<Readback>,
+}
+
 /// Copies submitted this frame, mapped after submission.
 #[derive(Resource, Default)]
-pub struct PendingCaptures(Vec<(Entity, UVec2, u32, Vec<Readback>)>);
+pub struct PendingCaptures(Vec<PendingCapture>);
 
 fn copy_texture(
     ctx: &mut RenderContext,
@@ -204,10 +237,20 @@ pub fn copy_capture(
         copy_texture(&mut ctx, &device, &t.mhgm.texture, MHGM_FORMAT),
         copy_buffer(&mut ctx, &device, &t.apex_sets),
         copy_buffer(&mut ctx, &device, &t.apex_stats),
+        copy_texture(&mut ctx, &device, &t.occlusion.texture, OCCLUSION_FORMAT),
     ];
-    pending
-        .0
-        .push((capture.0, t.size, t.apex_stride, readbacks));
+    let world_from_clip =
+        extracted_view.world_from_view.to_matrix() * extracted_view.clip_from_view.inverse();
+    pending.0.push(PendingCapture {
+        camera: capture.0,
+        size: t.size,
+        apex_stride: t.apex_stride,
+        view: ViewGeometry {
+            world_from_clip,
+            viewport: extracted_view.viewport.as_vec4(),
+        },
+        readbacks,
+    });
 }
 
 fn read(device: &RenderDevice, r: &Readback, rows: u32) -> Vec<u8> {
@@ -235,7 +278,14 @@ pub fn map_captures(
     device: Res<RenderDevice>,
     captures: Res<MesostructureCaptures>,
 ) {
-    for (camera, size, apex_stride, readbacks) in pending.0.drain(..) {
+    for PendingCapture {
+        camera,
+        size,
+        apex_stride,
+        view,
+        readbacks,
+    } in pending.0.drain(..)
+    {
         let floats = |bytes: Vec<u8>| -> Vec<[f32; 4]> { bytemuck::cast_slice(&bytes).to_vec() };
         let halves: Vec<u16> = bytemuck::cast_slice(&read(&device, &readbacks[1], size.y)).to_vec();
         let stats: Vec<u32> = bytemuck::cast_slice(&read(&device, &readbacks[4], 1)).to_vec();
@@ -251,6 +301,8 @@ pub fn map_captures(
             apex_sets: bytemuck::cast_slice(&read(&device, &readbacks[3], 1)).to_vec(),
             apex_stride,
             apex_stats: [stats[0], stats[1], stats[2]],
+            occlusion: bytemuck::cast_slice(&read(&device, &readbacks[5], size.y)).to_vec(),
+            view,
         };
         if let Ok(mut map) = captures.0.lock() {
             map.insert(camera, frame);

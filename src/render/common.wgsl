@@ -5,12 +5,14 @@
 struct MesostructureUniform {
     apex_directions: u32,
     max_ascent_steps: u32,
-    min_sample_radius: u32,
-    max_sample_radius: u32,
+    max_walk: u32,
+    _padding: u32,
     depth_relative: f32,
     depth_slope_factor: f32,
     debug_view: u32,
     apex_stride: u32,
+    occlusion_form: u32,
+    occlusion_enabled: u32,
     // (cos θ_i, sin θ_i) of the indirect sample directions, two per vector.
     directions: array<vec4<f32>, 8>,
 }

@@ -38,6 +38,7 @@ pub fn init_debug_view_pipeline(
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 storage_buffer_read_only_sized(false, None),
                 uniform_buffer::<MesostructureUniform>(true),
+                texture_2d(TextureSampleType::Float { filterable: false }),
             ),
         ),
     );

@@ -11,12 +11,14 @@
 @group(0) @binding(1) var mhgm: texture_2d<f32>;
 @group(0) @binding(2) var<storage, read> apex_sets: array<u32>;
 @group(0) @binding(3) var<uniform> settings: MesostructureUniform;
+@group(0) @binding(4) var occlusion: texture_2d<f32>;
 
 const VIEW_HEIGHT: u32 = 1u;
 const VIEW_GRADIENT: u32 = 2u;
 const VIEW_APEX_DISTANCE: u32 = 3u;
 const VIEW_APEX_COUNT: u32 = 4u;
 const VIEW_BOUNDARY: u32 = 5u;
+const VIEW_OCCLUSION: u32 = 6u;
 
 // Dark blue → teal → yellow.
 fn ramp(t: f32) -> vec3<f32> {
@@ -71,6 +73,9 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
                     select(0.0, 1.0, (flags & FLAG_SCREEN_EDGE) != 0u),
                 );
             }
+        }
+        case VIEW_OCCLUSION: {
+            color = vec3(select(0.0, textureLoad(occlusion, p, 0).r, settings.occlusion_enabled != 0u));
         }
         default: {
             discard;

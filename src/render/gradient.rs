@@ -78,7 +78,7 @@ pub fn gradient_pass(
         "mesostructure/gradient",
         compute,
         &bind_groups.gradient,
-        offset.0,
+        &[offset.0],
         textures.size,
         |_| {},
     );

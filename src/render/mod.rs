@@ -1,7 +1,8 @@
 //! The render-world side: per-view working images, the passes and their ordering.
 //!
 //! Per camera with [`Mesostructure`], each frame, between Bevy's prepass and main pass:
-//! [`height`] (raster, custom phase) → [`gradient`] (compute) → [`apex`] (compute); the
+//! [`height`] (raster, custom phase) → [`gradient`] (compute) → [`apex`] (compute) →
+//! [`occlusion`] (compute); the
 //! [`debug_view`] pass draws over the output after tonemapping when a debug view is chosen.
 
 pub mod apex;
@@ -9,6 +10,7 @@ pub mod capture;
 pub mod debug_view;
 pub mod gradient;
 pub mod height;
+pub mod occlusion;
 
 use bevy::{
     camera::Camera3d,
@@ -48,6 +50,8 @@ pub const MHM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
 pub const CORE_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 /// MHGM: (∂h/∂x, ∂h/∂y, h, flags).
 pub const MHGM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
+/// Mesostructure ambient occlusion (1 = open).
+pub const OCCLUSION_FORMAT: TextureFormat = TextureFormat::R32Float;
 
 /// The working images of one view.
 #[derive(Component)]
@@ -58,6 +62,8 @@ pub struct ViewMesostructureTextures {
     pub core_normal: CachedTexture,
     /// Gradient map.
     pub mhgm: CachedTexture,
+    /// Ambient occlusion.
+    pub occlusion: CachedTexture,
     /// Apex sets, `apex_stride` words per pixel (see `reference::packed`).
     pub apex_sets: Buffer,
     /// Apex-pass counters: mesostructure pixels, pixels that hit the step bound, ascent steps.
@@ -75,6 +81,8 @@ pub struct ViewMesostructureBindGroups {
     pub gradient: BindGroup,
     /// Apex pass.
     pub apex: BindGroup,
+    /// Occlusion pass.
+    pub occlusion: BindGroup,
     /// Debug view.
     pub debug_view: BindGroup,
 }
@@ -101,7 +109,7 @@ pub(crate) fn dispatch_per_pixel(
     label: &'static str,
     pipeline: &ComputePipeline,
     bind_group: &BindGroup,
-    uniform_offset: u32,
+    dynamic_offsets: &[u32],
     size: UVec2,
     before: impl FnOnce(&mut CommandEncoder),
 ) {
@@ -118,7 +126,7 @@ pub(crate) fn dispatch_per_pixel(
             timestamp_writes: None,
         });
         pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, bind_group, &[uniform_offset]);
+        pass.set_bind_group(0, bind_group, dynamic_offsets);
         pass.dispatch_workgroups(size.x.div_ceil(8), size.y.div_ceil(8), 1);
     }
     encoder.pop_debug_group();
@@ -134,6 +142,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "height.wgsl");
     bevy::asset::embedded_asset!(app, "gradient.wgsl");
     bevy::asset::embedded_asset!(app, "apex.wgsl");
+    bevy::asset::embedded_asset!(app, "occlusion.wgsl");
     bevy::asset::embedded_asset!(app, "debug_view.wgsl");
 
     // The phase plugin adds the batching systems; with our pipeline type as their batch data,
@@ -164,6 +173,7 @@ pub(crate) fn build(app: &mut App) {
                 height::init_height_pass_pipeline.after(MeshPipelineSystems),
                 gradient::init_gradient_pipeline,
                 apex::init_apex_pipeline,
+                occlusion::init_occlusion_pipeline,
                 debug_view::init_debug_view_pipeline,
             ),
         )
@@ -198,6 +208,7 @@ pub(crate) fn build(app: &mut App) {
                 height::height_pass,
                 gradient::gradient_pass,
                 apex::apex_pass,
+                occlusion::occlusion_pass,
                 capture::copy_capture,
             )
                 .chain()
@@ -374,6 +385,14 @@ fn prepare_view_textures(
                 | TextureUsages::TEXTURE_BINDING
                 | TextureUsages::COPY_SRC,
         );
+        let occlusion = texture(
+            &mut texture_cache,
+            "mesostructure_occlusion",
+            OCCLUSION_FORMAT,
+            TextureUsages::STORAGE_BINDING
+                | TextureUsages::TEXTURE_BINDING
+                | TextureUsages::COPY_SRC,
+        );
         let (apex_sets, apex_stats) = match previous {
             Some(p) if p.apex_sets.size() == apex_bytes => {
                 (p.apex_sets.clone(), p.apex_stats.clone())
@@ -397,6 +416,7 @@ fn prepare_view_textures(
             mhm,
             core_normal,
             mhgm,
+            occlusion,
             apex_sets,
             apex_stats,
             size,
@@ -431,9 +451,13 @@ fn prepare_view_bind_groups(
     gradient: Res<gradient::GradientPipeline>,
     apex: Res<apex::ApexPipeline>,
     debug: Res<debug_view::DebugViewPipeline>,
+    occlusion: Res<occlusion::OcclusionPipeline>,
+    view_uniforms: Res<bevy::render::view::ViewUniforms>,
     views: Query<(Entity, &ViewMesostructureTextures)>,
 ) {
-    let Some(settings) = uniforms.0.binding() else {
+    let (Some(settings), Some(view_binding)) =
+        (uniforms.0.binding(), view_uniforms.uniforms.binding())
+    else {
         return;
     };
     for (entity, t) in &views {
@@ -457,6 +481,19 @@ fn prepare_view_bind_groups(
                 settings.clone(),
             )),
         );
+        let occlusion = device.create_bind_group(
+            "mesostructure_occlusion_bind_group",
+            &pipeline_cache.get_bind_group_layout(&occlusion.layout),
+            &BindGroupEntries::sequential((
+                &t.mhm.default_view,
+                &t.core_normal.default_view,
+                t.apex_sets.as_entire_binding(),
+                &t.occlusion.default_view,
+                settings.clone(),
+                view_binding.clone(),
+                &t.mhgm.default_view,
+            )),
+        );
         let debug_view = device.create_bind_group(
             "mesostructure_debug_view_bind_group",
             &pipeline_cache.get_bind_group_layout(&debug.layout),
@@ -465,11 +502,13 @@ fn prepare_view_bind_groups(
                 &t.mhgm.default_view,
                 t.apex_sets.as_entire_binding(),
                 settings.clone(),
+                &t.occlusion.default_view,
             )),
         );
         commands.entity(entity).insert(ViewMesostructureBindGroups {
             gradient,
             apex,
+            occlusion,
             debug_view,
         });
     }

@@ -109,6 +109,7 @@ pub fn capture(app: &mut App, camera: Entity, max: usize) -> CapturedFrame {
     let captures = app.world().resource::<MesostructureCaptures>().clone();
     run(app, 4);
     captures.take(camera);
+    assert_pipelines_ready(app);
     for _ in 0..max {
         run(app, 1);
         if let Some(frame) = captures.take(camera) {
@@ -196,4 +197,30 @@ pub fn top_down_uv(px: u32, py: u32, size: u32) -> Vec2 {
     let ndc = |p: u32| ((p as f32 + 0.5) / size as f32) * 2.0 - 1.0;
     let (x, z) = (ndc(px) * t, ndc(py) * t);
     Vec2::new((x + 1.0) * 0.5, (z + 1.0) * 0.5)
+}
+
+/// Fails unless every pipeline of the plugin that was queued has compiled: a missing or broken
+/// shader otherwise only shows as a pass that silently never runs.
+pub fn assert_pipelines_ready(app: &App) {
+    use bevy::render::render_resource::{CachedPipelineState, PipelineCache, PipelineDescriptor};
+    let cache = app
+        .get_sub_app(RenderApp)
+        .unwrap()
+        .world()
+        .resource::<PipelineCache>();
+    for pipeline in cache.pipelines() {
+        let label = match &pipeline.descriptor {
+            PipelineDescriptor::RenderPipelineDescriptor(d) => d.label.clone(),
+            PipelineDescriptor::ComputePipelineDescriptor(d) => d.label.clone(),
+        }
+        .unwrap_or_default();
+        if !label.starts_with("mesostructure") {
+            continue;
+        }
+        match &pipeline.state {
+            CachedPipelineState::Ok(_) => {}
+            CachedPipelineState::Err(err) => panic!("pipeline {label} failed: {err}"),
+            _ => panic!("pipeline {label} is still not compiled (a shader that never loads?)"),
+        }
+    }
 }
