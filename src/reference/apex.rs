@@ -223,7 +223,7 @@ pub fn line_point((x, y): (i32, i32), d: [f32; 2], t: u32) -> (i32, i32) {
 }
 
 /// The apex of direction `d`: from the valley-walk start (pixel `t0` of the line), climb along
-/// the line while the height does not fall, and keep the pixel of steepest rise seen from P,
+/// the line while the height rises, and keep the pixel of steepest rise seen from P,
 /// `(h − h(P)) / t` — the horizon in that direction (paper §3.1 takes `h(θ)` from "the apex in
 /// that direction"). Climbing along the direction rather than the gradient [beyond the paper]
 /// makes the apex the occluder of that direction (see docs/accuracy.md). Boundary if the line
@@ -257,7 +257,8 @@ pub fn line_climb(
             break;
         }
         let h = mhm.heights[mhm.index(qx as u32, qy as u32)];
-        if h < previous {
+        // Past the top of the rise (flat or falling) the rise over distance only shrinks.
+        if h <= previous {
             break;
         }
         let rise = (h - h0) / t as f32;

@@ -123,8 +123,8 @@ fn valley_walk(p: vec2<i32>, d: vec2<f32>) -> vec3<i32> {
     return vec3(0);
 }
 
-// The apex of direction d: climb along the line from the walk's start while the height does
-// not fall; keep the pixel of steepest rise (h − h0) / t. See `reference::line_climb`.
+// The apex of direction d: climb along the line from the walk's start while the height
+// rises; keep the pixel of steepest rise (h − h0) / t. See `reference::line_climb`.
 fn line_climb(p: vec2<i32>, h0: f32, d: vec2<f32>, start: vec3<i32>) -> Ascent {
     var cur = start.xy;
     let t0 = u32(start.z);
@@ -148,7 +148,7 @@ fn line_climb(p: vec2<i32>, h0: f32, d: vec2<f32>, start: vec3<i32>) -> Ascent {
             break;
         }
         let h = textureLoad(mhgm, q, 0).z;
-        if h < previous {
+        if h <= previous {
             break;
         }
         let rise = (h - h0) / f32(t);
