@@ -26,14 +26,16 @@ pub struct Mesostructure {
     /// Indirect sample directions around each pixel for its apex set (0–16). More directions
     /// find more of the apexes that occlude a pixel, at a cost linear in the count.
     pub apex_directions: u32,
-    /// Bound on the steps (one pixel each) of one gradient ascent (1–512): the work per pixel is
-    /// at most `(1 + apex_directions) × max_ascent_steps` texel reads. Where it is hit the
-    /// pixel reached stands in for the apex; the `ApexCount` debug view shows those pixels.
+    /// Bound on the steps (one pixel each) of the gradient ascent to the direct apex (1–512).
+    /// Where it is hit the pixel reached stands in for the apex; the `ApexCount` debug view
+    /// shows those pixels in magenta. The work per pixel is at most
+    /// `max_ascent_steps + 2 × apex_directions × max_sample_radius` texel reads.
     pub max_ascent_steps: u32,
     /// How far, in pixels (1–256), each direction's walk from the pixel goes looking for the
-    /// valley beyond which something stands up (the start of its indirect ascent). The walk
-    /// stops where the height first rises, so the apex set adapts to the size of the
-    /// structures; this only bounds it.
+    /// valley beyond which something stands up, and how far the climb along the direction then
+    /// goes to that structure's apex. Both stop on their own (where the height first rises,
+    /// where it stops rising), so the apex set adapts to the size of the structures; this only
+    /// bounds them.
     pub max_sample_radius: u32,
     /// Relative depth jump (fraction of NDC depth, 0.0001–1) above which two neighbouring pixels
     /// of the same object count as separated (a depth discontinuity ends the visible region).

@@ -9,6 +9,9 @@ pub const MAX_APEX_DIRECTIONS: u32 = 16;
 /// flat maps free of apexes.
 pub const APEX_MIN_RISE: f32 = 1.0e-6;
 
+/// Relative height change under which a line climb counts the surface as flat and stops.
+pub const CLIMB_FLATNESS: f32 = 1.0e-4;
+
 /// Bounds and sampling of the apex search.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ApexSearch {
@@ -227,7 +230,9 @@ pub fn line_point((x, y): (i32, i32), d: [f32; 2], t: u32) -> (i32, i32) {
 /// `(h − h(P)) / t` — the horizon in that direction (paper §3.1 takes `h(θ)` from "the apex in
 /// that direction"). Climbing along the direction rather than the gradient [beyond the paper]
 /// makes the apex the occluder of that direction (see docs/accuracy.md). Boundary if the line
-/// leaves the visible region at that pixel while still rising; truncated after `max_steps`.
+/// leaves the visible region at that pixel while still rising. The climb looks at most
+/// `max_walk` pixels beyond the valley, like any bounded horizon search; reaching that bound is
+/// not an error (a long gentle ramp seen along its length), so it is not reported as one.
 /// Mirrors `line_climb` in `apex.wgsl`.
 pub fn line_climb(
     mhm: &ScreenHeightMap,
@@ -235,14 +240,14 @@ pub fn line_climb(
     p: (i32, i32),
     d: [f32; 2],
     (start, t0): ((i32, i32), u32),
-    max_steps: u32,
+    max_walk: u32,
 ) -> Apex {
     let h0 = mhm.heights[mhm.index(p.0 as u32, p.1 as u32)];
     let (mut cx, mut cy) = start;
     let mut previous = mhm.heights[mhm.index(cx as u32, cy as u32)];
     let mut best = (start, (previous - h0) / t0 as f32);
     let mut kind = ApexKind::Local;
-    for t in t0 + 1..=t0 + max_steps {
+    for t in t0 + 1..=t0 + max_walk {
         let (qx, qy) = line_point(p, d, t);
         if (qx, qy) == (cx, cy) {
             continue;
@@ -257,8 +262,10 @@ pub fn line_climb(
             break;
         }
         let h = mhm.heights[mhm.index(qx as u32, qy as u32)];
-        // Past the top of the rise (flat or falling) the rise over distance only shrinks.
-        if h <= previous {
+        // Past the top of the rise (flat or falling) the rise over distance only shrinks;
+        // "flat" allows filtering noise of 1e-4 of the height (plateaus are not exactly flat
+        // after mip filtering).
+        if h <= previous + CLIMB_FLATNESS * previous.abs() {
             break;
         }
         let rise = (h - h0) / t as f32;
@@ -266,9 +273,6 @@ pub fn line_climb(
             best = ((qx, qy), rise);
         }
         (cx, cy, previous) = (qx, qy, h);
-        if t == t0 + max_steps {
-            kind = ApexKind::Truncated;
-        }
     }
     Apex {
         x: best.0.0,
@@ -309,8 +313,7 @@ pub fn apex_set(
         let Some(start) = valley_walk(mhm, mhgm, (x, y), *d, search.max_walk) else {
             continue;
         };
-        let apex = line_climb(mhm, mhgm, (x, y), *d, start, search.max_steps);
-        set.truncated |= apex.kind == ApexKind::Truncated;
+        let apex = line_climb(mhm, mhgm, (x, y), *d, start, search.max_walk);
         if rises(&apex) && !set.iter().any(|a| a.x == apex.x && a.y == apex.y) {
             set.indirect.push(apex);
         }

@@ -2,7 +2,7 @@
 // apex by gradient ascent from P, and for each of `apex_directions` directions the apex of that
 // direction (walk to the valley, climb along the direction to the steepest rise), boundary
 // points where a climb would leave the visible region.
-// Work per pixel is bounded by `(1 + apex_directions) × (max_sample_radius + max_ascent_steps)`
+// Work per pixel is bounded by `max_ascent_steps + 2 × apex_directions × max_sample_radius`
 // texel reads.
 // Mirrors `reference::apex_set`.
 
@@ -18,6 +18,7 @@
 @group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>, 4>;
 @group(0) @binding(4) var<uniform> settings: MesostructureUniform;
 
+const CLIMB_FLATNESS: f32 = 1.0e-4;
 const KIND_LOCAL: u32 = 0u;
 const KIND_BOUNDARY: u32 = 1u;
 const KIND_TRUNCATED: u32 = 2u;
@@ -132,7 +133,7 @@ fn line_climb(p: vec2<i32>, h0: f32, d: vec2<f32>, start: vec3<i32>) -> Ascent {
     var best = cur;
     var best_rise = (previous - h0) / f32(t0);
     var kind = KIND_LOCAL;
-    for (var t = t0 + 1u; t <= t0 + settings.max_ascent_steps; t++) {
+    for (var t = t0 + 1u; t <= t0 + settings.max_walk; t++) {
         let q = line_point(p, d, t);
         if all(q == cur) {
             continue;
@@ -148,7 +149,7 @@ fn line_climb(p: vec2<i32>, h0: f32, d: vec2<f32>, start: vec3<i32>) -> Ascent {
             break;
         }
         let h = textureLoad(mhgm, q, 0).z;
-        if h <= previous {
+        if h <= previous + CLIMB_FLATNESS * abs(previous) {
             break;
         }
         let rise = (h - h0) / f32(t);
@@ -158,9 +159,6 @@ fn line_climb(p: vec2<i32>, h0: f32, d: vec2<f32>, start: vec3<i32>) -> Ascent {
         }
         cur = q;
         previous = h;
-        if t == t0 + settings.max_ascent_steps {
-            kind = KIND_TRUNCATED;
-        }
     }
     return Ascent(best, kind, t0);
 }
@@ -203,7 +201,6 @@ fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         let a = line_climb(p, h0, d, s);
         steps += a.steps;
-        truncated = truncated || a.kind == KIND_TRUNCATED;
         if !(textureLoad(mhgm, a.apex, 0).z > h0 + APEX_MIN_RISE) {
             continue;
         }
