@@ -351,7 +351,7 @@ fn each_pass_reports_a_gpu_time_span() {
     ));
     run(&mut app, 8);
     let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
-    for pass in ["height", "gradient", "apex", "debug_view"] {
+    for pass in ["height", "gradient", "apex", "occlusion", "debug_view"] {
         let gpu = bevy::diagnostic::DiagnosticPath::new(format!(
             "render/mesostructure/{pass}/elapsed_gpu"
         ));
