@@ -93,11 +93,19 @@ impl Plugin for MesostructurePlugin {
             .register_type::<MesostructureMaterial>()
             .init_resource::<warn_once::WarnedOnce>()
             .init_resource::<material::HeightMapMips>()
+            .init_resource::<material::AdaptedMaterials>()
             .add_plugins((
                 SyncComponentPlugin::<Mesostructure>::default(),
                 ExtractComponentPlugin::<material::PreparedMesostructure>::default(),
             ))
-            .add_systems(PostUpdate, material::prepare_mesostructure_materials);
+            .add_systems(
+                PostUpdate,
+                (
+                    material::prepare_mesostructure_materials,
+                    material::adapt_standard_materials,
+                )
+                    .chain(),
+            );
         render::build(app);
     }
 }

@@ -196,3 +196,91 @@ fn prepare_one(
         uv_transform: material.uv_transform,
     })
 }
+
+/// On an entity whose `StandardMaterial` the plugin swapped for its mesostructure copy: the
+/// user's own material, restored when the entity stops being a mesostructure surface.
+#[derive(Component, Clone, Debug)]
+pub struct AdaptedMaterial {
+    /// The material the user gave the entity.
+    pub original: Handle<StandardMaterial>,
+    /// The copy the entity renders with: deferred, lit by the mesostructure lighting pass.
+    pub adapted: Handle<StandardMaterial>,
+}
+
+/// Mesostructure copies of user materials, by original; shared by the entities that share the
+/// original, so other users of a material are never changed.
+#[derive(Resource, Default)]
+pub struct AdaptedMaterials(HashMap<AssetId<StandardMaterial>, Handle<StandardMaterial>>);
+
+/// The mesostructure copy of a material: rendered deferred, with the mesostructure lighting
+/// pass id, so that Bevy's lighting pass leaves its pixels to ours.
+pub fn adapt(material: &StandardMaterial) -> StandardMaterial {
+    StandardMaterial {
+        opaque_render_method: bevy::material::OpaqueRendererMethod::Deferred,
+        deferred_lighting_pass_id: crate::render::lighting::MESOSTRUCTURE_LIGHTING_PASS_ID,
+        ..material.clone()
+    }
+}
+
+/// Swaps the `StandardMaterial` of each prepared mesostructure entity for its mesostructure
+/// copy (keeping the copy in step with the original), and restores the original when the
+/// entity is no longer one.
+pub fn adapt_standard_materials(
+    mut commands: Commands,
+    entities: Query<(
+        Entity,
+        &MeshMaterial3d<StandardMaterial>,
+        Has<PreparedMesostructure>,
+        Option<&AdaptedMaterial>,
+    )>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut adapted: ResMut<AdaptedMaterials>,
+    mut events: MessageReader<AssetEvent<StandardMaterial>>,
+) {
+    for event in events.read() {
+        if let AssetEvent::Modified { id } = event {
+            if let Some(copy) = adapted.0.get(id).cloned() {
+                if let Some(original) = materials.get(*id).map(adapt) {
+                    if let Some(mut target) = materials.get_mut(&copy) {
+                        *target = original;
+                    }
+                }
+            }
+        }
+    }
+    for (entity, material, prepared, swapped) in &entities {
+        match (prepared, swapped) {
+            (true, Some(s)) if material.0 == s.adapted => {}
+            (true, _) => {
+                // New, or the user set another material since: that one is the original now.
+                let original = material.0.clone();
+                let copy = match adapted.0.get(&original.id()) {
+                    Some(copy) => copy.clone(),
+                    None => {
+                        let Some(source) = materials.get(&original).map(adapt) else {
+                            continue;
+                        };
+                        let copy = materials.add(source);
+                        adapted.0.insert(original.id(), copy.clone());
+                        copy
+                    }
+                };
+                commands.entity(entity).insert((
+                    MeshMaterial3d(copy.clone()),
+                    AdaptedMaterial {
+                        original,
+                        adapted: copy,
+                    },
+                ));
+            }
+            (false, Some(s)) => {
+                let mut e = commands.entity(entity);
+                if material.0 == s.adapted {
+                    e.insert(MeshMaterial3d(s.original.clone()));
+                }
+                e.remove::<AdaptedMaterial>();
+            }
+            (false, None) => {}
+        }
+    }
+}

@@ -1,6 +1,10 @@
 //! The per-camera settings component.
 
-use bevy::{core_pipeline::prepass::DepthPrepass, prelude::*, render::render_resource::ShaderType};
+use bevy::{
+    core_pipeline::prepass::{DeferredPrepass, DepthPrepass},
+    prelude::*,
+    render::render_resource::ShaderType,
+};
 
 use crate::reference::{
     ApexSearch, DepthContinuity, MAX_APEX_DIRECTIONS, OcclusionForm, sample_directions,
@@ -12,14 +16,19 @@ use crate::reference::{
 /// sees gets a screen-space height map (MHM), its gradient map (MHGM) and per-pixel local apex
 /// sets (paper §2), from which the lighting terms are computed.
 ///
-/// Requires [`Msaa::Off`] on the camera (like Bevy's SSAO and deferred rendering); with MSAA on
-/// the effect is switched off for that camera with a one-time warning.
+/// Needs [`Msaa::Off`] (like Bevy's SSAO and deferred rendering): Bevy itself turns MSAA off,
+/// with a warning, on cameras with a deferred prepass, which this component pulls in; should
+/// MSAA still be on, the effect is off for that camera with a one-time warning. Pulls in the depth and
+/// deferred prepasses: mesostructure meshes are rendered deferred and lit by a lighting pass of
+/// the plugin's own (their `StandardMaterial` is swapped for a copy with its own deferred
+/// lighting pass id; other meshes keep forward or deferred as they were). A second camera
+/// with a deferred prepass but without this component leaves those meshes unlit.
 ///
 /// Out-of-range values are clamped to their documented range and non-finite ones replaced by the
 /// default, with a one-time warning; they never reach the GPU.
 #[derive(Component, Reflect, Clone, Debug, PartialEq)]
 #[reflect(Component, Default, Clone, Debug, PartialEq)]
-#[require(DepthPrepass)]
+#[require(DepthPrepass, DeferredPrepass)]
 pub struct Mesostructure {
     /// What the camera shows: the lit scene, or one of the intermediate images.
     pub debug_view: MesostructureDebugView,
@@ -251,6 +260,7 @@ impl bevy::render::sync_component::SyncComponent for Mesostructure {
         crate::render::ViewMesostructureBindGroups,
         crate::render::ViewMesostructureUniformOffset,
         crate::render::capture::ExtractedCapture,
+        crate::render::lighting::ViewLightingPipeline,
     );
 }
 

@@ -10,6 +10,7 @@ pub mod capture;
 pub mod debug_view;
 pub mod gradient;
 pub mod height;
+pub mod lighting;
 pub mod occlusion;
 
 use bevy::{
@@ -143,6 +144,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "gradient.wgsl");
     bevy::asset::embedded_asset!(app, "apex.wgsl");
     bevy::asset::embedded_asset!(app, "occlusion.wgsl");
+    bevy::asset::embedded_asset!(app, "lighting.wgsl");
     bevy::asset::embedded_asset!(app, "debug_view.wgsl");
 
     // The phase plugin adds the batching systems; with our pipeline type as their batch data,
@@ -174,6 +176,7 @@ pub(crate) fn build(app: &mut App) {
                 gradient::init_gradient_pipeline,
                 apex::init_apex_pipeline,
                 occlusion::init_occlusion_pipeline,
+                lighting::init_lighting_pipeline,
                 debug_view::init_debug_view_pipeline,
             ),
         )
@@ -191,6 +194,7 @@ pub(crate) fn build(app: &mut App) {
                 height::queue_height_phase.in_set(RenderSystems::QueueMeshes),
                 sort_phase_system::<height::HeightPhaseItem>.in_set(RenderSystems::PhaseSort),
                 debug_view::prepare_debug_view_pipelines.in_set(RenderSystems::Prepare),
+                lighting::prepare_lighting_pipelines.in_set(RenderSystems::Prepare),
                 (prepare_view_textures, prepare_view_uniforms)
                     .in_set(RenderSystems::PrepareResources),
                 height::prepare_height_material_bind_groups
@@ -214,6 +218,13 @@ pub(crate) fn build(app: &mut App) {
                 .chain()
                 .after(Core3dSystems::Prepass)
                 .before(Core3dSystems::MainPass)
+                .before(main_opaque_pass_3d),
+        )
+        .add_systems(
+            Core3d,
+            lighting::lighting_pass
+                .in_set(Core3dSystems::MainPass)
+                .before(bevy::pbr::deferred::deferred_lighting)
                 .before(main_opaque_pass_3d),
         )
         .add_systems(

@@ -41,6 +41,15 @@ pub fn app() -> App {
 
 /// [`app`], with more plugins added by `more` before the app is finished.
 pub fn app_with(more: impl FnOnce(&mut App)) -> App {
+    build_app(true, more)
+}
+
+/// The same headless app without the plugin, to compare with.
+pub fn bare_app() -> App {
+    build_app(false, |_| {})
+}
+
+fn build_app(plugin: bool, more: impl FnOnce(&mut App)) -> App {
     let mut app = App::new();
     let plugins = DefaultPlugins
         .set(WindowPlugin {
@@ -58,7 +67,9 @@ pub fn app_with(more: impl FnOnce(&mut App)) -> App {
     } else {
         app.add_plugins(plugins.disable::<bevy::log::LogPlugin>());
     }
-    app.add_plugins(MesostructurePlugin);
+    if plugin {
+        app.add_plugins(MesostructurePlugin);
+    }
     more(&mut app);
     app.finish();
     app.cleanup();

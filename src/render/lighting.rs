@@ -1,0 +1,189 @@
+//! Lighting pass: Bevy's deferred lighting for the pixels of mesostructure materials, with the
+//! mesostructure ambient occlusion applied to ambient and environment light (paper eq. 2).
+//!
+//! Mesostructure materials get their own deferred lighting pass id
+//! ([`MESOSTRUCTURE_LIGHTING_PASS_ID`], see [`crate::material`]), so Bevy's lighting pass skips
+//! their pixels and this one lights exactly those. The pipeline is Bevy's own deferred lighting
+//! pipeline for the view (same shader defs: shadows, SSAO, environment maps, tonemapping) with
+//! our shader and our group 2.
+
+use bevy::{
+    core_pipeline::deferred::copy_lighting_id::DeferredLightingIdDepthTexture,
+    pbr::{MeshViewBindGroup, ViewKeyCache, deferred::DeferredLightingLayout},
+    platform::collections::HashMap,
+    prelude::*,
+    render::{
+        diagnostic::RecordDiagnostics,
+        render_phase::ViewSortedRenderPhases,
+        render_resource::{binding_types::*, *},
+        renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
+        view::{ExtractedView, ViewTarget},
+    },
+    shader::ShaderDefVal,
+};
+
+use super::{ViewMesostructureTextures, height::HeightPhaseItem, view_has_mesostructure};
+use crate::settings::ExtractedMesostructure;
+
+/// The deferred lighting pass id of mesostructure materials (Bevy's own is 1; 0 = no geometry).
+pub const MESOSTRUCTURE_LIGHTING_PASS_ID: u8 = 2;
+
+/// Our group 2, the shader, a 1×1 "open" occlusion image for frames without an occlusion pass,
+/// and the pipelines made so far, by view key.
+#[derive(Resource)]
+pub struct LightingPipeline {
+    /// Group 2: the occlusion image.
+    pub layout: BindGroupLayoutDescriptor,
+    shader: Handle<Shader>,
+    open: TextureView,
+    pipelines: HashMap<bevy::pbr::MeshPipelineKey, CachedRenderPipelineId>,
+}
+
+/// Creates the lighting pipeline resource (render startup).
+pub fn init_lighting_pipeline(
+    mut commands: Commands,
+    asset_server: Res<AssetServer>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+) {
+    let layout = BindGroupLayoutDescriptor::new(
+        "mesostructure_lighting_layout",
+        &BindGroupLayoutEntries::single(
+            ShaderStages::FRAGMENT,
+            texture_2d(TextureSampleType::Float { filterable: false }),
+        ),
+    );
+    let open = device
+        .create_texture_with_data(
+            &queue,
+            &TextureDescriptor {
+                label: Some("mesostructure_open_occlusion"),
+                size: Extent3d {
+                    width: 1,
+                    height: 1,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: TextureDimension::D2,
+                format: super::OCCLUSION_FORMAT,
+                usage: TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            TextureDataOrder::default(),
+            &1.0f32.to_le_bytes(),
+        )
+        .create_view(&TextureViewDescriptor::default());
+    commands.insert_resource(LightingPipeline {
+        layout,
+        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "lighting.wgsl"),
+        open,
+        pipelines: HashMap::default(),
+    });
+}
+
+/// The lighting pipeline of a view.
+#[derive(Component)]
+pub struct ViewLightingPipeline(pub CachedRenderPipelineId);
+
+/// Specializes Bevy's deferred lighting pipeline for each view and swaps in our shader and
+/// group 2.
+pub fn prepare_lighting_pipelines(
+    mut commands: Commands,
+    pipeline_cache: Res<PipelineCache>,
+    view_key_cache: Res<ViewKeyCache>,
+    deferred: Option<Res<DeferredLightingLayout>>,
+    mut lighting: ResMut<LightingPipeline>,
+    views: Query<(Entity, &ExtractedView), With<ExtractedMesostructure>>,
+) {
+    let Some(deferred) = deferred else {
+        return;
+    };
+    let lighting = lighting.as_mut();
+    for (entity, view) in &views {
+        let Some(&key) = view_key_cache.get(&view.retained_view_entity) else {
+            continue;
+        };
+        let id = *lighting.pipelines.entry(key).or_insert_with(|| {
+            let mut descriptor = deferred.specialize(key);
+            descriptor.label = Some("mesostructure_lighting_pipeline".into());
+            descriptor.layout[2] = lighting.layout.clone();
+            let id_def = ShaderDefVal::UInt(
+                "MESOSTRUCTURE_LIGHTING_PASS_ID".into(),
+                MESOSTRUCTURE_LIGHTING_PASS_ID as u32,
+            );
+            descriptor.vertex.shader = lighting.shader.clone();
+            descriptor.vertex.shader_defs.push(id_def.clone());
+            if let Some(fragment) = descriptor.fragment.as_mut() {
+                fragment.shader = lighting.shader.clone();
+                fragment.shader_defs.push(id_def);
+            }
+            pipeline_cache.queue_render_pipeline(descriptor)
+        });
+        commands.entity(entity).insert(ViewLightingPipeline(id));
+    }
+}
+
+/// Core3d system, before Bevy's deferred lighting (which discards the id-depth texture):
+/// lights the mesostructure pixels, timed as `mesostructure/lighting`.
+pub fn lighting_pass(
+    view: ViewQuery<(
+        &ExtractedView,
+        &ExtractedMesostructure,
+        &MeshViewBindGroup,
+        &ViewTarget,
+        &DeferredLightingIdDepthTexture,
+        &ViewLightingPipeline,
+        &ViewMesostructureTextures,
+    )>,
+    phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
+    lighting: Res<LightingPipeline>,
+    pipeline_cache: Res<PipelineCache>,
+    mut ctx: RenderContext,
+) {
+    let (extracted_view, settings, mesh_view, target, id_depth, pipeline_id, textures) =
+        view.into_inner();
+    let Some(pipeline) = pipeline_cache.get_render_pipeline(pipeline_id.0) else {
+        return;
+    };
+    // The occlusion image is only current when the occlusion pass ran this frame.
+    let occlusion = if settings.0.occlusion && view_has_mesostructure(&phases, extracted_view) {
+        &textures.occlusion.default_view
+    } else {
+        &lighting.open
+    };
+    let group_2 = ctx.render_device().create_bind_group(
+        "mesostructure_lighting_bind_group",
+        &pipeline_cache.get_bind_group_layout(&lighting.layout),
+        &BindGroupEntries::single(occlusion),
+    );
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let span = diagnostics.time_span(ctx.command_encoder(), "mesostructure/lighting");
+    ctx.command_encoder()
+        .push_debug_group("mesostructure/lighting");
+    {
+        let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+            label: Some("mesostructure_lighting_pass"),
+            color_attachments: &[Some(target.get_color_attachment())],
+            depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
+                view: &id_depth.texture.default_view,
+                depth_ops: Some(Operations {
+                    load: LoadOp::Load,
+                    store: StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_render_pipeline(pipeline);
+        pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
+        pass.set_bind_group(1, &mesh_view.binding_array, &[]);
+        pass.set_bind_group(2, &group_2, &[]);
+        pass.draw(0..3, 0..1);
+    }
+    ctx.command_encoder().pop_debug_group();
+    span.end(ctx.command_encoder());
+}

@@ -1,0 +1,325 @@
+//! The lighting pass: Bevy's deferred lighting for mesostructure pixels, with the
+//! mesostructure ambient occlusion on ambient light only.
+
+use bevy::{light::GlobalAmbientLight, prelude::*};
+use bevy_mesostructure::prelude::*;
+
+use crate::harness::*;
+
+const SIZE: u32 = 96;
+
+/// A lit scene: a plane (with or without a mesostructure material), a sphere beside it,
+/// a shadow-casting directional light and ambient light.
+fn lit_scene(app: &mut App, height_map: Option<Handle<Image>>) {
+    app.insert_resource(GlobalAmbientLight {
+        brightness: 400.0,
+        ..default()
+    });
+    let plane = mesh(app, Plane3d::default().mesh().size(2.0, 2.0));
+    let sphere = mesh(app, Sphere::new(0.3).mesh().uv(24, 12));
+    let mut materials = app.world_mut().resource_mut::<Assets<StandardMaterial>>();
+    let deferred = |color: Color| StandardMaterial {
+        base_color: color,
+        perceptual_roughness: 0.6,
+        opaque_render_method: bevy::material::OpaqueRendererMethod::Deferred,
+        ..default()
+    };
+    let plane_material = materials.add(deferred(Color::srgb(0.8, 0.5, 0.3)));
+    let sphere_material = materials.add(deferred(Color::srgb(0.3, 0.5, 0.8)));
+    let mut plane_entity = app
+        .world_mut()
+        .spawn((plane, MeshMaterial3d(plane_material)));
+    if let Some(height_map) = height_map {
+        plane_entity.insert(MesostructureMaterial {
+            height_map,
+            scale: 0.1,
+            ..default()
+        });
+    }
+    app.world_mut().spawn((
+        sphere,
+        MeshMaterial3d(sphere_material),
+        Transform::from_xyz(0.3, 0.3, 0.2),
+    ));
+    app.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 3000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_xyz(1.0, 2.0, 0.5).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+}
+
+fn view() -> Transform {
+    Transform::from_xyz(0.0, 1.6, 1.6).looking_at(Vec3::ZERO, Vec3::Y)
+}
+
+fn pixels(image: &Image) -> Vec<[u8; 4]> {
+    image
+        .data
+        .as_ref()
+        .unwrap()
+        .chunks_exact(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect()
+}
+
+#[test]
+fn flat_height_map_renders_like_bevy_without_the_plugin() {
+    if !gpu_or_skip() {
+        return;
+    }
+    // With the plugin and a flat height map: AO is 1 everywhere, so our lighting pass must
+    // reproduce Bevy's deferred lighting exactly (this checks our copy of Bevy's pass).
+    let mut with = app();
+    let target_with = target(&mut with, SIZE, SIZE);
+    camera(&mut with, &target_with, view(), Mesostructure::default());
+    let flat = image(&mut with, HeightMap::from_fn(16, 16, |_, _| 0.5).to_image());
+    lit_scene(&mut with, Some(flat));
+    let captures = with
+        .world()
+        .resource::<bevy_mesostructure::MesostructureCaptures>()
+        .clone();
+    run(&mut with, 6);
+    assert_pipelines_ready(&with);
+    let a = screenshot(&mut with, &target_with);
+    let cam = with
+        .world_mut()
+        .query_filtered::<Entity, With<Mesostructure>>()
+        .single(with.world())
+        .unwrap();
+    let frame = captures.take(cam).expect("the effect ran");
+    assert!(
+        frame.mesostructure_pixels() > 1000,
+        "the plane is a mesostructure surface"
+    );
+
+    // Without the plugin: Bevy's own deferred renderer on the same scene.
+    let mut without = bare_app();
+    let target_without = target(&mut without, SIZE, SIZE);
+    without.world_mut().spawn((
+        Camera3d::default(),
+        bevy::camera::RenderTarget::Image(target_without.clone().into()),
+        Msaa::Off,
+        bevy::core_pipeline::tonemapping::Tonemapping::None,
+        bevy::core_pipeline::prepass::DepthPrepass,
+        bevy::core_pipeline::prepass::DeferredPrepass,
+        view(),
+    ));
+    lit_scene(&mut without, None);
+    run(&mut without, 6);
+    let b = screenshot(&mut without, &target_without);
+
+    let worst = pixels(&a)
+        .iter()
+        .zip(pixels(&b))
+        .map(|(p, q)| (0..3).map(|c| p[c].abs_diff(q[c])).max().unwrap())
+        .max()
+        .unwrap();
+    assert!(
+        worst <= 2,
+        "with a flat height map the plugin changes a pixel by {worst}/255"
+    );
+}
+
+/// Bevy's multi-bounce approximation (Jimenez et al. 2016), as `ssao_utils.wgsl` has it.
+fn multibounce(visibility: f32, albedo: f32) -> f32 {
+    let a = 2.0404 * albedo - 0.3324;
+    let b = -4.7951 * albedo + 0.6417;
+    let c = 2.7552 * albedo + 0.6903;
+    visibility.max(((visibility * a + b) * visibility + c) * visibility)
+}
+
+fn linear(c: u8) -> f32 {
+    let c = c as f32 / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+#[test]
+fn occlusion_darkens_ambient_light_in_the_grooves_only() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = app();
+    let target = target(&mut app, SIZE, SIZE);
+    let camera = camera(&mut app, &target, top_down(), Mesostructure::default());
+    let bricks = image(&mut app, HeightMap::bricks(256, 4, 0.15).to_image());
+    // Ambient light only, dim enough that nothing clips; a dark albedo, so that multi-bounce
+    // light does not hide the occlusion.
+    app.insert_resource(GlobalAmbientLight {
+        brightness: 2000.0,
+        ..default()
+    });
+    let albedo = 0.3;
+    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
+    let grey = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::linear_rgb(albedo, albedo, albedo),
+            perceptual_roughness: 1.0,
+            ..default()
+        });
+    app.world_mut().spawn((
+        plane,
+        MeshMaterial3d(grey),
+        MesostructureMaterial {
+            height_map: bricks,
+            scale: 0.1,
+            ..default()
+        },
+    ));
+    let frame = capture(&mut app, camera, 5);
+    let lit = pixels(&screenshot(&mut app, &target));
+    app.world_mut()
+        .get_mut::<Mesostructure>(camera)
+        .unwrap()
+        .occlusion = false;
+    run(&mut app, 2);
+    let open = pixels(&screenshot(&mut app, &target));
+
+    // Where occluded, the ambient light scales by multibounce(AO); elsewhere nothing changes.
+    let (mut n, mut worst, mut unchanged) = (0, 0.0f32, 0u8);
+    for i in 0..(SIZE * SIZE) as usize {
+        let ao = frame.occlusion[i];
+        let (l, o) = (linear(lit[i][0]), linear(open[i][0]));
+        if ao < 0.8 && o > 0.02 {
+            n += 1;
+            worst = worst.max((l / o - multibounce(ao, albedo)).abs());
+        } else if ao > 0.999 {
+            unchanged = unchanged.max(lit[i][0].abs_diff(open[i][0]));
+        }
+    }
+    eprintln!("{n} occluded pixels: lit/open within {worst:.3} of multibounce(AO)");
+    assert!(n > 50, "there are occluded pixels ({n})");
+    assert!(
+        worst < 0.06,
+        "ambient light scales by multibounce(AO) within {worst}"
+    );
+    assert!(unchanged <= 1, "open pixels are unchanged: {unchanged}/255");
+}
+
+#[test]
+fn occlusion_leaves_direct_light_alone() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = app();
+    let target = target(&mut app, SIZE, SIZE);
+    let camera = camera(&mut app, &target, top_down(), Mesostructure::default());
+    let bricks = image(&mut app, HeightMap::bricks(256, 4, 0.15).to_image());
+    // Direct light only.
+    app.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    app.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 2000.0,
+            ..default()
+        },
+        Transform::from_xyz(0.5, 2.0, 0.3).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
+    let grey = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(Color::srgb(0.5, 0.5, 0.5));
+    app.world_mut().spawn((
+        plane,
+        MeshMaterial3d(grey),
+        MesostructureMaterial {
+            height_map: bricks,
+            scale: 0.1,
+            ..default()
+        },
+    ));
+    let frame = capture(&mut app, camera, 5);
+    assert!(
+        frame.occlusion.iter().any(|&a| a < 0.8),
+        "there is occlusion to (not) apply"
+    );
+    let with = pixels(&screenshot(&mut app, &target));
+    app.world_mut()
+        .get_mut::<Mesostructure>(camera)
+        .unwrap()
+        .occlusion = false;
+    run(&mut app, 2);
+    let without = pixels(&screenshot(&mut app, &target));
+    let worst = with
+        .iter()
+        .zip(&without)
+        .map(|(a, b)| (0..3).map(|c| a[c].abs_diff(b[c])).max().unwrap())
+        .max()
+        .unwrap();
+    assert!(worst <= 1, "direct light changed by {worst}/255");
+    assert!(with.iter().any(|p| p[0] > 20), "the plane is lit");
+}
+
+#[test]
+fn shared_materials_are_copied_not_changed() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = app();
+    let target = target(&mut app, 32, 32);
+    camera(&mut app, &target, top_down(), Mesostructure::default());
+    let map = image(&mut app, HeightMap::sine(32, 2).to_image());
+    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
+    let shared = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(Color::WHITE);
+    let meso = app
+        .world_mut()
+        .spawn((
+            plane.clone(),
+            MeshMaterial3d(shared.clone()),
+            MesostructureMaterial {
+                height_map: map,
+                scale: 0.1,
+                ..default()
+            },
+        ))
+        .id();
+    let plain = app
+        .world_mut()
+        .spawn((
+            plane,
+            MeshMaterial3d(shared.clone()),
+            Transform::from_xyz(3.0, 0.0, 0.0),
+        ))
+        .id();
+    run(&mut app, 3);
+    let material_of = |app: &App, e: Entity| {
+        app.world()
+            .get::<MeshMaterial3d<StandardMaterial>>(e)
+            .unwrap()
+            .0
+            .clone()
+    };
+    let copy = material_of(&app, meso);
+    assert_ne!(copy, shared, "the mesostructure mesh renders with a copy");
+    assert_eq!(
+        material_of(&app, plain),
+        shared,
+        "the other user keeps the original"
+    );
+    let materials = app.world().resource::<Assets<StandardMaterial>>();
+    assert_eq!(materials.get(&shared).unwrap().deferred_lighting_pass_id, 1);
+    assert_eq!(
+        materials.get(&copy).unwrap().deferred_lighting_pass_id,
+        bevy_mesostructure::render::lighting::MESOSTRUCTURE_LIGHTING_PASS_ID
+    );
+    // Removing the component restores the original.
+    app.world_mut()
+        .entity_mut(meso)
+        .remove::<MesostructureMaterial>();
+    run(&mut app, 2);
+    assert_eq!(material_of(&app, meso), shared);
+}
