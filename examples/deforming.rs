@@ -7,7 +7,8 @@
 //! ```text
 //! cargo run --example deforming -- [--frames N] [--out DIR] [--size WxH]
 //!     [--shape morph|sphere|plane] [--height-map bricks|rivets|weave|sine|stone|cone]
-//!     [--scale K] [--view none|height|gradient|apex-distance|apex-count|boundary|occlusion|all]
+//!     [--scale K] [--occlusion on|off]
+//!     [--view none|height|gradient|apex-distance|apex-count|boundary|occlusion|all]
 //! ```
 
 use std::{f32::consts::PI, path::PathBuf};
@@ -28,6 +29,7 @@ use bevy::{
 use bevy_mesostructure::prelude::*;
 
 struct Args {
+    occlusion: bool,
     frames: u32,
     out: PathBuf,
     size: UVec2,
@@ -39,6 +41,7 @@ struct Args {
 
 fn parse_args() -> Args {
     let mut args = Args {
+        occlusion: true,
         frames: 30,
         out: PathBuf::from("out/deforming"),
         size: UVec2::new(512, 384),
@@ -64,6 +67,7 @@ fn parse_args() -> Args {
             "--shape" => args.shape = value(),
             "--height-map" => args.height_map = value(),
             "--scale" => args.scale = value().parse().expect("--scale K"),
+            "--occlusion" => args.occlusion = value() != "off",
             "--view" => {
                 let v = value();
                 args.views = if v == "all" {
@@ -147,7 +151,12 @@ fn main() {
             .disable::<PipelinedRenderingPlugin>(),
     )
     .add_plugins(MesostructurePlugin)
-    .insert_resource(ClearColor(Color::srgb(0.55, 0.62, 0.72)));
+    .insert_resource(ClearColor(Color::srgb(0.55, 0.62, 0.72)))
+    // A bright sky: ambient light is what the mesostructure occlusion darkens.
+    .insert_resource(bevy::light::GlobalAmbientLight {
+        brightness: 1500.0,
+        ..default()
+    });
     app.finish();
     app.cleanup();
 
@@ -174,7 +183,10 @@ fn main() {
             Camera3d::default(),
             RenderTarget::Image(target.clone().into()),
             Msaa::Off,
-            Mesostructure::default(),
+            Mesostructure {
+                occlusion: args.occlusion,
+                ..default()
+            },
             Transform::from_xyz(0.0, 1.3, 2.6).looking_at(Vec3::new(0.0, 0.1, 0.0), Vec3::Y),
         ))
         .id();
@@ -286,7 +298,10 @@ fn main() {
         for _ in 0..2 {
             app.update();
         }
-        let path = args.out.join(format!("{}_{}.png", args.shape, view.name()));
+        let suffix = if args.occlusion { "" } else { "_no-occlusion" };
+        let path = args
+            .out
+            .join(format!("{}_{}{suffix}.png", args.shape, view.name()));
         app.world_mut()
             .spawn(Screenshot::image(target.clone()))
             .observe(save_to_disk(path.clone()));
