@@ -54,6 +54,12 @@ pub struct Mesostructure {
     /// The integral that turns horizon angles into occlusion: the physically based
     /// cosine-weighted form (default) or the paper's eq. (6).
     pub occlusion_form: OcclusionForm,
+    /// Shadows of the bumps on the surface from directional lights (paper §3.2), inside the
+    /// regions Bevy's shadow maps light.
+    pub micro_shadows: bool,
+    /// Width of the micro-shadow edge, as a difference of sines of elevation (0–0.5): 0 is the
+    /// paper's hard test; a little softness hides aliasing of the horizon.
+    pub micro_shadow_softness: f32,
 }
 
 impl Default for Mesostructure {
@@ -70,6 +76,8 @@ impl Default for Mesostructure {
             depth_discontinuity: 0.02,
             occlusion: true,
             occlusion_form: OcclusionForm::CosineWeighted,
+            micro_shadows: true,
+            micro_shadow_softness: 0.05,
         }
     }
 }
@@ -161,6 +169,13 @@ impl Mesostructure {
         );
         clamp_u32(&mut s.max_ascent_steps, 1, 512, "max_ascent_steps");
         clamp_u32(&mut s.max_sample_radius, 1, 256, "max_sample_radius");
+        if !s.micro_shadow_softness.is_finite() {
+            s.micro_shadow_softness = d.micro_shadow_softness;
+            changed.push("micro_shadow_softness");
+        } else if !(0.0..=0.5).contains(&s.micro_shadow_softness) {
+            s.micro_shadow_softness = s.micro_shadow_softness.clamp(0.0, 0.5);
+            changed.push("micro_shadow_softness");
+        }
         if !s.depth_discontinuity.is_finite() {
             s.depth_discontinuity = d.depth_discontinuity;
             changed.push("depth_discontinuity");
@@ -216,6 +231,10 @@ pub struct MesostructureUniform {
     pub occlusion_form: u32,
     /// Whether the occlusion pass runs (1) or not (0).
     pub occlusion_enabled: u32,
+    /// Whether micro-shadows are applied (1) or not (0).
+    pub micro_shadows: u32,
+    /// Softness of the micro-shadow edge, in sine of elevation.
+    pub micro_shadow_softness: f32,
     /// `(cos θ_i, sin θ_i)` of the sample directions, two per vector.
     pub directions: [Vec4; 8],
 }
@@ -246,6 +265,8 @@ impl From<&Mesostructure> for MesostructureUniform {
             apex_stride: crate::reference::packed::stride(s.apex_directions),
             occlusion_form: s.occlusion_form.code(),
             occlusion_enabled: s.occlusion as u32,
+            micro_shadows: s.micro_shadows as u32,
+            micro_shadow_softness: s.micro_shadow_softness,
             directions,
         }
     }

@@ -13,6 +13,8 @@ struct MesostructureUniform {
     apex_stride: u32,
     occlusion_form: u32,
     occlusion_enabled: u32,
+    micro_shadows: u32,
+    micro_shadow_softness: f32,
     // (cos θ_i, sin θ_i) of the indirect sample directions, two per vector.
     directions: array<vec4<f32>, 8>,
 }

@@ -32,10 +32,11 @@ pub const MESOSTRUCTURE_LIGHTING_PASS_ID: u8 = 2;
 /// and the pipelines made so far, by view key.
 #[derive(Resource)]
 pub struct LightingPipeline {
-    /// Group 2: the occlusion image.
+    /// Group 2: occlusion, MHM, core normals, MHGM, apex sets, settings.
     pub layout: BindGroupLayoutDescriptor,
     shader: Handle<Shader>,
     open: TextureView,
+    empty: TextureView,
     pipelines: HashMap<bevy::pbr::MeshPipelineKey, CachedRenderPipelineId>,
 }
 
@@ -48,11 +49,40 @@ pub fn init_lighting_pipeline(
 ) {
     let layout = BindGroupLayoutDescriptor::new(
         "mesostructure_lighting_layout",
-        &BindGroupLayoutEntries::single(
+        &BindGroupLayoutEntries::sequential(
             ShaderStages::FRAGMENT,
-            texture_2d(TextureSampleType::Float { filterable: false }),
+            (
+                texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_2d(TextureSampleType::Float { filterable: false }),
+                storage_buffer_read_only_sized(false, None),
+                uniform_buffer::<crate::settings::MesostructureUniform>(true),
+            ),
         ),
     );
+    // "No mesostructure here": an MHM texel with object id 0, for frames without a height pass.
+    let empty = device
+        .create_texture_with_data(
+            &queue,
+            &TextureDescriptor {
+                label: Some("mesostructure_empty_mhm"),
+                size: Extent3d {
+                    width: 1,
+                    height: 1,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: TextureDimension::D2,
+                format: super::MHM_FORMAT,
+                usage: TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            TextureDataOrder::default(),
+            &[0u8; 16],
+        )
+        .create_view(&TextureViewDescriptor::default());
     let open = device
         .create_texture_with_data(
             &queue,
@@ -78,6 +108,7 @@ pub fn init_lighting_pipeline(
         layout,
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "lighting.wgsl"),
         open,
+        empty,
         pipelines: HashMap::default(),
     });
 }
@@ -135,27 +166,50 @@ pub fn lighting_pass(
         &DeferredLightingIdDepthTexture,
         &ViewLightingPipeline,
         &ViewMesostructureTextures,
+        &super::ViewMesostructureUniformOffset,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     lighting: Res<LightingPipeline>,
+    uniforms: Res<super::MesostructureUniforms>,
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, settings, mesh_view, target, id_depth, pipeline_id, textures) =
+    let (extracted_view, settings, mesh_view, target, id_depth, pipeline_id, textures, offset) =
         view.into_inner();
-    let Some(pipeline) = pipeline_cache.get_render_pipeline(pipeline_id.0) else {
+    let (Some(pipeline), Some(settings_binding)) = (
+        pipeline_cache.get_render_pipeline(pipeline_id.0),
+        uniforms.0.binding(),
+    ) else {
         return;
     };
-    // The occlusion image is only current when the occlusion pass ran this frame.
-    let occlusion = if settings.0.occlusion && view_has_mesostructure(&phases, extracted_view) {
+    // The images are only current when their passes ran this frame; otherwise "open" and
+    // "no mesostructure here".
+    let current = view_has_mesostructure(&phases, extracted_view);
+    let occlusion = if settings.0.occlusion && current {
         &textures.occlusion.default_view
     } else {
         &lighting.open
     };
+    let (mhm, core_normal, mhgm) = if current {
+        (
+            &textures.mhm.default_view,
+            &textures.core_normal.default_view,
+            &textures.mhgm.default_view,
+        )
+    } else {
+        (&lighting.empty, &lighting.empty, &lighting.empty)
+    };
     let group_2 = ctx.render_device().create_bind_group(
         "mesostructure_lighting_bind_group",
         &pipeline_cache.get_bind_group_layout(&lighting.layout),
-        &BindGroupEntries::single(occlusion),
+        &BindGroupEntries::sequential((
+            occlusion,
+            mhm,
+            core_normal,
+            mhgm,
+            textures.apex_sets.as_entire_binding(),
+            settings_binding,
+        )),
     );
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
@@ -181,7 +235,7 @@ pub fn lighting_pass(
         pass.set_render_pipeline(pipeline);
         pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
         pass.set_bind_group(1, &mesh_view.binding_array, &[]);
-        pass.set_bind_group(2, &group_2, &[]);
+        pass.set_bind_group(2, &group_2, &[offset.0]);
         pass.draw(0..3, 0..1);
     }
     ctx.command_encoder().pop_debug_group();

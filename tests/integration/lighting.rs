@@ -323,3 +323,125 @@ fn shared_materials_are_copied_not_changed() {
     run(&mut app, 2);
     assert_eq!(material_of(&app, meso), shared);
 }
+
+/// Renders the bricks plane top-down under one directional light with micro-shadows on and
+/// off; returns (on, off) pixels and the captured frame.
+fn micro_shadow_pair(
+    direction: Vec3,
+) -> (
+    Vec<[u8; 4]>,
+    Vec<[u8; 4]>,
+    bevy_mesostructure::CapturedFrame,
+) {
+    let mut app = app();
+    let target = target(&mut app, SIZE, SIZE);
+    let camera = camera(
+        &mut app,
+        &target,
+        top_down(),
+        Mesostructure {
+            occlusion: false,
+            ..default()
+        },
+    );
+    let bricks = image(&mut app, HeightMap::bricks(256, 4, 0.15).to_image());
+    app.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    app.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 3000.0,
+            ..default()
+        },
+        Transform::default().looking_to(
+            direction,
+            if direction.cross(Vec3::Y).length() < 1e-3 {
+                Vec3::Z
+            } else {
+                Vec3::Y
+            },
+        ),
+    ));
+    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
+    let grey = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(Color::srgb(0.5, 0.5, 0.5));
+    app.world_mut().spawn((
+        plane,
+        MeshMaterial3d(grey),
+        MesostructureMaterial {
+            height_map: bricks,
+            scale: 0.1,
+            ..default()
+        },
+    ));
+    let frame = capture(&mut app, camera, 5);
+    let on = pixels(&screenshot(&mut app, &target));
+    app.world_mut()
+        .get_mut::<Mesostructure>(camera)
+        .unwrap()
+        .micro_shadows = false;
+    run(&mut app, 2);
+    let off = pixels(&screenshot(&mut app, &target));
+    (on, off, frame)
+}
+
+#[test]
+fn light_from_straight_above_casts_no_micro_shadow() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let (on, off, _) = micro_shadow_pair(Vec3::NEG_Y);
+    let worst = on
+        .iter()
+        .zip(&off)
+        .map(|(a, b)| a[0].abs_diff(b[0]))
+        .max()
+        .unwrap();
+    assert!(
+        worst <= 1,
+        "a light from the zenith changes a pixel by {worst}/255"
+    );
+}
+
+#[test]
+fn low_light_micro_shadows_agree_with_the_ground_truth() {
+    if !gpu_or_skip() {
+        return;
+    }
+    use bevy_mesostructure::reference::ground_truth::HeightField;
+    // Light travelling towards +x, 20° above the horizon.
+    let elevation = 20f32.to_radians();
+    let direction = Vec3::new(elevation.cos(), -elevation.sin(), 0.0);
+    let (on, off, _) = micro_shadow_pair(direction);
+    let map = HeightMap::bricks(256, 4, 0.15);
+    let field = HeightField::new(256, 256, &map.values, 2.0, 0.1);
+    // The field's frame: x = u = world x, y = v = world z, z = up = world y.
+    let field_direction = Vec3::new(direction.x, direction.z, direction.y);
+    let (mut agree, mut total, mut shadowed, mut truly) = (0, 0, 0, 0);
+    for y in (4..SIZE - 4).step_by(2) {
+        for x in (4..SIZE - 4).step_by(2) {
+            let i = (y * SIZE + x) as usize;
+            if off[i][0] < 40 {
+                continue; // facing away from the light already: nothing to shadow
+            }
+            let ours = on[i][0] as f32 <= 0.5 * off[i][0] as f32;
+            let truth = !field.light_visible(top_down_uv(x, y, SIZE) * 256.0, field_direction);
+            agree += (ours == truth) as u32;
+            shadowed += ours as u32;
+            truly += truth as u32;
+            total += 1;
+        }
+    }
+    let share = agree as f32 / total as f32;
+    // Rendering without micro-shadows agrees wherever the truth is lit.
+    let baseline = (total - truly) as f32 / total as f32;
+    eprintln!(
+        "micro-shadows at 20°: {shadowed} of {total} lit pixels shadowed ({truly} in the ground \
+         truth); agreement {share:.3}, without micro-shadows {baseline:.3}"
+    );
+    assert!(shadowed > 10, "a low light casts micro-shadows");
+    assert!(share > baseline, "micro-shadows agree better than none: {share} vs {baseline}");
+}
