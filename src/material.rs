@@ -54,6 +54,9 @@ pub struct PreparedMesostructure {
     pub scale: f32,
     /// UV transform.
     pub uv_transform: Affine2,
+    /// Whether the height pass derives the shading normal from the height map (Blinn bump
+    /// mapping): true unless the entity's `StandardMaterial` has a normal map of its own.
+    pub bump: bool,
 }
 
 /// Converted height maps, by source image.
@@ -68,7 +71,9 @@ pub fn prepare_mesostructure_materials(
         Entity,
         &MesostructureMaterial,
         Option<&PreparedMesostructure>,
+        Option<&MeshMaterial3d<StandardMaterial>>,
     )>,
+    standard_materials: Res<Assets<StandardMaterial>>,
     mut removed: RemovedComponents<MesostructureMaterial>,
     mut image_events: MessageReader<AssetEvent<Image>>,
     mut images: ResMut<Assets<Image>>,
@@ -88,7 +93,10 @@ pub fn prepare_mesostructure_materials(
             }
         }
     }
-    for (entity, material, prepared) in &materials {
+    for (entity, material, prepared, standard) in &materials {
+        let has_normal_map = standard
+            .and_then(|m| standard_materials.get(&m.0))
+            .is_some_and(|m| m.normal_map_texture.is_some());
         let wanted = prepare_one(
             entity,
             material,
@@ -96,7 +104,11 @@ pub fn prepare_mesostructure_materials(
             &asset_server,
             &mut mips,
             &mut warned,
-        );
+        )
+        .map(|p| PreparedMesostructure {
+            bump: !has_normal_map,
+            ..p
+        });
         match (wanted, prepared) {
             (Some(w), Some(p)) if &w == p => {}
             (Some(w), _) => {
@@ -194,6 +206,7 @@ fn prepare_one(
         height_mips: derived.id(),
         scale: material.scale,
         uv_transform: material.uv_transform,
+        bump: true,
     })
 }
 

@@ -60,6 +60,9 @@ pub struct Mesostructure {
     /// Width of the micro-shadow edge, as a difference of sines of elevation (0–0.5): 0 is the
     /// paper's hard test; a little softness hides aliasing of the horizon.
     pub micro_shadow_softness: f32,
+    /// Shade mesostructure surfaces with the normal of the height map (Blinn bump mapping)
+    /// where their material has no normal map of its own.
+    pub bump_mapping: bool,
 }
 
 impl Default for Mesostructure {
@@ -78,6 +81,7 @@ impl Default for Mesostructure {
             occlusion_form: OcclusionForm::CosineWeighted,
             micro_shadows: true,
             micro_shadow_softness: 0.05,
+            bump_mapping: true,
         }
     }
 }
@@ -235,6 +239,10 @@ pub struct MesostructureUniform {
     pub micro_shadows: u32,
     /// Softness of the micro-shadow edge, in sine of elevation.
     pub micro_shadow_softness: f32,
+    /// Whether the bump-mapped normal shades the surface (1) or not (0).
+    pub bump_mapping: u32,
+    /// Padding (keeps the WGSL struct's layout explicit).
+    pub spare: UVec3,
     /// `(cos θ_i, sin θ_i)` of the sample directions, two per vector.
     pub directions: [Vec4; 8],
 }
@@ -267,6 +275,8 @@ impl From<&Mesostructure> for MesostructureUniform {
             occlusion_enabled: s.occlusion as u32,
             micro_shadows: s.micro_shadows as u32,
             micro_shadow_softness: s.micro_shadow_softness,
+            bump_mapping: s.bump_mapping as u32,
+            spare: UVec3::ZERO,
             directions,
         }
     }

@@ -15,6 +15,8 @@ struct MesostructureUniform {
     occlusion_enabled: u32,
     micro_shadows: u32,
     micro_shadow_softness: f32,
+    bump_mapping: u32,
+    spare: vec3<u32>,
     // (cos θ_i, sin θ_i) of the indirect sample directions, two per vector.
     directions: array<vec4<f32>, 8>,
 }

@@ -134,6 +134,8 @@ pub struct HeightMaterialUniform {
     pub scale: f32,
     /// Object id written to the MHM (> 0).
     pub object_id: f32,
+    /// 1: write the Blinn bump normal; 0: the material has a normal map of its own.
+    pub bump: f32,
 }
 
 /// Builds the height-pass pipeline from Bevy's mesh pipeline (render startup).
@@ -185,6 +187,11 @@ impl SpecializedMeshPipeline for HeightPassPipeline {
                 }),
                 Some(ColorTargetState {
                     format: CORE_NORMAL_FORMAT,
+                    blend: None,
+                    write_mask: ColorWrites::ALL,
+                }),
+                Some(ColorTargetState {
+                    format: super::BUMP_NORMAL_FORMAT,
                     blend: None,
                     write_mask: ColorWrites::ALL,
                 }),
@@ -325,6 +332,7 @@ pub fn prepare_height_material_bind_groups(
             uv_translation: t.translation,
             scale: prepared.scale,
             object_id: object_id(*main_entity),
+            bump: prepared.bump as u32 as f32,
         });
         entries.push((*main_entity, image.texture_view.clone(), offset));
     }
@@ -495,6 +503,7 @@ pub fn height_pass(
             color_attachments: &[
                 clear(&textures.mhm.default_view),
                 clear(&textures.core_normal.default_view),
+                clear(&textures.bump_normal.default_view),
             ],
             depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
                 view: depth.view(),

@@ -11,6 +11,8 @@ struct HeightMaterial {
     uv_translation: vec2<f32>,
     scale: f32,
     object_id: f32,
+    // 1: write the Blinn bump normal; 0: the material has its own normal map.
+    bump: f32,
 }
 
 @group(3) @binding(0) var height_mips: texture_2d<f32>;
@@ -21,6 +23,8 @@ struct HeightOutput {
     @location(0) mhm: vec4<f32>,
     // (n0 in world space, 1)
     @location(1) core_normal: vec4<f32>,
+    // (N' by Blinn bump mapping in world space, 1), or 0 where the material has a normal map
+    @location(2) bump_normal: vec4<f32>,
 }
 
 fn height_texel(p: vec2<i32>, level: i32, size: vec2<i32>) -> f32 {
@@ -63,7 +67,38 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     let l1 = min(l0 + 1.0, last);
     let dis = mix(height_bilinear(uv, i32(l0)), height_bilinear(uv, i32(l1)), lod - l0);
 
+    // Blinn bump mapping (seed 003): P' = P + F n with F = k · dis; N' = Pu × Pv + Fu (n × Pv)
+    // − Fv (n × Pu), oriented like n. Pu and Pv, the surface's derivatives along the texture
+    // axes, come from the screen derivatives of the position and the UVs (no tangents needed);
+    // Fu and Fv from central differences of neighbouring texels at the level sampled.
+    let dp1 = dpdx(in.world_position.xyz);
+    let dp2 = dpdy(in.world_position.xyz);
+    let duv1 = dpdx(uv);
+    let duv2 = dpdy(uv);
+    var bump = vec3<f32>(0.0);
+#ifdef VERTEX_NORMALS
+    let n = normalize(in.world_normal);
+    let det = duv1.x * duv2.y - duv1.y * duv2.x;
+    if material.bump > 0.0 && abs(det) > 1e-12 {
+        let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
+        let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
+        let texel = exp2(l0) / size0;
+        let fu = material.scale * (height_bilinear(uv + vec2(texel.x, 0.0), i32(l0))
+            - height_bilinear(uv - vec2(texel.x, 0.0), i32(l0))) / (2.0 * texel.x);
+        let fv = material.scale * (height_bilinear(uv + vec2(0.0, texel.y), i32(l0))
+            - height_bilinear(uv - vec2(0.0, texel.y), i32(l0))) / (2.0 * texel.y);
+        let base = cross(pu, pv);
+        let orientation = select(-1.0, 1.0, dot(base, n) >= 0.0);
+        let bumped = orientation * (base + fu * cross(n, pv) - fv * cross(n, pu));
+        let len = length(bumped);
+        if len > 0.0 {
+            bump = bumped / len;
+        }
+    }
+#endif
+
     var out: HeightOutput;
+    out.bump_normal = vec4<f32>(bump, 1.0);
     out.mhm = vec4<f32>(dis * material.scale, in.position.z, material.object_id, dis);
 #ifdef VERTEX_NORMALS
     out.core_normal = vec4<f32>(normalize(in.world_normal), 1.0);

@@ -58,6 +58,7 @@ pub fn init_lighting_pipeline(
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 storage_buffer_read_only_sized(false, None),
                 uniform_buffer::<crate::settings::MesostructureUniform>(true),
+                texture_2d(TextureSampleType::Float { filterable: false }),
             ),
         ),
     );
@@ -190,14 +191,20 @@ pub fn lighting_pass(
     } else {
         &lighting.open
     };
-    let (mhm, core_normal, mhgm) = if current {
+    let (mhm, core_normal, mhgm, bump_normal) = if current {
         (
             &textures.mhm.default_view,
             &textures.core_normal.default_view,
             &textures.mhgm.default_view,
+            &textures.bump_normal.default_view,
         )
     } else {
-        (&lighting.empty, &lighting.empty, &lighting.empty)
+        (
+            &lighting.empty,
+            &lighting.empty,
+            &lighting.empty,
+            &lighting.empty,
+        )
     };
     let group_2 = ctx.render_device().create_bind_group(
         "mesostructure_lighting_bind_group",
@@ -209,6 +216,7 @@ pub fn lighting_pass(
             mhgm,
             textures.apex_sets.as_entire_binding(),
             settings_binding,
+            bump_normal,
         )),
     );
     let diagnostics = ctx.diagnostic_recorder();

@@ -31,6 +31,7 @@
 @group(2) @binding(3) var mhgm: texture_2d<f32>;
 @group(2) @binding(4) var<storage, read> apex_sets: array<u32>;
 @group(2) @binding(5) var<uniform> settings: MesostructureUniform;
+@group(2) @binding(6) var bump_normal: texture_2d<f32>;
 
 const SECTORS: u32 = 8u;
 const TAU: f32 = 6.283185307;
@@ -190,6 +191,13 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
 #endif
     var pbr_input = pbr_input_from_deferred_gbuffer(frag_coord, deferred_data);
     var output_color = vec4(0.0);
+    // The shading normal of the mesostructure surface (Blinn bump mapping in the height pass),
+    // where the material has no normal map of its own.
+    let bump_size = vec2<i32>(textureDimensions(bump_normal));
+    let bumped = textureLoad(bump_normal, min(pixel, bump_size - 1), 0).xyz;
+    if settings.bump_mapping != 0u && dot(bumped, bumped) > 0.5 {
+        pbr_input.N = normalize(bumped);
+    }
 
     if ((pbr_input.material.flags & STANDARD_MATERIAL_FLAGS_UNLIT_BIT) == 0u) {
         // Clamped: frames without an occlusion pass bind a 1×1 "open" image.

@@ -49,6 +49,8 @@ use crate::{
 pub const MHM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
 /// Core normal n0 (world space).
 pub const CORE_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
+/// Shading normal by Blinn bump mapping (world space; 0 where the material has a normal map).
+pub const BUMP_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 /// MHGM: (∂h/∂x, ∂h/∂y, h, flags).
 pub const MHGM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
 /// Mesostructure ambient occlusion (1 = open).
@@ -61,6 +63,8 @@ pub struct ViewMesostructureTextures {
     pub mhm: CachedTexture,
     /// Core normals.
     pub core_normal: CachedTexture,
+    /// Bump-mapped shading normals.
+    pub bump_normal: CachedTexture,
     /// Gradient map.
     pub mhgm: CachedTexture,
     /// Ambient occlusion.
@@ -388,6 +392,12 @@ fn prepare_view_textures(
             CORE_NORMAL_FORMAT,
             attachment,
         );
+        let bump_normal = texture(
+            &mut texture_cache,
+            "mesostructure_bump_normal",
+            BUMP_NORMAL_FORMAT,
+            attachment,
+        );
         let mhgm = texture(
             &mut texture_cache,
             "mesostructure_mhgm",
@@ -426,6 +436,7 @@ fn prepare_view_textures(
         commands.entity(entity).insert(ViewMesostructureTextures {
             mhm,
             core_normal,
+            bump_normal,
             mhgm,
             occlusion,
             apex_sets,

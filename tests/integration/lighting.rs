@@ -443,5 +443,93 @@ fn low_light_micro_shadows_agree_with_the_ground_truth() {
          truth); agreement {share:.3}, without micro-shadows {baseline:.3}"
     );
     assert!(shadowed > 10, "a low light casts micro-shadows");
-    assert!(share > baseline, "micro-shadows agree better than none: {share} vs {baseline}");
+    assert!(
+        share > baseline,
+        "micro-shadows agree better than none: {share} vs {baseline}"
+    );
+}
+
+#[test]
+fn bump_mapping_turns_the_slopes_towards_and_away_from_the_light() {
+    if !gpu_or_skip() {
+        return;
+    }
+    use bevy_mesostructure::reference::ground_truth::HeightField;
+    let mut app = app();
+    let target = target(&mut app, SIZE, SIZE);
+    let settings = Mesostructure {
+        occlusion: false,
+        micro_shadows: false,
+        ..default()
+    };
+    let camera = camera(&mut app, &target, top_down(), settings);
+    let map = HeightMap::bricks(256, 4, 0.3);
+    let bricks = image(&mut app, map.to_image());
+    app.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    // A light from a diagonal azimuth, so that both texture axes of the bump matter.
+    let direction = Vec3::new(1.0, -1.2, 0.7).normalize();
+    app.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 2000.0,
+            ..default()
+        },
+        Transform::default().looking_to(direction, Vec3::Y),
+    ));
+    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
+    let grey = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::srgb(0.5, 0.5, 0.5),
+            perceptual_roughness: 1.0,
+            ..default()
+        });
+    app.world_mut().spawn((
+        plane,
+        MeshMaterial3d(grey),
+        MesostructureMaterial {
+            height_map: bricks,
+            scale: 0.05,
+            ..default()
+        },
+    ));
+    capture(&mut app, camera, 5);
+    let bumped = pixels(&screenshot(&mut app, &target));
+    app.world_mut()
+        .get_mut::<Mesostructure>(camera)
+        .unwrap()
+        .bump_mapping = false;
+    run(&mut app, 2);
+    let flat = pixels(&screenshot(&mut app, &target));
+
+    // The true normal of the height field at each pixel says which way the shading must go.
+    let field = HeightField::new(256, 256, &map.values, 2.0, 0.05);
+    let to_light = Vec3::new(-direction.x, -direction.z, -direction.y); // field frame: z up
+    let flat_ndotl = to_light.z;
+    let (mut agree, mut total) = (0, 0);
+    for y in (2..SIZE - 2).step_by(2) {
+        for x in (2..SIZE - 2).step_by(2) {
+            let i = (y * SIZE + x) as usize;
+            let ndotl = field
+                .normal(top_down_uv(x, y, SIZE) * 256.0)
+                .dot(to_light)
+                .max(0.0);
+            if (ndotl - flat_ndotl).abs() < 0.15 {
+                continue;
+            }
+            total += 1;
+            let brighter = bumped[i][0] > flat[i][0];
+            agree += (brighter == (ndotl > flat_ndotl)) as u32;
+        }
+    }
+    let share = agree as f32 / total.max(1) as f32;
+    eprintln!("bump mapping: {agree} of {total} slope pixels shade the right way ({share:.3})");
+    assert!(total > 50, "there are slopes ({total})");
+    assert!(
+        share > 0.9,
+        "bump shading agrees with the true normals on {share}"
+    );
 }
