@@ -62,49 +62,37 @@ pub fn init_lighting_pipeline(
             ),
         ),
     );
-    // "No mesostructure here": an MHM texel with object id 0, for frames without a height pass.
-    let empty = device
-        .create_texture_with_data(
-            &queue,
-            &TextureDescriptor {
-                label: Some("mesostructure_empty_mhm"),
-                size: Extent3d {
-                    width: 1,
-                    height: 1,
-                    depth_or_array_layers: 1,
+    let texel = |label, format, data: &[u8]| {
+        device
+            .create_texture_with_data(
+                &queue,
+                &TextureDescriptor {
+                    label: Some(label),
+                    size: Extent3d {
+                        width: 1,
+                        height: 1,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: TextureDimension::D2,
+                    format,
+                    usage: TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
                 },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: TextureDimension::D2,
-                format: super::MHM_FORMAT,
-                usage: TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            },
-            TextureDataOrder::default(),
-            &[0u8; 16],
-        )
-        .create_view(&TextureViewDescriptor::default());
-    let open = device
-        .create_texture_with_data(
-            &queue,
-            &TextureDescriptor {
-                label: Some("mesostructure_open_occlusion"),
-                size: Extent3d {
-                    width: 1,
-                    height: 1,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: TextureDimension::D2,
-                format: super::OCCLUSION_FORMAT,
-                usage: TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            },
-            TextureDataOrder::default(),
-            &1.0f32.to_le_bytes(),
-        )
-        .create_view(&TextureViewDescriptor::default());
+                TextureDataOrder::default(),
+                data,
+            )
+            .create_view(&TextureViewDescriptor::default())
+    };
+    // For frames without a height pass: "no mesostructure here" (an MHM texel with object id
+    // 0; all zeros also reads as no bump normal) and "open" occlusion.
+    let empty = texel("mesostructure_empty_mhm", super::MHM_FORMAT, &[0u8; 16]);
+    let open = texel(
+        "mesostructure_open_occlusion",
+        super::OCCLUSION_FORMAT,
+        &1.0f32.to_le_bytes(),
+    );
     commands.insert_resource(LightingPipeline {
         layout,
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "lighting.wgsl"),

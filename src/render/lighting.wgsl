@@ -17,9 +17,9 @@
     shadows,
     ssao_utils::ssao_multibounce,
 }
-#import bevy_mesostructure::common::{
-    MesostructureUniform, APEX_COUNT_MASK, unpack_offset, is_connected,
-}
+#import bevy_mesostructure::common::{MesostructureUniform, APEX_COUNT_MASK, unpack_offset}
+#import bevy_mesostructure::surface
+#import bevy_mesostructure::surface::{SECTORS, sector_of, sector_position, wrap_sector}
 
 #ifdef SCREEN_SPACE_AMBIENT_OCCLUSION
 #import bevy_pbr::mesh_view_bindings::screen_space_ambient_occlusion_texture
@@ -33,91 +33,68 @@
 @group(2) @binding(5) var<uniform> settings: MesostructureUniform;
 @group(2) @binding(6) var bump_normal: texture_2d<f32>;
 
-const SECTORS: u32 = 8u;
-const TAU: f32 = 6.283185307;
-
 fn surface_point(p: vec2<i32>) -> vec3<f32> {
-    let m = textureLoad(mhm, p, 0);
-    let uv = (vec2<f32>(p) + 0.5 - view.viewport.xy) / view.viewport.zw;
-    let world = view.world_from_clip * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, m.y, 1.0);
-    return world.xyz / world.w + textureLoad(core_normal, p, 0).xyz * m.x;
+    return surface::surface_point(mhm, core_normal, view.world_from_clip, view.viewport, p);
 }
 
-fn surface_derivative(p: vec2<i32>, sp: vec3<f32>, flags: u32, plus: u32, minus: u32, o: vec2<i32>) -> vec4<f32> {
-    let cp = is_connected(flags, plus);
-    let cm = is_connected(flags, minus);
-    if cp && cm {
-        return vec4((surface_point(p + o) - surface_point(p - o)) * 0.5, 1.0);
-    } else if cp {
-        return vec4(surface_point(p + o) - sp, 1.0);
-    } else if cm {
-        return vec4(sp - surface_point(p - o), 1.0);
-    }
-    return vec4(0.0);
+// What the micro-shadow test needs of a pixel, whatever the light: its surface point, the
+// normal N' and the horizon of each azimuth sector (the profiles through P and its apexes).
+struct Horizons {
+    valid: bool,
+    sp: vec3<f32>,
+    n: vec3<f32>,
+    sin_h: array<f32, 8>,
 }
 
-// N' of the mesostructure surface (as in occlusion.wgsl).
-fn mesostructure_normal(p: vec2<i32>, sp: vec3<f32>, n0: vec3<f32>) -> vec3<f32> {
-    let flags = u32(textureLoad(mhgm, p, 0).w);
-    let dx = surface_derivative(p, sp, flags, 0u, 4u, vec2(1, 0));
-    let dy = surface_derivative(p, sp, flags, 2u, 6u, vec2(0, 1));
-    if dx.w == 0.0 || dy.w == 0.0 {
-        return n0;
-    }
-    let n = cross(dx.xyz, dy.xyz);
-    let len = length(n);
-    if !(len > 0.0) {
-        return n0;
-    }
-    return select(n / len, -n / len, dot(n, n0) < 0.0);
-}
-
-fn screen_angle(o: vec2<f32>) -> f32 {
-    return atan2(o.y, o.x) / TAU * f32(SECTORS);
-}
-
-// Micro-shadow of the light coming from `to_light` (paper §3.2): the horizons of the apex set
-// per azimuth sector (the profiles through P and each apex), the light's azimuth placed between
-// the two nearest profiles [beyond: interpolated], and P in shadow where the light is lower
-// above the tangent plane than that horizon; soft over `micro_shadow_softness` (in sine).
-fn micro_shadow(p: vec2<i32>, to_light: vec3<f32>) -> f32 {
-    if textureLoad(mhm, p, 0).z == 0.0 {
-        return 1.0;
+fn horizons(p: vec2<i32>) -> Horizons {
+    var h: Horizons;
+    h.valid = textureLoad(mhm, p, 0).z != 0.0;
+    if !h.valid {
+        return h;
     }
     let size = vec2<i32>(textureDimensions(mhm));
     let base = (u32(p.y) * u32(size.x) + u32(p.x)) * settings.apex_stride;
     let count = apex_sets[base] & APEX_COUNT_MASK;
-    let sp = surface_point(p);
-    let n = mesostructure_normal(p, sp, textureLoad(core_normal, p, 0).xyz);
-    let sin_l = dot(to_light, n);
-    if sin_l <= 0.0 {
-        return 1.0;
-    }
-    var sin_h = array<f32, 8>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    h.sp = surface_point(p);
+    h.n = surface::mesostructure_normal(
+        mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, h.sp,
+        textureLoad(core_normal, p, 0).xyz);
     for (var i = 0u; i < count; i++) {
         let o = unpack_offset(apex_sets[base + 1u + i]);
-        let d = surface_point(p + o) - sp;
+        let d = surface_point(p + o) - h.sp;
         let len = length(d);
         if len <= 0.0 {
             continue;
         }
-        let a = screen_angle(vec2<f32>(o));
-        let sector = u32(((i32(floor(a + 0.5)) % 8) + 8) % 8);
-        sin_h[sector] = max(sin_h[sector], clamp(dot(d, n) / len, 0.0, 1.0));
+        let sector = sector_of(o);
+        h.sin_h[sector] = max(h.sin_h[sector], clamp(dot(d, h.n) / len, 0.0, 1.0));
+    }
+    return h;
+}
+
+// Micro-shadow of the light coming from `to_light` (paper §3.2): the light's azimuth placed
+// between the two nearest profiles [beyond: interpolated], and P in shadow where the light is
+// lower above the tangent plane than that horizon; soft over `micro_shadow_softness` (in sine).
+fn micro_shadow(h: Horizons, to_light: vec3<f32>) -> f32 {
+    if !h.valid {
+        return 1.0;
+    }
+    let sin_l = dot(to_light, h.n);
+    if sin_l <= 0.0 {
+        return 1.0;
     }
     // The light's azimuth on screen: project a step along its tangential direction.
-    let tangential = to_light - n * sin_l;
-    let c0 = view.clip_from_world * vec4(sp, 1.0);
-    let c1 = view.clip_from_world * vec4(sp + tangential * 0.01, 1.0);
+    let tangential = to_light - h.n * sin_l;
+    let c0 = view.clip_from_world * vec4(h.sp, 1.0);
+    let c1 = view.clip_from_world * vec4(h.sp + tangential * 0.01, 1.0);
     let s = (c1.xy / c1.w - c0.xy / c0.w) * vec2(1.0, -1.0);
     if all(s == vec2(0.0)) {
         return 1.0;
     }
-    let a = screen_angle(s);
+    let a = sector_position(s);
     let lower = floor(a);
-    let f = a - lower;
-    let i0 = u32(((i32(lower) % 8) + 8) % 8);
-    let horizon = mix(sin_h[i0], sin_h[(i0 + 1u) % 8u], f);
+    let i0 = wrap_sector(i32(lower));
+    let horizon = mix(h.sin_h[i0], h.sin_h[(i0 + 1u) % SECTORS], a - lower);
     let w = settings.micro_shadow_softness;
     if w <= 0.0 {
         return select(0.0, 1.0, sin_l >= horizon);
@@ -128,6 +105,9 @@ fn micro_shadow(p: vec2<i32>, to_light: vec3<f32>) -> f32 {
 // The part of the directional lights' direct light that the micro-shadows take away, with
 // Bevy's own BRDF and shadow maps (so that the rest of Bevy's light loop stays untouched).
 fn micro_shadowed_light(in: PbrInput, p: vec2<i32>) -> vec3<f32> {
+    if lights.n_directional_lights == 0u {
+        return vec3(0.0);
+    }
     var input: lighting::LightingInput;
     let roughness = lighting::perceptualRoughnessToRoughness(in.material.perceptual_roughness);
     input.layers[lighting::LAYER_BASE].NdotV = max(dot(in.N, in.V), 0.0001);
@@ -147,10 +127,12 @@ fn micro_shadowed_light(in: PbrInput, p: vec2<i32>) -> vec3<f32> {
     let view_z = dot(vec4<f32>(
         view.view_from_world[0].z, view.view_from_world[1].z,
         view.view_from_world[2].z, view.view_from_world[3].z), in.world_position);
+    // The horizons do not depend on the light: found once, tested against each light.
+    let h = horizons(p);
     var removed = vec3(0.0);
     for (var i = 0u; i < lights.n_directional_lights; i++) {
         let to_light = lights.directional_lights[i].direction_to_light;
-        let visible = micro_shadow(p, to_light);
+        let visible = micro_shadow(h, to_light);
         if visible >= 1.0 {
             continue;
         }

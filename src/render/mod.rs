@@ -144,6 +144,7 @@ pub struct MesostructureUniforms(pub DynamicUniformBuffer<MesostructureUniform>)
 
 pub(crate) fn build(app: &mut App) {
     load_shader_library!(app, "common.wgsl");
+    load_shader_library!(app, "surface.wgsl");
     bevy::asset::embedded_asset!(app, "height.wgsl");
     bevy::asset::embedded_asset!(app, "gradient.wgsl");
     bevy::asset::embedded_asset!(app, "apex.wgsl");

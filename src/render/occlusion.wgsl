@@ -5,8 +5,10 @@
 
 #import bevy_render::view::View
 #import bevy_mesostructure::common::{
-    MesostructureUniform, APEX_COUNT_MASK, on_screen, unpack_offset, is_connected,
+    MesostructureUniform, APEX_COUNT_MASK, on_screen, unpack_offset,
 }
+#import bevy_mesostructure::surface
+#import bevy_mesostructure::surface::{SECTORS, sector_of}
 
 @group(0) @binding(0) var mhm: texture_2d<f32>;
 @group(0) @binding(1) var core_normal: texture_2d<f32>;
@@ -16,53 +18,8 @@
 @group(0) @binding(5) var<uniform> view: View;
 @group(0) @binding(6) var mhgm: texture_2d<f32>;
 
-const SECTORS: u32 = 8u;
-const TAU: f32 = 6.283185307;
-
 fn surface_point(p: vec2<i32>) -> vec3<f32> {
-    let m = textureLoad(mhm, p, 0);
-    let uv = (vec2<f32>(p) + 0.5 - view.viewport.xy) / view.viewport.zw;
-    let clip = vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, m.y, 1.0);
-    let world = view.world_from_clip * clip;
-    let n0 = textureLoad(core_normal, p, 0).xyz;
-    return world.xyz / world.w + n0 * m.x;
-}
-
-// Derivative of the surface point along one screen axis: central where both neighbours are
-// connected, one-sided where one is; w = 0 where none is.
-fn surface_derivative(p: vec2<i32>, sp: vec3<f32>, flags: u32, plus: u32, minus: u32, o: vec2<i32>) -> vec4<f32> {
-    let cp = is_connected(flags, plus);
-    let cm = is_connected(flags, minus);
-    if cp && cm {
-        return vec4((surface_point(p + o) - surface_point(p - o)) * 0.5, 1.0);
-    } else if cp {
-        return vec4(surface_point(p + o) - sp, 1.0);
-    } else if cm {
-        return vec4(sp - surface_point(p - o), 1.0);
-    }
-    return vec4(0.0);
-}
-
-// N' of the mesostructure surface (see `reference::mesostructure_normal`).
-fn mesostructure_normal(p: vec2<i32>, sp: vec3<f32>, n0: vec3<f32>) -> vec3<f32> {
-    let flags = u32(textureLoad(mhgm, p, 0).w);
-    let dx = surface_derivative(p, sp, flags, 0u, 4u, vec2(1, 0));
-    let dy = surface_derivative(p, sp, flags, 2u, 6u, vec2(0, 1));
-    if dx.w == 0.0 || dy.w == 0.0 {
-        return n0;
-    }
-    let n = cross(dx.xyz, dy.xyz);
-    let len = length(n);
-    if !(len > 0.0) {
-        return n0;
-    }
-    return select(n / len, -n / len, dot(n, n0) < 0.0);
-}
-
-fn sector_of(o: vec2<i32>) -> u32 {
-    let a = atan2(f32(o.y), f32(o.x)) / TAU * f32(SECTORS);
-    let s = i32(floor(a + 0.5));
-    return u32(((s % i32(SECTORS)) + i32(SECTORS)) % i32(SECTORS));
+    return surface::surface_point(mhm, core_normal, view.world_from_clip, view.viewport, p);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -84,7 +41,8 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     // tangent plane of the mesostructure surface.
     var n = n0;
     if settings.occlusion_form == 0u {
-        n = mesostructure_normal(p, sp, n0);
+        n = surface::mesostructure_normal(
+            mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, sp, n0);
     }
     var sin_h = array<f32, 8>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for (var i = 0u; i < count; i++) {
