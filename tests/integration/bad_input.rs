@@ -247,17 +247,8 @@ fn msaa_and_nan_settings_do_not_panic() {
     }
     let mut app = app();
     let map = image(&mut app, HeightMap::sine(64, 2).to_image());
-    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let white = unlit(&mut app, Color::WHITE);
-    app.world_mut().spawn((
-        plane,
-        white,
-        MesostructureMaterial {
-            height_map: map,
-            scale: 0.1,
-            ..default()
-        },
-    ));
+    mesostructure_plane(&mut app, white, map, 0.1);
 
     // MSAA on: the effect is off for this camera, the scene renders.
     let t1 = target(&mut app, 64, 64);

@@ -115,18 +115,9 @@ fn plane_with_rivets_matches_the_oracle_and_the_height_map() {
     let camera = camera(&mut app, &target, top_down(), settings.clone());
     let map = HeightMap::rivets(256, 4, 0.35);
     let height_map = image(&mut app, map.to_image());
-    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let material = unlit(&mut app, Color::WHITE);
     let k = 0.2;
-    app.world_mut().spawn((
-        plane,
-        material,
-        MesostructureMaterial {
-            height_map,
-            scale: k,
-            ..default()
-        },
-    ));
+    mesostructure_plane(&mut app, material, height_map, k);
 
     let frame = capture(&mut app, camera, 20);
     assert_eq!((frame.width, frame.height), (SIZE, SIZE));
@@ -280,17 +271,8 @@ fn two_cameras_get_their_own_images_and_debug_views_draw() {
         },
     );
     let map = image(&mut app, HeightMap::sine(128, 4).to_image());
-    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let material = unlit(&mut app, Color::srgb(1.0, 0.0, 0.0));
-    app.world_mut().spawn((
-        plane,
-        material,
-        MesostructureMaterial {
-            height_map: map,
-            scale: 0.1,
-            ..default()
-        },
-    ));
+    mesostructure_plane(&mut app, material, map, 0.1);
     let fa = capture(&mut app, cam_a, 20);
     let fb = capture(&mut app, cam_b, 20);
     assert_eq!((fa.width, fb.width), (64, 96));
@@ -338,17 +320,8 @@ fn each_pass_reports_a_gpu_time_span() {
         },
     );
     let map = image(&mut app, HeightMap::bricks(64, 4, 0.1).to_image());
-    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let material = unlit(&mut app, Color::WHITE);
-    app.world_mut().spawn((
-        plane,
-        material,
-        MesostructureMaterial {
-            height_map: map,
-            scale: 0.1,
-            ..default()
-        },
-    ));
+    mesostructure_plane(&mut app, material, map, 0.1);
     run(&mut app, 8);
     let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
     for pass in ["height", "gradient", "apex", "occlusion", "debug_view"] {
@@ -442,17 +415,8 @@ fn passes_cost_nothing_without_mesostructure_on_screen() {
         },
     );
     let map = image(&mut app, HeightMap::bricks(64, 4, 0.1).to_image());
-    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let material = unlit(&mut app, Color::WHITE);
-    app.world_mut().spawn((
-        plane,
-        material,
-        MesostructureMaterial {
-            height_map: map,
-            scale: 0.1,
-            ..default()
-        },
-    ));
+    mesostructure_plane(&mut app, material, map, 0.1);
     run(&mut app, 8);
     let captures = app
         .world()
@@ -509,17 +473,8 @@ fn occlusion_is_closer_to_the_ground_truth_than_none() {
         let target = target(&mut app, SIZE, SIZE);
         let camera = camera(&mut app, &target, top_down(), Mesostructure::default());
         let height_map = image(&mut app, map.to_image());
-        let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
         let material = unlit(&mut app, Color::WHITE);
-        app.world_mut().spawn((
-            plane,
-            material,
-            MesostructureMaterial {
-                height_map,
-                scale: k,
-                ..default()
-            },
-        ));
+        mesostructure_plane(&mut app, material, height_map, k);
         let frame = capture(&mut app, camera, 20);
         let field = HeightField::new(256, 256, &map.values, 2.0, k);
         let (mut method, mut truth) = (vec![], vec![]);

@@ -235,3 +235,25 @@ pub fn assert_pipelines_ready(app: &App) {
         }
     }
 }
+
+/// Spawns the 2 × 2 plane (XZ plane, centred at the origin, normal +Y; see [`top_down_uv`])
+/// with `material` and `height_map` at scale `k`.
+pub fn mesostructure_plane(
+    app: &mut App,
+    material: MeshMaterial3d<StandardMaterial>,
+    height_map: Handle<Image>,
+    k: f32,
+) -> Entity {
+    let plane = mesh(app, Plane3d::default().mesh().size(2.0, 2.0));
+    app.world_mut()
+        .spawn((
+            plane,
+            material,
+            MesostructureMaterial {
+                height_map,
+                scale: k,
+                ..default()
+            },
+        ))
+        .id()
+}

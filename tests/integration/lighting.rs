@@ -55,6 +55,19 @@ fn view() -> Transform {
     Transform::from_xyz(0.0, 1.6, 1.6).looking_at(Vec3::ZERO, Vec3::Y)
 }
 
+/// Screenshots of `target` with the camera's settings as they are, and after `change`.
+fn before_and_after(
+    app: &mut App,
+    camera: Entity,
+    target: &Handle<Image>,
+    change: impl FnOnce(&mut Mesostructure),
+) -> (Vec<[u8; 4]>, Vec<[u8; 4]>) {
+    let before = pixels(&screenshot(app, target));
+    change(&mut app.world_mut().get_mut::<Mesostructure>(camera).unwrap());
+    run(app, 2);
+    (before, pixels(&screenshot(app, target)))
+}
+
 fn pixels(image: &Image) -> Vec<[u8; 4]> {
     image
         .data
@@ -156,7 +169,6 @@ fn occlusion_darkens_ambient_light_in_the_grooves_only() {
         ..default()
     });
     let albedo = 0.3;
-    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let grey = app
         .world_mut()
         .resource_mut::<Assets<StandardMaterial>>()
@@ -165,23 +177,9 @@ fn occlusion_darkens_ambient_light_in_the_grooves_only() {
             perceptual_roughness: 1.0,
             ..default()
         });
-    app.world_mut().spawn((
-        plane,
-        MeshMaterial3d(grey),
-        MesostructureMaterial {
-            height_map: bricks,
-            scale: 0.1,
-            ..default()
-        },
-    ));
+    mesostructure_plane(&mut app, MeshMaterial3d(grey), bricks, 0.1);
     let frame = capture(&mut app, camera, 5);
-    let lit = pixels(&screenshot(&mut app, &target));
-    app.world_mut()
-        .get_mut::<Mesostructure>(camera)
-        .unwrap()
-        .occlusion = false;
-    run(&mut app, 2);
-    let open = pixels(&screenshot(&mut app, &target));
+    let (lit, open) = before_and_after(&mut app, camera, &target, |m| m.occlusion = false);
 
     // Where occluded, the ambient light scales by multibounce(AO); elsewhere nothing changes.
     let (mut n, mut worst, mut unchanged) = (0, 0.0f32, 0u8);
@@ -225,32 +223,17 @@ fn occlusion_leaves_direct_light_alone() {
         },
         Transform::from_xyz(0.5, 2.0, 0.3).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let grey = app
         .world_mut()
         .resource_mut::<Assets<StandardMaterial>>()
         .add(Color::srgb(0.5, 0.5, 0.5));
-    app.world_mut().spawn((
-        plane,
-        MeshMaterial3d(grey),
-        MesostructureMaterial {
-            height_map: bricks,
-            scale: 0.1,
-            ..default()
-        },
-    ));
+    mesostructure_plane(&mut app, MeshMaterial3d(grey), bricks, 0.1);
     let frame = capture(&mut app, camera, 5);
     assert!(
         frame.occlusion.iter().any(|&a| a < 0.8),
         "there is occlusion to (not) apply"
     );
-    let with = pixels(&screenshot(&mut app, &target));
-    app.world_mut()
-        .get_mut::<Mesostructure>(camera)
-        .unwrap()
-        .occlusion = false;
-    run(&mut app, 2);
-    let without = pixels(&screenshot(&mut app, &target));
+    let (with, without) = before_and_after(&mut app, camera, &target, |m| m.occlusion = false);
     let worst = with
         .iter()
         .zip(&without)
@@ -363,28 +346,13 @@ fn micro_shadow_pair(
             },
         ),
     ));
-    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let grey = app
         .world_mut()
         .resource_mut::<Assets<StandardMaterial>>()
         .add(Color::srgb(0.5, 0.5, 0.5));
-    app.world_mut().spawn((
-        plane,
-        MeshMaterial3d(grey),
-        MesostructureMaterial {
-            height_map: bricks,
-            scale: 0.1,
-            ..default()
-        },
-    ));
+    mesostructure_plane(&mut app, MeshMaterial3d(grey), bricks, 0.1);
     let frame = capture(&mut app, camera, 5);
-    let on = pixels(&screenshot(&mut app, &target));
-    app.world_mut()
-        .get_mut::<Mesostructure>(camera)
-        .unwrap()
-        .micro_shadows = false;
-    run(&mut app, 2);
-    let off = pixels(&screenshot(&mut app, &target));
+    let (on, off) = before_and_after(&mut app, camera, &target, |m| m.micro_shadows = false);
     (on, off, frame)
 }
 
@@ -478,7 +446,6 @@ fn bump_mapping_turns_the_slopes_towards_and_away_from_the_light() {
         },
         Transform::default().looking_to(direction, Vec3::Y),
     ));
-    let plane = mesh(&mut app, Plane3d::default().mesh().size(2.0, 2.0));
     let grey = app
         .world_mut()
         .resource_mut::<Assets<StandardMaterial>>()
@@ -487,23 +454,9 @@ fn bump_mapping_turns_the_slopes_towards_and_away_from_the_light() {
             perceptual_roughness: 1.0,
             ..default()
         });
-    app.world_mut().spawn((
-        plane,
-        MeshMaterial3d(grey),
-        MesostructureMaterial {
-            height_map: bricks,
-            scale: 0.05,
-            ..default()
-        },
-    ));
+    mesostructure_plane(&mut app, MeshMaterial3d(grey), bricks, 0.05);
     capture(&mut app, camera, 5);
-    let bumped = pixels(&screenshot(&mut app, &target));
-    app.world_mut()
-        .get_mut::<Mesostructure>(camera)
-        .unwrap()
-        .bump_mapping = false;
-    run(&mut app, 2);
-    let flat = pixels(&screenshot(&mut app, &target));
+    let (bumped, flat) = before_and_after(&mut app, camera, &target, |m| m.bump_mapping = false);
 
     // The true normal of the height field at each pixel says which way the shading must go.
     let field = HeightField::new(256, 256, &map.values, 2.0, 0.05);
