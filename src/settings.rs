@@ -54,8 +54,13 @@ pub struct Mesostructure {
     /// The integral that turns horizon angles into occlusion: the physically based
     /// cosine-weighted form (default) or the paper's eq. (6).
     pub occlusion_form: OcclusionForm,
-    /// Shadows of the bumps on the surface from directional lights (paper §3.2), inside the
-    /// regions Bevy's shadow maps light.
+    /// Multiply the mesostructure occlusion with a coarse horizon-based AO on the depth buffer
+    /// (Bavoil et al. 2008), whose step is the adaptive `(min + max) / 2` of the pixel's apex
+    /// distances (paper §3.1): the occlusion of the core geometry around the bumps. Pixels
+    /// without apexes get none, so a flat height map stays neutral.
+    pub coarse_occlusion: bool,
+    /// Shadows of the bumps on the surface from directional, point and spot lights (paper
+    /// §3.2), inside the regions Bevy's shadow maps light.
     pub micro_shadows: bool,
     /// Width of the micro-shadow edge, as a difference of sines of elevation (0–0.5): 0 is the
     /// paper's hard test; a little softness hides aliasing of the horizon.
@@ -63,6 +68,19 @@ pub struct Mesostructure {
     /// Shade mesostructure surfaces with the normal of the height map (Blinn bump mapping)
     /// where their material has no normal map of its own.
     pub bump_mapping: bool,
+    /// One-bounce colour bleeding (paper §3.3, eq. 8): light reflected by the directly lit
+    /// bumps onto their neighbours.
+    pub bleeding: bool,
+    /// Samples (1–16) along the path from a pixel to each apex of its set that the bleeding
+    /// gathers from. Cost is linear in the count.
+    pub bleeding_samples: u32,
+    /// λa of paper eq. (2): weight of ambient and environment light (0–4; 1 = physical).
+    pub ambient_weight: f32,
+    /// λs of paper eq. (2): weight of direct light from directional, point and spot lights
+    /// (0–4; 1 = physical).
+    pub direct_weight: f32,
+    /// λd of paper eq. (2): weight of the one-bounce bleeding (0–4; 1 = physical).
+    pub bleeding_weight: f32,
 }
 
 impl Default for Mesostructure {
@@ -70,6 +88,9 @@ impl Default for Mesostructure {
     /// steps (enough for structures up to ~64 px across, a quarter of a 256² texture cache),
     /// walks of up to 32 px, and a 2 % depth jump, which keeps planes at grazing angles
     /// connected (the slope test covers them) but separates overlapping parts of one object.
+    /// Every effect on; weights 1 (eq. 2 with physical weights: the result approximates a
+    /// path tracer's one-bounce image); 4 bleeding samples per apex path, which resolve the
+    /// walls of a groove to a few percent of a 16-sample gather.
     fn default() -> Self {
         Self {
             debug_view: MesostructureDebugView::None,
@@ -79,9 +100,15 @@ impl Default for Mesostructure {
             depth_discontinuity: 0.02,
             occlusion: true,
             occlusion_form: OcclusionForm::CosineWeighted,
+            coarse_occlusion: true,
             micro_shadows: true,
             micro_shadow_softness: 0.05,
             bump_mapping: true,
+            bleeding: true,
+            bleeding_samples: 4,
+            ambient_weight: 1.0,
+            direct_weight: 1.0,
+            bleeding_weight: 1.0,
         }
     }
 }
@@ -108,11 +135,16 @@ pub enum MesostructureDebugView {
     Boundary,
     /// The mesostructure ambient occlusion, grey (white = open, black = closed).
     Occlusion,
+    /// The micro-shadow visibility, grey (white = lit, black = shadowed by the bumps), the
+    /// lowest over the lights.
+    MicroShadow,
+    /// The one-bounce bleeding added to the picture, ×4 so that it shows.
+    Bleeding,
 }
 
 impl MesostructureDebugView {
     /// All views, in the order a key cycles them.
-    pub const ALL: [Self; 7] = [
+    pub const ALL: [Self; 9] = [
         Self::None,
         Self::Height,
         Self::Gradient,
@@ -120,6 +152,8 @@ impl MesostructureDebugView {
         Self::ApexCount,
         Self::Boundary,
         Self::Occlusion,
+        Self::MicroShadow,
+        Self::Bleeding,
     ];
 
     /// The next view in [`Self::ALL`], wrapping around.
@@ -138,6 +172,8 @@ impl MesostructureDebugView {
             Self::ApexCount => "apex-count",
             Self::Boundary => "boundary",
             Self::Occlusion => "occlusion",
+            Self::MicroShadow => "micro-shadow",
+            Self::Bleeding => "bleeding",
         }
     }
 
@@ -173,20 +209,51 @@ impl Mesostructure {
         );
         clamp_u32(&mut s.max_ascent_steps, 1, 512, "max_ascent_steps");
         clamp_u32(&mut s.max_sample_radius, 1, 256, "max_sample_radius");
-        if !s.micro_shadow_softness.is_finite() {
-            s.micro_shadow_softness = d.micro_shadow_softness;
-            changed.push("micro_shadow_softness");
-        } else if !(0.0..=0.5).contains(&s.micro_shadow_softness) {
-            s.micro_shadow_softness = s.micro_shadow_softness.clamp(0.0, 0.5);
-            changed.push("micro_shadow_softness");
-        }
-        if !s.depth_discontinuity.is_finite() {
-            s.depth_discontinuity = d.depth_discontinuity;
-            changed.push("depth_discontinuity");
-        } else if !(0.0001..=1.0).contains(&s.depth_discontinuity) {
-            s.depth_discontinuity = s.depth_discontinuity.clamp(0.0001, 1.0);
-            changed.push("depth_discontinuity");
-        }
+        clamp_u32(&mut s.bleeding_samples, 1, 16, "bleeding_samples");
+        let mut clamp_f32 = |v: &mut f32, default: f32, lo: f32, hi: f32, name| {
+            if !v.is_finite() {
+                *v = default;
+                changed.push(name);
+            } else if !(lo..=hi).contains(v) {
+                *v = v.clamp(lo, hi);
+                changed.push(name);
+            }
+        };
+        clamp_f32(
+            &mut s.ambient_weight,
+            d.ambient_weight,
+            0.0,
+            4.0,
+            "ambient_weight",
+        );
+        clamp_f32(
+            &mut s.direct_weight,
+            d.direct_weight,
+            0.0,
+            4.0,
+            "direct_weight",
+        );
+        clamp_f32(
+            &mut s.bleeding_weight,
+            d.bleeding_weight,
+            0.0,
+            4.0,
+            "bleeding_weight",
+        );
+        clamp_f32(
+            &mut s.micro_shadow_softness,
+            d.micro_shadow_softness,
+            0.0,
+            0.5,
+            "micro_shadow_softness",
+        );
+        clamp_f32(
+            &mut s.depth_discontinuity,
+            d.depth_discontinuity,
+            0.0001,
+            1.0,
+            "depth_discontinuity",
+        );
         (s, changed)
     }
 
@@ -241,8 +308,14 @@ pub struct MesostructureUniform {
     pub micro_shadow_softness: f32,
     /// Whether the bump-mapped normal shades the surface (1) or not (0).
     pub bump_mapping: u32,
-    /// Padding (keeps the WGSL struct's layout explicit).
-    pub spare: UVec3,
+    /// Whether the bleeding pass runs (1) or not (0).
+    pub bleeding_enabled: u32,
+    /// Samples per apex path of the bleeding gather.
+    pub bleeding_samples: u32,
+    /// Whether the coarse depth-buffer AO multiplies the occlusion (1) or not (0).
+    pub coarse_occlusion: u32,
+    /// λa, λs, λd of eq. (2), and one spare float.
+    pub weights: Vec4,
     /// `(cos θ_i, sin θ_i)` of the sample directions, two per vector.
     pub directions: [Vec4; 8],
 }
@@ -276,7 +349,10 @@ impl From<&Mesostructure> for MesostructureUniform {
             micro_shadows: s.micro_shadows as u32,
             micro_shadow_softness: s.micro_shadow_softness,
             bump_mapping: s.bump_mapping as u32,
-            spare: UVec3::ZERO,
+            bleeding_enabled: crate::render::bleeding::bleeding_runs(s) as u32,
+            bleeding_samples: s.bleeding_samples,
+            coarse_occlusion: s.coarse_occlusion as u32,
+            weights: Vec4::new(s.ambient_weight, s.direct_weight, s.bleeding_weight, 0.0),
             directions,
         }
     }
@@ -306,6 +382,9 @@ mod tests {
             max_ascent_steps: 0,
             max_sample_radius: 0,
             depth_discontinuity: f32::NAN,
+            bleeding_weight: f32::INFINITY,
+            direct_weight: -1.0,
+            bleeding_samples: 0,
             ..default()
         };
         let (s, changed) = bad.sanitized();
@@ -314,6 +393,8 @@ mod tests {
         assert_eq!(s.max_sample_radius, 1);
         assert_eq!(s.depth_discontinuity, 0.02);
         assert!(changed.contains(&"depth_discontinuity"));
+        assert_eq!((s.bleeding_weight, s.direct_weight), (1.0, 0.0));
+        assert_eq!(s.bleeding_samples, 1);
         assert!(Mesostructure::default().sanitized().1.is_empty());
     }
 
@@ -327,7 +408,7 @@ mod tests {
         assert!((u.directions[0].w - 1.0).abs() < 1e-6); // θ_1 = 90°
         assert_eq!(u.apex_stride, 6);
         assert_eq!(
-            MesostructureDebugView::Occlusion.next(),
+            MesostructureDebugView::Bleeding.next(),
             MesostructureDebugView::None
         );
         for view in MesostructureDebugView::ALL {

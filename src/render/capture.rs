@@ -15,7 +15,8 @@ use bevy::{
 };
 
 use super::{
-    CORE_NORMAL_FORMAT, MHGM_FORMAT, MHM_FORMAT, OCCLUSION_FORMAT, ViewMesostructureTextures,
+    BLEEDING_FORMAT, CORE_NORMAL_FORMAT, MHGM_FORMAT, MHM_FORMAT, MICRO_SHADOW_FORMAT,
+    OCCLUSION_FORMAT, ViewMesostructureTextures,
 };
 use crate::reference::{
     ApexSet, FLAG_VALID, GradientMap, ScreenHeightMap, ViewGeometry, unpack_apex_set,
@@ -48,6 +49,14 @@ pub struct CapturedFrame {
     pub apex_stats: [u32; 3],
     /// Mesostructure ambient occlusion per pixel (1 = open; 1 where not computed).
     pub occlusion: Vec<f32>,
+    /// Micro-shadow visibility per mesostructure pixel, the lowest over the lights (1 = lit);
+    /// empty if the lighting pass did not run.
+    pub micro_shadow: Vec<f32>,
+    /// The lit opaque image the bleeding gathers from (linear RGBA, exposure applied), before
+    /// the bleeding is added; empty if its format cannot be read back.
+    pub lit: Vec<[f32; 4]>,
+    /// The bleeding radiance added to each pixel (λd · ρ / π · E); empty if bleeding is off.
+    pub bleeding: Vec<[f32; 4]>,
     /// How pixels map back to the world in this frame.
     pub view: ViewGeometry,
 }
@@ -153,6 +162,9 @@ struct PendingCapture {
     apex_stride: u32,
     view: ViewGeometry,
     readbacks: Vec<Readback>,
+    micro_shadow: Option<Readback>,
+    lit: Option<(Readback, TextureFormat)>,
+    bleeding: Option<Readback>,
 }
 
 /// Copies submitted this frame, mapped after submission.
@@ -250,7 +262,65 @@ pub fn copy_capture(
             viewport: extracted_view.viewport.as_vec4(),
         },
         readbacks,
+        micro_shadow: None,
+        lit: None,
+        bleeding: None,
     });
+}
+
+/// Core3d system after Bevy's opaque pass: copies the micro-shadow visibility and the lit
+/// opaque image of views whose working images were captured this frame.
+pub fn copy_lighting_capture(
+    view: ViewQuery<(
+        &ViewMesostructureTextures,
+        &ExtractedCapture,
+        &bevy::render::view::ViewTarget,
+    )>,
+    device: Res<RenderDevice>,
+    mut pending: ResMut<PendingCaptures>,
+    mut ctx: RenderContext,
+) {
+    let (t, capture, target) = view.into_inner();
+    let Some(entry) = pending.0.iter_mut().rev().find(|p| p.camera == capture.0) else {
+        return;
+    };
+    if entry.micro_shadow.is_some() {
+        return;
+    }
+    entry.micro_shadow = Some(copy_texture(
+        &mut ctx,
+        &device,
+        &t.micro_shadow.texture,
+        MICRO_SHADOW_FORMAT,
+    ));
+    let format = target.main_texture_format();
+    if matches!(
+        format,
+        TextureFormat::Rgba16Float | TextureFormat::Rgba8UnormSrgb | TextureFormat::Rgba8Unorm
+    ) {
+        entry.lit = Some((
+            copy_texture(&mut ctx, &device, target.main_texture(), format),
+            format,
+        ));
+    }
+}
+
+/// After the bleeding gather: copies the bleeding of a captured view.
+pub(crate) fn copy_bleeding(
+    ctx: &mut RenderContext,
+    device: &RenderDevice,
+    pending: &mut PendingCaptures,
+    capture: &ExtractedCapture,
+    t: &ViewMesostructureTextures,
+) {
+    if let Some(entry) = pending.0.iter_mut().rev().find(|p| p.camera == capture.0) {
+        entry.bleeding = Some(copy_texture(
+            ctx,
+            device,
+            &t.bleeding.texture,
+            BLEEDING_FORMAT,
+        ));
+    }
 }
 
 fn read(device: &RenderDevice, r: &Readback, rows: u32) -> Vec<u8> {
@@ -284,8 +354,37 @@ pub fn map_captures(
         apex_stride,
         view,
         readbacks,
+        micro_shadow,
+        lit,
+        bleeding,
     } in pending.0.drain(..)
     {
+        let half4 = |bytes: Vec<u8>| -> Vec<[f32; 4]> {
+            let halves: Vec<u16> = bytemuck::cast_slice(&bytes).to_vec();
+            halves
+                .chunks_exact(4)
+                .map(|c| std::array::from_fn(|i| crate::height_map_import::half_to_f32(c[i])))
+                .collect()
+        };
+        let lit = lit.map_or_else(Vec::new, |(r, format)| {
+            let bytes = read(&device, &r, size.y);
+            match format {
+                TextureFormat::Rgba16Float => half4(bytes),
+                _ => bytes
+                    .chunks_exact(4)
+                    .map(|c| {
+                        std::array::from_fn(|i| {
+                            let v = c[i] as f32 / 255.0;
+                            if i < 3 && format == TextureFormat::Rgba8UnormSrgb {
+                                srgb_to_linear(v)
+                            } else {
+                                v
+                            }
+                        })
+                    })
+                    .collect(),
+            }
+        });
         let floats = |bytes: Vec<u8>| -> Vec<[f32; 4]> { bytemuck::cast_slice(&bytes).to_vec() };
         let halves: Vec<u16> = bytemuck::cast_slice(&read(&device, &readbacks[1], size.y)).to_vec();
         let stats: Vec<u32> = bytemuck::cast_slice(&read(&device, &readbacks[4], 1)).to_vec();
@@ -302,10 +401,23 @@ pub fn map_captures(
             apex_stride,
             apex_stats: [stats[0], stats[1], stats[2]],
             occlusion: bytemuck::cast_slice(&read(&device, &readbacks[5], size.y)).to_vec(),
+            micro_shadow: micro_shadow.map_or_else(Vec::new, |r| {
+                bytemuck::cast_slice(&read(&device, &r, size.y)).to_vec()
+            }),
+            lit,
+            bleeding: bleeding.map_or_else(Vec::new, |r| half4(read(&device, &r, size.y))),
             view,
         };
         if let Ok(mut map) = captures.0.lock() {
             map.insert(camera, frame);
         }
+    }
+}
+
+fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
     }
 }

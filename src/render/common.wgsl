@@ -16,7 +16,11 @@ struct MesostructureUniform {
     micro_shadows: u32,
     micro_shadow_softness: f32,
     bump_mapping: u32,
-    spare: vec3<u32>,
+    bleeding_enabled: u32,
+    bleeding_samples: u32,
+    coarse_occlusion: u32,
+    // λa, λs, λd of eq. (2), spare.
+    weights: vec4<f32>,
     // (cos θ_i, sin θ_i) of the indirect sample directions, two per vector.
     directions: array<vec4<f32>, 8>,
 }

@@ -1,4 +1,4 @@
-//! Debug views: the MHM, MHGM and apex sets drawn into the camera's output.
+//! Debug views: the MHM, MHGM, apex sets and the lighting terms drawn into the camera's output.
 
 use bevy::{
     core_pipeline::FullscreenShader,
@@ -17,7 +17,7 @@ use crate::settings::{ExtractedMesostructure, MesostructureDebugView, Mesostruct
 /// Layout, shaders and per-format pipelines of the debug views.
 #[derive(Resource)]
 pub struct DebugViewPipeline {
-    /// MHM, MHGM, apex buffer (read), settings.
+    /// MHM, MHGM, apex buffer (read), settings, occlusion, micro-shadow, bleeding.
     pub layout: BindGroupLayoutDescriptor,
     fullscreen: FullscreenShader,
     shader: Handle<Shader>,
@@ -38,6 +38,8 @@ pub fn init_debug_view_pipeline(
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 storage_buffer_read_only_sized(false, None),
                 uniform_buffer::<MesostructureUniform>(true),
+                texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_2d(TextureSampleType::Float { filterable: false }),
                 texture_2d(TextureSampleType::Float { filterable: false }),
             ),
         ),

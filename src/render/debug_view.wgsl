@@ -12,6 +12,8 @@
 @group(0) @binding(2) var<storage, read> apex_sets: array<u32>;
 @group(0) @binding(3) var<uniform> settings: MesostructureUniform;
 @group(0) @binding(4) var occlusion: texture_2d<f32>;
+@group(0) @binding(5) var micro_shadow: texture_2d<f32>;
+@group(0) @binding(6) var bleeding: texture_2d<f32>;
 
 const VIEW_HEIGHT: u32 = 1u;
 const VIEW_GRADIENT: u32 = 2u;
@@ -19,6 +21,8 @@ const VIEW_APEX_DISTANCE: u32 = 3u;
 const VIEW_APEX_COUNT: u32 = 4u;
 const VIEW_BOUNDARY: u32 = 5u;
 const VIEW_OCCLUSION: u32 = 6u;
+const VIEW_MICRO_SHADOW: u32 = 7u;
+const VIEW_BLEEDING: u32 = 8u;
 
 // Dark blue → teal → yellow.
 fn ramp(t: f32) -> vec3<f32> {
@@ -76,6 +80,12 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         }
         case VIEW_OCCLUSION: {
             color = vec3(select(0.0, textureLoad(occlusion, p, 0).r, settings.occlusion_enabled != 0u));
+        }
+        case VIEW_MICRO_SHADOW: {
+            color = vec3(select(1.0, textureLoad(micro_shadow, p, 0).r, settings.micro_shadows != 0u));
+        }
+        case VIEW_BLEEDING: {
+            color = select(vec3(0.0), 4.0 * textureLoad(bleeding, p, 0).rgb, settings.bleeding_enabled != 0u);
         }
         default: {
             discard;

@@ -1,5 +1,6 @@
 //! Lighting pass: Bevy's deferred lighting for the pixels of mesostructure materials, with the
-//! mesostructure ambient occlusion applied to ambient and environment light (paper eq. 2).
+//! mesostructure ambient occlusion applied to ambient and environment light and the
+//! micro-shadows to each light's direct light (paper eq. 2).
 //!
 //! Mesostructure materials get their own deferred lighting pass id
 //! ([`MESOSTRUCTURE_LIGHTING_PASS_ID`], see [`crate::material`]), so Bevy's lighting pass skips
@@ -32,7 +33,8 @@ pub const MESOSTRUCTURE_LIGHTING_PASS_ID: u8 = 2;
 /// and the pipelines made so far, by view key.
 #[derive(Resource)]
 pub struct LightingPipeline {
-    /// Group 2: occlusion, MHM, core normals, MHGM, apex sets, settings.
+    /// Group 2: occlusion, MHM, core normals, MHGM, apex sets, settings, bump normals,
+    /// micro-shadow visibility (written).
     pub layout: BindGroupLayoutDescriptor,
     shader: Handle<Shader>,
     open: TextureView,
@@ -59,6 +61,7 @@ pub fn init_lighting_pipeline(
                 storage_buffer_read_only_sized(false, None),
                 uniform_buffer::<crate::settings::MesostructureUniform>(true),
                 texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_storage_2d(super::MICRO_SHADOW_FORMAT, StorageTextureAccess::WriteOnly),
             ),
         ),
     );
@@ -205,6 +208,7 @@ pub fn lighting_pass(
             textures.apex_sets.as_entire_binding(),
             settings_binding,
             bump_normal,
+            &textures.micro_shadow.default_view,
         )),
     );
     let diagnostics = ctx.diagnostic_recorder();

@@ -1,18 +1,21 @@
 // Lighting pass for mesostructure pixels: Bevy's deferred lighting (same G-buffer decoding,
-// BRDF, shadow maps, clustered lights, environment light) with the mesostructure ambient
-// occlusion applied to ambient and environment light only — diffuse and specular occlusion,
-// never direct light (paper eq. 2: La is the ambient term). Combined multiplicatively with
-// Bevy's SSAO when the camera has it. Draws a fullscreen triangle at the depth of our
-// deferred lighting pass id, so only pixels of mesostructure materials are touched.
+// BRDF, shadow maps, clustered lights, environment light) with paper eq. (2)'s terms:
+// the mesostructure ambient occlusion on ambient and environment light only (diffuse and
+// specular occlusion, never direct light), multiplied with Bevy's SSAO when the camera has
+// it, weighted by λa; the micro-shadows of every directional, point and spot light, taken
+// off that light's own contribution; direct light weighted by λs. Draws a fullscreen
+// triangle at the depth of our deferred lighting pass id, so only pixels of mesostructure
+// materials are touched. Writes each pixel's micro-shadow visibility for the debug view.
 
 #import bevy_pbr::{
     prepass_utils,
     pbr_types::{PbrInput, STANDARD_MATERIAL_FLAGS_UNLIT_BIT},
     pbr_functions,
+    clustered_forward as clustering,
     pbr_deferred_functions::pbr_input_from_deferred_gbuffer,
     lighting,
-    mesh_view_bindings::{deferred_prepass_texture, lights, view},
-    mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
+    mesh_view_bindings::{deferred_prepass_texture, lights, clustered_lights, view},
+    mesh_view_types::{DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT, POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT},
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
     shadows,
     ssao_utils::ssao_multibounce,
@@ -32,6 +35,7 @@
 @group(2) @binding(4) var<storage, read> apex_sets: array<u32>;
 @group(2) @binding(5) var<uniform> settings: MesostructureUniform;
 @group(2) @binding(6) var bump_normal: texture_2d<f32>;
+@group(2) @binding(7) var micro_shadow_out: texture_storage_2d<r32float, write>;
 
 fn surface_point(p: vec2<i32>) -> vec3<f32> {
     return surface::surface_point(mhm, core_normal, view.world_from_clip, view.viewport, p);
@@ -102,12 +106,8 @@ fn micro_shadow(h: Horizons, to_light: vec3<f32>) -> f32 {
     return smoothstep(-w, w, sin_l - horizon);
 }
 
-// The part of the directional lights' direct light that the micro-shadows take away, with
-// Bevy's own BRDF and shadow maps (so that the rest of Bevy's light loop stays untouched).
-fn micro_shadowed_light(in: PbrInput, p: vec2<i32>) -> vec3<f32> {
-    if lights.n_directional_lights == 0u {
-        return vec3(0.0);
-    }
+// Bevy's lighting input for one pixel, as `apply_pbr_lighting` builds it (base layer).
+fn lighting_input(in: PbrInput) -> lighting::LightingInput {
     var input: lighting::LightingInput;
     let roughness = lighting::perceptualRoughnessToRoughness(in.material.perceptual_roughness);
     input.layers[lighting::LAYER_BASE].NdotV = max(dot(in.N, in.V), 0.0001);
@@ -124,26 +124,92 @@ fn micro_shadowed_light(in: PbrInput, p: vec2<i32>) -> vec3<f32> {
     input.F0_dielectric = pbr_functions::calculate_F0_dielectric(in.material.reflectance);
     input.F0_metallic = in.material.base_color.rgb;
     input.F_ab = lighting::F_AB(in.material.perceptual_roughness, input.layers[lighting::LAYER_BASE].NdotV);
+    return input;
+}
+
+// The direct light of a pixel as eq. (2) splits it: `all`, Bevy's direct light of every light
+// (BRDF × shadow map), only summed when λs ≠ 1; `shadowed`, the part of it the micro-shadows
+// take away; `visibility`, the lowest micro-shadow visibility over the lights that reach P.
+struct DirectTerms {
+    all: vec3<f32>,
+    shadowed: vec3<f32>,
+    visibility: f32,
+}
+
+fn add_light(terms: ptr<function, DirectTerms>, contribution: vec3<f32>, shadow: f32, visible: f32) {
+    (*terms).all += contribution * shadow;
+    (*terms).shadowed += (1.0 - visible) * shadow * contribution;
+    if shadow > 0.0 {
+        (*terms).visibility = min((*terms).visibility, visible);
+    }
+}
+
+// The same lights, shadow maps and BRDF as Bevy's light loop (`apply_pbr_lighting`), evaluated
+// again only for the lights a micro-shadow dims (or all of them when λs ≠ 1), so that the rest
+// of Bevy's loop stays untouched.
+fn direct_terms(in: PbrInput, p: vec2<i32>) -> DirectTerms {
+    var terms: DirectTerms;
+    terms.visibility = 1.0;
+    let micro = settings.micro_shadows != 0u;
+    let every_light = settings.weights.y != 1.0;
+    if !micro && !every_light {
+        return terms;
+    }
+    var input = lighting_input(in);
+    let receiver = (in.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) != 0u;
     let view_z = dot(vec4<f32>(
         view.view_from_world[0].z, view.view_from_world[1].z,
         view.view_from_world[2].z, view.view_from_world[3].z), in.world_position);
     // The horizons do not depend on the light: found once, tested against each light.
-    let h = horizons(p);
-    var removed = vec3(0.0);
-    for (var i = 0u; i < lights.n_directional_lights; i++) {
-        let to_light = lights.directional_lights[i].direction_to_light;
-        let visible = micro_shadow(h, to_light);
-        if visible >= 1.0 {
+    var h: Horizons;
+    if micro {
+        h = horizons(p);
+    }
+    let sp = select(in.world_position.xyz, h.sp, h.valid);
+
+    let cluster = clustering::view_fragment_cluster_index(in.frag_coord.xy, view_z, in.is_orthographic);
+    let ranges = clustering::unpack_clusterable_object_index_ranges(cluster);
+    for (var i = ranges.first_point_light_index_offset; i < ranges.first_spot_light_index_offset; i++) {
+        let id = clustering::get_clusterable_object_id(i);
+        let light = &clustered_lights.data[id];
+        let visible = micro_shadow(h, normalize((*light).position_radius.xyz - sp));
+        if visible >= 1.0 && !every_light {
             continue;
         }
         var shadow = 1.0;
-        if (in.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) != 0u
-                && (lights.directional_lights[i].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+        if receiver && ((*light).flags & POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            shadow = shadows::fetch_point_shadow(id, in.world_position, in.world_normal, in.frag_coord.xy);
+        }
+        add_light(&terms, lighting::point_light(id, &input, true, true), shadow, visible);
+    }
+    for (var i = ranges.first_spot_light_index_offset; i < ranges.first_reflection_probe_index_offset; i++) {
+        let id = clustering::get_clusterable_object_id(i);
+        let light = &clustered_lights.data[id];
+        let visible = micro_shadow(h, normalize((*light).position_radius.xyz - sp));
+        if visible >= 1.0 && !every_light {
+            continue;
+        }
+        var shadow = 1.0;
+        if receiver && ((*light).flags & POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            shadow = shadows::fetch_spot_shadow(
+                id, in.world_position, in.world_normal, (*light).shadow_map_near_z, in.frag_coord.xy);
+        }
+        add_light(&terms, lighting::spot_light(id, &input, true), shadow, visible);
+    }
+    for (var i = 0u; i < lights.n_directional_lights; i++) {
+        let visible = micro_shadow(h, lights.directional_lights[i].direction_to_light);
+        if visible >= 1.0 && !every_light {
+            continue;
+        }
+        var shadow = 1.0;
+        if receiver && (lights.directional_lights[i].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             shadow = shadows::fetch_directional_shadow(i, in.world_position, in.world_normal, view_z, in.frag_coord.xy);
         }
-        removed += (1.0 - visible) * shadow * lighting::directional_light(i, &input, true);
+        add_light(&terms, lighting::directional_light(i, &input, true), shadow, visible);
     }
-    return removed * view.exposure;
+    terms.all *= view.exposure;
+    terms.shadowed *= view.exposure;
+    return terms;
 }
 
 struct FullscreenVertexOutput {
@@ -191,18 +257,27 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         // As Bevy does for SSAO: multi-bounce diffuse occlusion, and specular occlusion from
         // it (Lagarde and Rousiers 2014).
         let multibounce = ssao_multibounce(ambient_visibility, pbr_input.material.base_color.rgb);
-        pbr_input.diffuse_occlusion = min(pbr_input.diffuse_occlusion, multibounce);
+        // λa of eq. (2) scales ambient and environment light, which is all these two
+        // factors reach.
+        let ambient_weight = settings.weights.x;
+        pbr_input.diffuse_occlusion = min(pbr_input.diffuse_occlusion, multibounce) * ambient_weight;
         let NdotV = max(dot(pbr_input.N, pbr_input.V), 0.0001);
         let roughness = lighting::perceptualRoughnessToRoughness(pbr_input.material.perceptual_roughness);
         pbr_input.specular_occlusion = min(
             pbr_input.specular_occlusion,
             saturate(pow(NdotV + ambient_visibility, exp2(-16.0 * roughness - 1.0)) - 1.0 + ambient_visibility),
-        );
+        ) * ambient_weight;
         output_color = pbr_functions::apply_pbr_lighting(pbr_input);
-        if settings.micro_shadows != 0u {
-            output_color = vec4(max(output_color.rgb - micro_shadowed_light(pbr_input, pixel), vec3(0.0)), output_color.a);
-        }
+        // Eq. (2): (λa La + λs Ls) V — the micro-shadows (V) and λs on direct light.
+        let direct = direct_terms(pbr_input, pixel);
+        let direct_weight = settings.weights.y;
+        output_color = vec4(
+            max(output_color.rgb + (direct_weight - 1.0) * direct.all - direct_weight * direct.shadowed, vec3(0.0)),
+            output_color.a,
+        );
+        textureStore(micro_shadow_out, pixel, vec4(direct.visibility));
     } else {
+        textureStore(micro_shadow_out, pixel, vec4(1.0));
         output_color = pbr_input.material.base_color;
     }
     return pbr_functions::main_pass_post_lighting_processing(pbr_input, output_color);

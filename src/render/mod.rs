@@ -2,10 +2,12 @@
 //!
 //! Per camera with [`Mesostructure`], each frame, between Bevy's prepass and main pass:
 //! [`height`] (raster, custom phase) → [`gradient`] (compute) → [`apex`] (compute) →
-//! [`occlusion`] (compute); the
-//! [`debug_view`] pass draws over the output after tonemapping when a debug view is chosen.
+//! [`occlusion`] (compute); in the main pass, [`lighting`] before Bevy's deferred lighting and
+//! [`bleeding`] between the opaque and transparent passes; the [`debug_view`] pass draws over
+//! the output after tonemapping when a debug view is chosen.
 
 pub mod apex;
+pub mod bleeding;
 pub mod capture;
 pub mod debug_view;
 pub mod gradient;
@@ -16,7 +18,10 @@ pub mod occlusion;
 use bevy::{
     camera::Camera3d,
     core_pipeline::{
-        Core3dSystems, core_3d::main_opaque_pass_3d, prepass::DepthPrepass, schedule::Core3d,
+        Core3dSystems,
+        core_3d::{main_opaque_pass_3d, main_transparent_pass_3d},
+        prepass::DepthPrepass,
+        schedule::Core3d,
         tonemapping::tonemapping,
     },
     image::ToExtents,
@@ -55,6 +60,10 @@ pub const BUMP_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 pub const MHGM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
 /// Mesostructure ambient occlusion (1 = open).
 pub const OCCLUSION_FORMAT: TextureFormat = TextureFormat::R32Float;
+/// Micro-shadow visibility, the lowest over the lights (1 = lit).
+pub const MICRO_SHADOW_FORMAT: TextureFormat = TextureFormat::R32Float;
+/// One-bounce bleeding radiance added to the view (λd · ρ / π · E).
+pub const BLEEDING_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 
 /// The working images of one view.
 #[derive(Component)]
@@ -69,6 +78,10 @@ pub struct ViewMesostructureTextures {
     pub mhgm: CachedTexture,
     /// Ambient occlusion.
     pub occlusion: CachedTexture,
+    /// Micro-shadow visibility (written by the lighting pass).
+    pub micro_shadow: CachedTexture,
+    /// Bleeding radiance.
+    pub bleeding: CachedTexture,
     /// Apex sets, `apex_stride` words per pixel (see `reference::packed`).
     pub apex_sets: Buffer,
     /// Apex-pass counters: mesostructure pixels, pixels that hit the step bound, ascent steps.
@@ -150,6 +163,8 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "apex.wgsl");
     bevy::asset::embedded_asset!(app, "occlusion.wgsl");
     bevy::asset::embedded_asset!(app, "lighting.wgsl");
+    bevy::asset::embedded_asset!(app, "bleeding.wgsl");
+    bevy::asset::embedded_asset!(app, "bleeding_composite.wgsl");
     bevy::asset::embedded_asset!(app, "debug_view.wgsl");
 
     // The phase plugin adds the batching systems; with our pipeline type as their batch data,
@@ -171,6 +186,7 @@ pub(crate) fn build(app: &mut App) {
         .init_resource::<height::HeightMaterialBindGroups>()
         .init_resource::<SpecializedMeshPipelines<height::HeightPassPipeline>>()
         .init_resource::<SpecializedRenderPipelines<debug_view::DebugViewPipeline>>()
+        .init_resource::<SpecializedRenderPipelines<bleeding::BleedingPipeline>>()
         .init_resource::<DrawFunctions<height::HeightPhaseItem>>()
         .init_resource::<ViewSortedRenderPhases<height::HeightPhaseItem>>()
         .add_render_command::<height::HeightPhaseItem, height::DrawHeight>()
@@ -182,6 +198,7 @@ pub(crate) fn build(app: &mut App) {
                 apex::init_apex_pipeline,
                 occlusion::init_occlusion_pipeline,
                 lighting::init_lighting_pipeline,
+                bleeding::init_bleeding_pipeline,
                 debug_view::init_debug_view_pipeline,
             ),
         )
@@ -200,6 +217,7 @@ pub(crate) fn build(app: &mut App) {
                 sort_phase_system::<height::HeightPhaseItem>.in_set(RenderSystems::PhaseSort),
                 debug_view::prepare_debug_view_pipelines.in_set(RenderSystems::Prepare),
                 lighting::prepare_lighting_pipelines.in_set(RenderSystems::Prepare),
+                bleeding::prepare_bleeding_pipelines.in_set(RenderSystems::Prepare),
                 (prepare_view_textures, prepare_view_uniforms)
                     .in_set(RenderSystems::PrepareResources),
                 height::prepare_height_material_bind_groups
@@ -231,6 +249,18 @@ pub(crate) fn build(app: &mut App) {
                 .in_set(Core3dSystems::MainPass)
                 .before(bevy::pbr::deferred::deferred_lighting)
                 .before(main_opaque_pass_3d),
+        )
+        .add_systems(
+            Core3d,
+            (
+                capture::copy_lighting_capture,
+                bleeding::bleeding_pass,
+                bleeding::bleeding_composite_pass,
+            )
+                .chain()
+                .in_set(Core3dSystems::MainPass)
+                .after(main_opaque_pass_3d)
+                .before(main_transparent_pass_3d),
         )
         .add_systems(
             Core3d,
@@ -415,6 +445,22 @@ fn prepare_view_textures(
                 | TextureUsages::TEXTURE_BINDING
                 | TextureUsages::COPY_SRC,
         );
+        let micro_shadow = texture(
+            &mut texture_cache,
+            "mesostructure_micro_shadow",
+            MICRO_SHADOW_FORMAT,
+            TextureUsages::STORAGE_BINDING
+                | TextureUsages::TEXTURE_BINDING
+                | TextureUsages::COPY_SRC,
+        );
+        let bleeding = texture(
+            &mut texture_cache,
+            "mesostructure_bleeding",
+            BLEEDING_FORMAT,
+            TextureUsages::STORAGE_BINDING
+                | TextureUsages::TEXTURE_BINDING
+                | TextureUsages::COPY_SRC,
+        );
         let (apex_sets, apex_stats) = match previous {
             Some(p) if p.apex_sets.size() == apex_bytes => {
                 (p.apex_sets.clone(), p.apex_stats.clone())
@@ -440,6 +486,8 @@ fn prepare_view_textures(
             bump_normal,
             mhgm,
             occlusion,
+            micro_shadow,
+            bleeding,
             apex_sets,
             apex_stats,
             size,
@@ -476,14 +524,21 @@ fn prepare_view_bind_groups(
     debug: Res<debug_view::DebugViewPipeline>,
     occlusion: Res<occlusion::OcclusionPipeline>,
     view_uniforms: Res<bevy::render::view::ViewUniforms>,
-    views: Query<(Entity, &ViewMesostructureTextures)>,
+    views: Query<(
+        Entity,
+        &ViewMesostructureTextures,
+        &bevy::core_pipeline::prepass::ViewPrepassTextures,
+    )>,
 ) {
     let (Some(settings), Some(view_binding)) =
         (uniforms.0.binding(), view_uniforms.uniforms.binding())
     else {
         return;
     };
-    for (entity, t) in &views {
+    for (entity, t, prepass) in &views {
+        let Some(depth) = prepass.depth_view() else {
+            continue;
+        };
         let gradient = device.create_bind_group(
             "mesostructure_gradient_bind_group",
             &pipeline_cache.get_bind_group_layout(&gradient.layout),
@@ -515,6 +570,7 @@ fn prepare_view_bind_groups(
                 settings.clone(),
                 view_binding.clone(),
                 &t.mhgm.default_view,
+                depth,
             )),
         );
         let debug_view = device.create_bind_group(
@@ -526,6 +582,8 @@ fn prepare_view_bind_groups(
                 t.apex_sets.as_entire_binding(),
                 settings.clone(),
                 &t.occlusion.default_view,
+                &t.micro_shadow.default_view,
+                &t.bleeding.default_view,
             )),
         );
         commands.entity(entity).insert(ViewMesostructureBindGroups {

@@ -1,4 +1,5 @@
-//! Occlusion pass (compute): apex sets → mesostructure ambient occlusion (paper §3.1).
+//! Occlusion pass (compute): apex sets → mesostructure ambient occlusion (paper §3.1), times a
+//! coarse horizon-based AO of the depth buffer with the apex sets' adaptive step.
 
 use bevy::{
     prelude::*,
@@ -20,7 +21,7 @@ use crate::settings::{ExtractedMesostructure, MesostructureUniform};
 /// Pipeline and layout of the occlusion pass.
 #[derive(Resource)]
 pub struct OcclusionPipeline {
-    /// MHM, core normals, apex sets, occlusion (storage), settings, view, MHGM.
+    /// MHM, core normals, apex sets, occlusion (storage), settings, view, MHGM, prepass depth.
     pub layout: BindGroupLayoutDescriptor,
     /// The compute pipeline.
     pub pipeline: CachedComputePipelineId,
@@ -44,6 +45,7 @@ pub fn init_occlusion_pipeline(
                 uniform_buffer::<MesostructureUniform>(true),
                 uniform_buffer::<ViewUniform>(true),
                 texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_depth_2d(),
             ),
         ),
     );

@@ -1,7 +1,9 @@
 // Occlusion pass (paper §3.1, eqs. 3–7): per pixel, the horizon angle of each apex of its set,
 // sin h = ((H − P) · n0) / |H − P| with P = P0 + n0 · dis · k for both points; the highest per
 // azimuth sector; then 1/(2π) ∫ cos² h dθ (cosine-weighted) or ∫ (1 − sin h) (eq. 6).
-// Mirrors `reference::occlusion`.
+// Mirrors `reference::occlusion`. Multiplied by a coarse horizon-based AO on the depth buffer
+// (Bavoil et al. 2008) whose step is the adaptive (min + max) / 2 of the apex distances (§3.1):
+// the depth buffer holds only the core geometry, so the two do not count the same occluder.
 
 #import bevy_render::view::View
 #import bevy_mesostructure::common::{
@@ -17,9 +19,62 @@
 @group(0) @binding(4) var<uniform> settings: MesostructureUniform;
 @group(0) @binding(5) var<uniform> view: View;
 @group(0) @binding(6) var mhgm: texture_2d<f32>;
+@group(0) @binding(7) var depth: texture_depth_2d;
+
+const COARSE_DIRECTIONS: u32 = 8u;
+const COARSE_STEPS: u32 = 4u;
+// Sine of the elevation a depth sample must exceed to count (hides the facets of tessellated
+// curved cores, as HBAO's angle bias does).
+const COARSE_BIAS: f32 = 0.1;
 
 fn surface_point(p: vec2<i32>) -> vec3<f32> {
     return surface::surface_point(mhm, core_normal, view.world_from_clip, view.viewport, p);
+}
+
+// The core point seen through pixel p at NDC depth `ndc_depth`.
+fn core_point(p: vec2<f32>, ndc_depth: f32) -> vec3<f32> {
+    let uv = (p + 0.5 - view.viewport.xy) / view.viewport.zw;
+    let world = view.world_from_clip * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, ndc_depth, 1.0);
+    return world.xyz / world.w;
+}
+
+// Coarse horizon-based AO of the core around P0 (normal n0), `step` pixels a step: per
+// direction the highest elevation of the depth buffer's points within the world radius the
+// march covers, attenuated towards that radius; cosine-weighted like the fine term.
+fn coarse_occlusion(p: vec2<i32>, n0: vec3<f32>, step: f32) -> f32 {
+    let size = vec2<i32>(textureDimensions(depth));
+    let d0 = textureLoad(depth, p, 0);
+    let p0 = core_point(vec2<f32>(p), d0);
+    let reach = step * f32(COARSE_STEPS);
+    let radius = length(core_point(vec2<f32>(p) + vec2(reach, 0.0), d0) - p0);
+    if !(radius > 0.0) {
+        return 1.0;
+    }
+    var visibility = 0.0;
+    for (var i = 0u; i < COARSE_DIRECTIONS; i++) {
+        let a = (f32(i) + 0.5) * surface::TAU / f32(COARSE_DIRECTIONS);
+        let dir = vec2(cos(a), sin(a));
+        var sin_h = 0.0;
+        for (var j = 1u; j <= COARSE_STEPS; j++) {
+            let q = p + vec2<i32>(round(dir * step * f32(j)));
+            if !on_screen(q, size) {
+                break;
+            }
+            let dq = textureLoad(depth, q, 0);
+            if dq == 0.0 {
+                continue; // sky (reverse Z)
+            }
+            let v = core_point(vec2<f32>(q), dq) - p0;
+            let dist = length(v);
+            if dist <= 0.0 || dist > radius {
+                continue;
+            }
+            let falloff = 1.0 - (dist * dist) / (radius * radius);
+            sin_h = max(sin_h, (dot(v, n0) / dist - COARSE_BIAS) * falloff);
+        }
+        visibility += 1.0 - sin_h * sin_h;
+    }
+    return visibility / f32(COARSE_DIRECTIONS);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -45,8 +100,15 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
             mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, sp, n0);
     }
     var sin_h = array<f32, 8>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    var nearest = 1.0e9;
+    var farthest = 0.0;
     for (var i = 0u; i < count; i++) {
         let o = unpack_offset(apex_sets[base + 1u + i]);
+        let distance = length(vec2<f32>(o));
+        if distance > 0.0 {
+            nearest = min(nearest, distance);
+            farthest = max(farthest, distance);
+        }
         let d = surface_point(p + o) - sp;
         let len = length(d);
         if len <= 0.0 {
@@ -64,5 +126,10 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
             visibility += 1.0 - sin_h[s] * sin_h[s];
         }
     }
-    textureStore(occlusion_out, p, vec4<f32>(visibility / f32(SECTORS)));
+    visibility /= f32(SECTORS);
+    // No apex, no scale for the coarse step: a flat height map stays neutral.
+    if settings.coarse_occlusion != 0u && farthest > 0.0 {
+        visibility *= coarse_occlusion(p, n0, max(0.5 * (nearest + farthest), 1.0));
+    }
+    textureStore(occlusion_out, p, vec4<f32>(visibility));
 }

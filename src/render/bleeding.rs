@@ -1,0 +1,270 @@
+//! Bleeding pass (paper §3.3, eq. 8): one-bounce light from the directly lit mesostructure onto
+//! its neighbours, gathered in a compute pass from the lit opaque image along each pixel's
+//! paths to its apexes, then added to the view by a fullscreen draw with additive blending
+//! (weighted by λd of eq. 2), between Bevy's opaque and transparent passes.
+
+use bevy::{
+    core_pipeline::{FullscreenShader, prepass::ViewPrepassTextures},
+    prelude::*,
+    render::{
+        diagnostic::RecordDiagnostics,
+        render_phase::ViewSortedRenderPhases,
+        render_resource::{binding_types::*, *},
+        renderer::{RenderContext, ViewQuery},
+        view::{ExtractedView, ViewTarget, ViewUniform, ViewUniformOffset, ViewUniforms},
+    },
+};
+
+use super::{
+    BLEEDING_FORMAT, MesostructureUniforms, ViewMesostructureTextures,
+    ViewMesostructureUniformOffset, dispatch_per_pixel, height::HeightPhaseItem,
+    view_has_mesostructure,
+};
+use crate::settings::{ExtractedMesostructure, MesostructureUniform};
+
+/// Layouts and pipelines of the gather (compute) and the composite (fullscreen draw).
+#[derive(Resource)]
+pub struct BleedingPipeline {
+    /// Lit image, MHM, core normals, bump normals, apex sets, G-buffer, bleeding (storage),
+    /// settings, view, MHGM.
+    pub gather_layout: BindGroupLayoutDescriptor,
+    /// The gather pipeline.
+    pub gather: CachedComputePipelineId,
+    /// Bleeding, MHM.
+    pub composite_layout: BindGroupLayoutDescriptor,
+    fullscreen: FullscreenShader,
+    composite_shader: Handle<Shader>,
+}
+
+/// Queues the gather pipeline and keeps what the composite pipelines need (render startup).
+pub fn init_bleeding_pipeline(
+    mut commands: Commands,
+    pipeline_cache: Res<PipelineCache>,
+    asset_server: Res<AssetServer>,
+    fullscreen: Res<FullscreenShader>,
+) {
+    let float = || texture_2d(TextureSampleType::Float { filterable: false });
+    let gather_layout = BindGroupLayoutDescriptor::new(
+        "mesostructure_bleeding_gather_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::COMPUTE,
+            (
+                float(),
+                float(),
+                float(),
+                float(),
+                storage_buffer_read_only_sized(false, None),
+                texture_2d(TextureSampleType::Uint),
+                texture_storage_2d(BLEEDING_FORMAT, StorageTextureAccess::WriteOnly),
+                uniform_buffer::<MesostructureUniform>(true),
+                uniform_buffer::<ViewUniform>(true),
+                float(),
+            ),
+        ),
+    );
+    let gather = pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
+        label: Some("mesostructure_bleeding_gather_pipeline".into()),
+        layout: vec![gather_layout.clone()],
+        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "bleeding.wgsl"),
+        entry_point: Some("bleeding".into()),
+        ..default()
+    });
+    let composite_layout = BindGroupLayoutDescriptor::new(
+        "mesostructure_bleeding_composite_layout",
+        &BindGroupLayoutEntries::sequential(ShaderStages::FRAGMENT, (float(), float())),
+    );
+    commands.insert_resource(BleedingPipeline {
+        gather_layout,
+        gather,
+        composite_layout,
+        fullscreen: fullscreen.clone(),
+        composite_shader: bevy::asset::load_embedded_asset!(
+            asset_server.as_ref(),
+            "bleeding_composite.wgsl"
+        ),
+    });
+}
+
+impl SpecializedRenderPipeline for BleedingPipeline {
+    type Key = TextureFormat;
+
+    fn specialize(&self, format: TextureFormat) -> RenderPipelineDescriptor {
+        RenderPipelineDescriptor {
+            label: Some("mesostructure_bleeding_composite_pipeline".into()),
+            layout: vec![self.composite_layout.clone()],
+            vertex: self.fullscreen.to_vertex_state(),
+            fragment: Some(FragmentState {
+                shader: self.composite_shader.clone(),
+                entry_point: Some("composite".into()),
+                targets: vec![Some(ColorTargetState {
+                    format,
+                    // Added to the lit colour; alpha kept.
+                    blend: Some(BlendState {
+                        color: BlendComponent {
+                            src_factor: BlendFactor::One,
+                            dst_factor: BlendFactor::One,
+                            operation: BlendOperation::Add,
+                        },
+                        alpha: BlendComponent {
+                            src_factor: BlendFactor::Zero,
+                            dst_factor: BlendFactor::One,
+                            operation: BlendOperation::Add,
+                        },
+                    }),
+                    write_mask: ColorWrites::ALL,
+                })],
+                ..default()
+            }),
+            ..default()
+        }
+    }
+}
+
+/// The composite pipeline of a view, specialized for its main texture format.
+#[derive(Component)]
+pub struct ViewBleedingPipeline(pub CachedRenderPipelineId);
+
+/// Specializes the composite pipeline for each view with bleeding on.
+pub fn prepare_bleeding_pipelines(
+    mut commands: Commands,
+    pipeline_cache: Res<PipelineCache>,
+    mut pipelines: ResMut<SpecializedRenderPipelines<BleedingPipeline>>,
+    pipeline: Res<BleedingPipeline>,
+    views: Query<(Entity, &ViewTarget, &ExtractedMesostructure)>,
+) {
+    for (entity, target, settings) in &views {
+        if !bleeding_runs(&settings.0) {
+            commands.entity(entity).remove::<ViewBleedingPipeline>();
+            continue;
+        }
+        let id = pipelines.specialize(&pipeline_cache, &pipeline, target.main_texture_format());
+        commands.entity(entity).insert(ViewBleedingPipeline(id));
+    }
+}
+
+/// Whether the settings ask for bleeding at all (a zero weight costs nothing either).
+pub fn bleeding_runs(settings: &crate::Mesostructure) -> bool {
+    settings.bleeding && settings.bleeding_weight > 0.0
+}
+
+/// Core3d system between Bevy's opaque and transparent passes: gathers the bleeding of the
+/// current view, timed as `mesostructure/bleeding`.
+pub fn bleeding_pass(
+    view: ViewQuery<(
+        &ExtractedView,
+        &ViewTarget,
+        &ViewPrepassTextures,
+        &ViewMesostructureTextures,
+        &ViewMesostructureUniformOffset,
+        &ViewUniformOffset,
+        &ViewBleedingPipeline,
+        Option<&super::capture::ExtractedCapture>,
+    )>,
+    phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
+    pipeline: Res<BleedingPipeline>,
+    pipeline_cache: Res<PipelineCache>,
+    uniforms: Res<MesostructureUniforms>,
+    view_uniforms: Res<ViewUniforms>,
+    mut pending: ResMut<super::capture::PendingCaptures>,
+    mut ctx: RenderContext,
+) {
+    let (extracted_view, target, prepass, textures, offset, view_offset, composite, capture) =
+        view.into_inner();
+    if !view_has_mesostructure(&phases, extracted_view) {
+        return;
+    }
+    let (Some(gather), Some(_), Some(settings), Some(view_binding), Some(gbuffer)) = (
+        pipeline_cache.get_compute_pipeline(pipeline.gather),
+        pipeline_cache.get_render_pipeline(composite.0),
+        uniforms.0.binding(),
+        view_uniforms.uniforms.binding(),
+        prepass.deferred_view(),
+    ) else {
+        return;
+    };
+    let device = ctx.render_device().clone();
+    let gather_group = device.create_bind_group(
+        "mesostructure_bleeding_gather_bind_group",
+        &pipeline_cache.get_bind_group_layout(&pipeline.gather_layout),
+        &BindGroupEntries::sequential((
+            target.main_texture_view(),
+            &textures.mhm.default_view,
+            &textures.core_normal.default_view,
+            &textures.bump_normal.default_view,
+            textures.apex_sets.as_entire_binding(),
+            gbuffer,
+            &textures.bleeding.default_view,
+            settings,
+            view_binding,
+            &textures.mhgm.default_view,
+        )),
+    );
+    dispatch_per_pixel(
+        &mut ctx,
+        "mesostructure/bleeding",
+        gather,
+        &gather_group,
+        &[offset.0, view_offset.offset],
+        textures.size,
+        |_| {},
+    );
+    if let Some(capture) = capture {
+        super::capture::copy_bleeding(&mut ctx, &device, &mut pending, capture, textures);
+    }
+}
+
+/// Core3d system after the gather: adds the bleeding to the view's lit colour, timed as
+/// `mesostructure/bleeding_composite`. (Its own system, so its own command encoder: lavapipe
+/// crashes on debug groups around a compute and a render pass in one encoder.)
+pub fn bleeding_composite_pass(
+    view: ViewQuery<(
+        &ExtractedView,
+        &ViewTarget,
+        &ViewMesostructureTextures,
+        &ViewBleedingPipeline,
+    )>,
+    phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
+    pipeline: Res<BleedingPipeline>,
+    pipeline_cache: Res<PipelineCache>,
+    mut ctx: RenderContext,
+) {
+    let (extracted_view, target, textures, composite) = view.into_inner();
+    if !view_has_mesostructure(&phases, extracted_view) {
+        return;
+    }
+    let (Some(composite), Some(_)) = (
+        pipeline_cache.get_render_pipeline(composite.0),
+        pipeline_cache.get_compute_pipeline(pipeline.gather),
+    ) else {
+        return;
+    };
+    let device = ctx.render_device().clone();
+    let composite_group = device.create_bind_group(
+        "mesostructure_bleeding_composite_bind_group",
+        &pipeline_cache.get_bind_group_layout(&pipeline.composite_layout),
+        &BindGroupEntries::sequential((
+            &textures.bleeding.default_view,
+            &textures.mhm.default_view,
+        )),
+    );
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let span = diagnostics.time_span(ctx.command_encoder(), "mesostructure/bleeding_composite");
+    ctx.command_encoder()
+        .push_debug_group("mesostructure/bleeding_composite");
+    {
+        let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+            label: Some("mesostructure_bleeding_composite_pass"),
+            color_attachments: &[Some(target.get_color_attachment())],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_render_pipeline(composite);
+        pass.set_bind_group(0, &composite_group, &[]);
+        pass.draw(0..3, 0..1);
+    }
+    ctx.command_encoder().pop_debug_group();
+    span.end(ctx.command_encoder());
+}
