@@ -1,5 +1,6 @@
-//! Ground truth for a height field over a plane: ambient occlusion and the visibility of a
-//! directional light, by ray marching the height field itself (no screen space, no apexes).
+//! Ground truth for a height field over a plane: ambient occlusion, the visibility of a
+//! directional light and the one-bounce light of the directly lit surface, by ray marching the
+//! height field itself (no screen space, no apexes).
 //! Deterministic; the sample counts are arguments. The accuracy tests and tools compare the
 //! screen-space method against these.
 
@@ -59,22 +60,40 @@ impl HeightField {
     /// Whether the ray from the surface point at `p` along the unit `direction` (world units,
     /// z up) leaves the height field without passing under it. Marches half a texel a step.
     pub fn ray_escapes(&self, p: Vec2, direction: Vec3) -> bool {
+        self.ray_hit(p, direction).is_none()
+    }
+
+    /// Where the ray from the surface point at `p` along the unit `direction` first passes under
+    /// the height field, in texel coordinates (refined by bisection), or `None` if it leaves it.
+    /// Rays that go down stop after four tile widths, as hits.
+    pub fn ray_hit(&self, p: Vec2, direction: Vec3) -> Option<Vec2> {
         let top = self.max_height();
         let start = Vec3::new(p.x * self.texel_size, p.y * self.texel_size, self.sample(p));
         let step = 0.5 * self.texel_size;
+        let below = |q: Vec3| q.z < self.sample(Vec2::new(q.x, q.y) / self.texel_size);
         // Leave the surface by a hair, so that the start point does not occlude itself.
         let mut t = 0.25 * step;
         loop {
             let q = start + direction * t;
             if q.z >= top {
-                return true;
+                return None;
             }
             if direction.z <= 0.0 && t > 4.0 * self.texel_size * self.width.max(self.height) as f32
             {
-                return false;
+                return Some(Vec2::new(q.x, q.y) / self.texel_size);
             }
-            if q.z < self.sample(Vec2::new(q.x, q.y) / self.texel_size) {
-                return false;
+            if below(q) {
+                let (mut lo, mut hi) = ((t - step).max(0.0), t);
+                for _ in 0..8 {
+                    let mid = 0.5 * (lo + hi);
+                    if below(start + direction * mid) {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                let q = start + direction * hi;
+                return Some(Vec2::new(q.x, q.y) / self.texel_size);
             }
             t += step;
         }
@@ -141,6 +160,44 @@ impl HeightField {
     }
 }
 
+impl HeightField {
+    /// One-bounce irradiance at texel coordinates `p` from the surface lit directly by a
+    /// directional light travelling along `light_direction`, relative to E0, the irradiance of a
+    /// surface facing that light; all surfaces white and Lambertian. Each surface point S sends
+    /// radiance `E0 / π · max(0, N_S · l) · V(S, l)`, so `E1 / E0 = mean over cosine-weighted
+    /// directions of max(0, N_S · l) · V(S, l)` for the rays that hit S (those that escape see
+    /// the sky, which is not this term). The outgoing one-bounce radiance of P is
+    /// `ρ_P / π · E0 · one_bounce`. Stratified over `rings × sectors` directions.
+    pub fn one_bounce(&self, p: Vec2, light_direction: Vec3, rings: u32, sectors: u32) -> f32 {
+        let to_light = -light_direction.normalize();
+        let n = self.normal(p);
+        let (t, b) = orthonormal_basis(n);
+        let mut sum = 0.0;
+        for i in 0..rings {
+            for j in 0..sectors {
+                let u = (i as f32 + 0.5) / rings as f32;
+                let phi = std::f32::consts::TAU * (j as f32 + 0.5 * (i % 2) as f32 + 0.5)
+                    / sectors as f32;
+                let r = u.sqrt();
+                let local = Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u).max(0.0).sqrt());
+                let d = (t * local.x + b * local.y + n * local.z).normalize();
+                let Some(s) = self.ray_hit(p, d) else {
+                    continue;
+                };
+                let n_s = self.normal(s);
+                // S faces P and is lit.
+                if n_s.dot(-d) > 0.0 && to_light.z > 0.0 {
+                    let cos_l = n_s.dot(to_light);
+                    if cos_l > 0.0 && self.ray_escapes(s, to_light) {
+                        sum += cos_l;
+                    }
+                }
+            }
+        }
+        sum / (rings * sectors) as f32
+    }
+}
+
 fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
     let t = if n.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
     let t = (t - n * n.dot(t)).normalize();
@@ -198,6 +255,26 @@ mod tests {
                 "slope {slope}: traced {traced}"
             );
         }
+    }
+
+    #[test]
+    fn one_bounce_at_the_bottom_of_a_v_groove_matches_the_closed_form() {
+        // Light from straight above: both walls (slope α) send E0 cos α / π; they fill the
+        // directions under the horizon h(θ) = atan(tan α |cos θ|), whose cosine-weighted
+        // solid angle is π (1 − cos α) (the AO closed form): E1 / E0 = cos α (1 − cos α).
+        for slope in [30.0f32, 45.0] {
+            let f = v_groove(64, slope);
+            let c = slope.to_radians().cos();
+            let bounce = f.one_bounce(Vec2::new(32.0, 32.0), Vec3::NEG_Z, 24, 48);
+            assert!(
+                (bounce - c * (1.0 - c)).abs() < 0.02,
+                "slope {slope}: {bounce} vs {}",
+                c * (1.0 - c)
+            );
+        }
+        // A flat field has no bounce.
+        let flat = HeightField::new(16, 16, &vec![0.5; 256], 1.0, 0.1);
+        assert_eq!(flat.one_bounce(Vec2::new(8.0, 8.0), Vec3::NEG_Z, 4, 8), 0.0);
     }
 
     #[test]

@@ -11,14 +11,18 @@
 //!   and the boundary flags.
 //! - [`apex_sets`]: the local apex set f(P) of every pixel: the direct apex by gradient ascent,
 //!   indirect apexes from sampled directions, and boundary points.
+//! - [`occlusion`], [`micro_shadow`], [`bleeding_irradiance`]: the lighting terms of paper §3
+//!   from the apex sets; [`ground_truth`] computes them from the height field itself.
 
 mod apex;
 mod gradient;
 pub mod ground_truth;
+mod lighting;
 mod occlusion;
 
 pub use apex::*;
 pub use gradient::*;
+pub use lighting::*;
 pub use occlusion::*;
 
 /// The screen-space height map (MHM, paper §2.1) of one view.

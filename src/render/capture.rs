@@ -49,6 +49,9 @@ pub struct CapturedFrame {
     pub apex_stats: [u32; 3],
     /// Mesostructure ambient occlusion per pixel (1 = open; 1 where not computed).
     pub occlusion: Vec<f32>,
+    /// Bump-mapped shading normal per pixel (world space; zero where the material has a
+    /// normal map or there is no mesostructure).
+    pub bump_normal: Vec<[f32; 4]>,
     /// Micro-shadow visibility per mesostructure pixel, the lowest over the lights (1 = lit);
     /// empty if the lighting pass did not run.
     pub micro_shadow: Vec<f32>,
@@ -100,6 +103,23 @@ impl CapturedFrame {
         }
         let s = self.apex_stride as usize;
         unpack_apex_set(&self.apex_sets[i * s..(i + 1) * s], (x as i32, y as i32))
+    }
+
+    /// The normal each pixel faces with in the bleeding gather: its bump-mapped normal, or n0
+    /// where it has none.
+    pub fn facing_normals(&self) -> Vec<Vec3> {
+        self.bump_normal
+            .iter()
+            .zip(&self.core_normal)
+            .map(|(b, n)| {
+                let b = Vec3::new(b[0], b[1], b[2]);
+                if b.length_squared() > 0.5 {
+                    b.normalize()
+                } else {
+                    Vec3::new(n[0], n[1], n[2])
+                }
+            })
+            .collect()
     }
 
     /// The core normals n0 as vectors.
@@ -250,6 +270,12 @@ pub fn copy_capture(
         copy_buffer(&mut ctx, &device, &t.apex_sets),
         copy_buffer(&mut ctx, &device, &t.apex_stats),
         copy_texture(&mut ctx, &device, &t.occlusion.texture, OCCLUSION_FORMAT),
+        copy_texture(
+            &mut ctx,
+            &device,
+            &t.bump_normal.texture,
+            super::BUMP_NORMAL_FORMAT,
+        ),
     ];
     let world_from_clip =
         extracted_view.world_from_view.to_matrix() * extracted_view.clip_from_view.inverse();
@@ -401,6 +427,7 @@ pub fn map_captures(
             apex_stride,
             apex_stats: [stats[0], stats[1], stats[2]],
             occlusion: bytemuck::cast_slice(&read(&device, &readbacks[5], size.y)).to_vec(),
+            bump_normal: half4(read(&device, &readbacks[6], size.y)),
             micro_shadow: micro_shadow.map_or_else(Vec::new, |r| {
                 bytemuck::cast_slice(&read(&device, &r, size.y)).to_vec()
             }),

@@ -437,7 +437,7 @@ fn passes_cost_nothing_without_mesostructure_on_screen() {
 }
 
 /// Mean absolute error and RMSE of `values` against `truth`.
-fn errors(values: &[f32], truth: &[f32]) -> (f32, f32) {
+pub fn errors(values: &[f32], truth: &[f32]) -> (f32, f32) {
     let n = values.len() as f32;
     let mae = values
         .iter()

@@ -56,7 +56,7 @@ fn view() -> Transform {
 }
 
 /// Screenshots of `target` with the camera's settings as they are, and after `change`.
-fn before_and_after(
+pub fn before_and_after(
     app: &mut App,
     camera: Entity,
     target: &Handle<Image>,
@@ -68,7 +68,7 @@ fn before_and_after(
     (before, pixels(&screenshot(app, target)))
 }
 
-fn pixels(image: &Image) -> Vec<[u8; 4]> {
+pub fn pixels(image: &Image) -> Vec<[u8; 4]> {
     image
         .data
         .as_ref()

@@ -2,7 +2,10 @@
 //! against the CPU oracle, deformation, and bad input, all headless on the software driver.
 
 mod bad_input;
+mod bleeding;
+mod coarse;
 mod contract;
 mod deformation;
 mod harness;
 mod lighting;
+mod micro_shadows;
