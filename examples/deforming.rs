@@ -7,9 +7,16 @@
 //! ```text
 //! cargo run --example deforming -- [--frames N] [--out DIR] [--size WxH]
 //!     [--shape morph|sphere|plane] [--height-map bricks|rivets|weave|sine|stone|cone]
-//!     [--scale K] [--occlusion on|off]
-//!     [--view none|height|gradient|apex-distance|apex-count|boundary|occlusion|all]
+//!     [--scale K] [--off occlusion,micro-shadows,bleeding,bump-mapping]
+//!     [--light-height H]
+//!     [--view none|height|gradient|apex-distance|apex-count|boundary|occlusion|
+//!             micro-shadow|bleeding|all]
 //! ```
+//!
+//! `--off` switches effects off (the file names get `_no-<effect>`); `--light-height` sets how
+//! high above the object the circling light stands (default 4; lower casts longer
+//! micro-shadows). The object is two-tone: the raised parts of the height map in brick red,
+//! the low parts in light grey, so that the bleeding of the red onto the grey shows.
 
 use std::{f32::consts::PI, path::PathBuf};
 
@@ -28,8 +35,12 @@ use bevy::{
 };
 use bevy_mesostructure::prelude::*;
 
+/// The effects `--off` can switch off.
+const EFFECTS: [&str; 4] = ["occlusion", "micro-shadows", "bleeding", "bump-mapping"];
+
 struct Args {
-    occlusion: bool,
+    off: Vec<String>,
+    light_height: f32,
     frames: u32,
     out: PathBuf,
     size: UVec2,
@@ -41,7 +52,8 @@ struct Args {
 
 fn parse_args() -> Args {
     let mut args = Args {
-        occlusion: true,
+        off: vec![],
+        light_height: 4.0,
         frames: 30,
         out: PathBuf::from("out/deforming"),
         size: UVec2::new(512, 384),
@@ -67,7 +79,21 @@ fn parse_args() -> Args {
             "--shape" => args.shape = value(),
             "--height-map" => args.height_map = value(),
             "--scale" => args.scale = value().parse().expect("--scale K"),
-            "--occlusion" => args.occlusion = value() != "off",
+            "--occlusion" => {
+                if value() == "off" {
+                    args.off.push("occlusion".into());
+                }
+            }
+            "--off" => {
+                for effect in value().split(',').filter(|e| !e.is_empty()) {
+                    assert!(
+                        EFFECTS.contains(&effect),
+                        "unknown effect {effect}; one of {EFFECTS:?}"
+                    );
+                    args.off.push(effect.into());
+                }
+            }
+            "--light-height" => args.light_height = value().parse().expect("--light-height H"),
             "--view" => {
                 let v = value();
                 args.views = if v == "all" {
@@ -87,6 +113,37 @@ fn parse_args() -> Args {
         }
     }
     args
+}
+
+/// A repeating sRGB colour texture over `map`: `high` where the height map is above 0.1 (the
+/// bumps and their walls), `low` on the floor between them.
+fn two_tone(map: &HeightMap, high: [u8; 3], low: [u8; 3]) -> Image {
+    use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
+    let data = map
+        .values
+        .iter()
+        .flat_map(|&v| {
+            let c = if v > 0.1 { high } else { low };
+            [c[0], c[1], c[2], 255]
+        })
+        .collect();
+    let mut image = Image::new(
+        bevy::render::render_resource::Extent3d {
+            width: map.width,
+            height: map.height,
+            depth_or_array_layers: 1,
+        },
+        bevy::render::render_resource::TextureDimension::D2,
+        data,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
+        address_mode_u: ImageAddressMode::Repeat,
+        address_mode_v: ImageAddressMode::Repeat,
+        ..ImageSamplerDescriptor::linear()
+    });
+    image
 }
 
 /// The morphing object: a UV sphere whose vertices blend towards the cube they project onto.
@@ -177,6 +234,9 @@ fn main() {
         )
     });
     let height_map = world.resource_mut::<Assets<Image>>().add(map.to_image());
+    let colours = world
+        .resource_mut::<Assets<Image>>()
+        .add(two_tone(&map, [191, 97, 71], [217, 214, 207]));
 
     let camera = world
         .spawn((
@@ -184,7 +244,10 @@ fn main() {
             RenderTarget::Image(target.clone().into()),
             Msaa::Off,
             Mesostructure {
-                occlusion: args.occlusion,
+                occlusion: !args.off.iter().any(|e| e == "occlusion"),
+                micro_shadows: !args.off.iter().any(|e| e == "micro-shadows"),
+                bleeding: !args.off.iter().any(|e| e == "bleeding"),
+                bump_mapping: !args.off.iter().any(|e| e == "bump-mapping"),
                 ..default()
             },
             Transform::from_xyz(0.0, 1.3, 2.6).looking_at(Vec3::new(0.0, 0.1, 0.0), Vec3::Y),
@@ -210,17 +273,23 @@ fn main() {
         Transform::from_xyz(0.0, -0.85, 0.0),
     ));
 
+    let uv_transform = if args.shape == "plane" {
+        bevy::math::Affine2::IDENTITY
+    } else {
+        bevy::math::Affine2::from_scale(Vec2::new(2.0, 1.0))
+    };
     let brick_red = world
         .resource_mut::<Assets<StandardMaterial>>()
         .add(StandardMaterial {
-            base_color: Color::srgb(0.75, 0.38, 0.28),
+            base_color_texture: Some(colours),
+            uv_transform,
             perceptual_roughness: 0.8,
             ..default()
         });
     let material = MesostructureMaterial {
         height_map,
         scale: args.scale,
-        uv_transform: bevy::math::Affine2::from_scale(Vec2::new(2.0, 1.0)),
+        uv_transform,
     };
     match args.shape.as_str() {
         "plane" => {
@@ -230,10 +299,7 @@ fn main() {
             world.spawn((
                 Mesh3d(plane),
                 MeshMaterial3d(brick_red),
-                MesostructureMaterial {
-                    uv_transform: bevy::math::Affine2::IDENTITY,
-                    ..material
-                },
+                material,
                 Transform::from_xyz(0.0, -0.2, 0.0),
             ));
         }
@@ -286,7 +352,8 @@ fn main() {
         let mut lights = world.query_filtered::<&mut Transform, With<DirectionalLight>>();
         for mut light in lights.iter_mut(world) {
             let (s, c) = (t * 0.5).sin_cos();
-            *light = Transform::from_xyz(2.5 * c, 4.0, 2.5 * s).looking_at(Vec3::ZERO, Vec3::Y);
+            *light = Transform::from_xyz(2.5 * c, args.light_height, 2.5 * s)
+                .looking_at(Vec3::ZERO, Vec3::Y);
         }
         app.update();
     }
@@ -298,7 +365,7 @@ fn main() {
         for _ in 0..2 {
             app.update();
         }
-        let suffix = if args.occlusion { "" } else { "_no-occlusion" };
+        let suffix: String = args.off.iter().map(|e| format!("_no-{e}")).collect();
         let path = args
             .out
             .join(format!("{}_{}{suffix}.png", args.shape, view.name()));
