@@ -234,9 +234,10 @@ fn main() {
         )
     });
     let height_map = world.resource_mut::<Assets<Image>>().add(map.to_image());
-    let colours = world
-        .resource_mut::<Assets<Image>>()
-        .add(two_tone(&map, [191, 97, 71], [217, 214, 207]));
+    let colours =
+        world
+            .resource_mut::<Assets<Image>>()
+            .add(two_tone(&map, [191, 97, 71], [217, 214, 207]));
 
     let camera = world
         .spawn((

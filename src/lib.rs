@@ -45,8 +45,11 @@
 //!
 //! ## What runs
 //! Per camera with [`Mesostructure`], between Bevy's prepass and its main pass: the height pass
-//! (only meshes with [`MesostructureMaterial`]), the gradient pass and the apex pass; see
-//! [`render`]. [`reference`] is the same method in plain Rust, the oracle of the GPU tests.
+//! (only meshes with [`MesostructureMaterial`]), the gradient pass, the apex pass and the
+//! occlusion pass; in the main pass, a deferred lighting pass of the plugin's own for the
+//! mesostructure pixels (Bevy's BRDF, shadow maps and lights, with the occlusion on ambient light
+//! and the micro-shadows on each light) and, after the opaque pass, the bleeding pass. See
+//! [`render`]. [`reference`](mod@reference) is the same method in plain Rust, the oracle of the GPU tests.
 //!
 //! ## Bad input
 //! Missing or still-loading height maps, unsupported formats, meshes without UVs or normals,

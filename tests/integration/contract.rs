@@ -324,7 +324,16 @@ fn each_pass_reports_a_gpu_time_span() {
     mesostructure_plane(&mut app, material, map, 0.1);
     run(&mut app, 8);
     let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
-    for pass in ["height", "gradient", "apex", "occlusion", "debug_view"] {
+    for pass in [
+        "height",
+        "gradient",
+        "apex",
+        "occlusion",
+        "lighting",
+        "bleeding",
+        "bleeding_composite",
+        "debug_view",
+    ] {
         let gpu = bevy::diagnostic::DiagnosticPath::new(format!(
             "render/mesostructure/{pass}/elapsed_gpu"
         ));
@@ -424,15 +433,57 @@ fn passes_cost_nothing_without_mesostructure_on_screen() {
         .clone();
     assert!(captures.take(camera).is_none(), "nothing to capture");
     let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
-    for pass in ["height", "gradient", "apex", "debug_view"] {
-        let path = bevy::diagnostic::DiagnosticPath::new(format!(
-            "render/mesostructure/{pass}/elapsed_cpu"
-        ));
-        let ran = store.get(&path).and_then(|d| d.measurement()).is_some();
+    for pass in [
+        "height",
+        "gradient",
+        "apex",
+        "occlusion",
+        "bleeding",
+        "bleeding_composite",
+        "debug_view",
+    ] {
         assert!(
-            !ran,
+            !pass_ran(store, pass),
             "mesostructure/{pass} ran with no mesostructure surface on screen"
         );
+    }
+}
+
+fn pass_ran(store: &bevy::diagnostic::DiagnosticsStore, pass: &str) -> bool {
+    let path =
+        bevy::diagnostic::DiagnosticPath::new(format!("render/mesostructure/{pass}/elapsed_cpu"));
+    store.get(&path).and_then(|d| d.measurement()).is_some()
+}
+
+#[test]
+fn effects_that_are_off_cost_nothing() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = app_with(|app| {
+        app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
+    });
+    let target = target(&mut app, 64, 64);
+    camera(
+        &mut app,
+        &target,
+        top_down(),
+        Mesostructure {
+            occlusion: false,
+            bleeding: true,
+            bleeding_weight: 0.0,
+            micro_shadows: false,
+            ..default()
+        },
+    );
+    let map = image(&mut app, HeightMap::bricks(64, 4, 0.1).to_image());
+    let material = unlit(&mut app, Color::WHITE);
+    mesostructure_plane(&mut app, material, map, 0.1);
+    run(&mut app, 8);
+    let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
+    assert!(pass_ran(store, "apex"), "the surface is on screen");
+    for pass in ["occlusion", "bleeding", "bleeding_composite"] {
+        assert!(!pass_ran(store, pass), "mesostructure/{pass} ran while off");
     }
 }
 
