@@ -1,5 +1,5 @@
 //! The coarse horizon-based AO on the depth buffer (paper §3.1): the core geometry around a
-//! mesostructure surface occludes it, with the apex sets' adaptive step.
+//! mesostructure surface occludes it, with the apex sets' adaptive step. And Bevy's SSAO on top.
 
 use bevy::prelude::*;
 use bevy_mesostructure::prelude::*;
@@ -72,4 +72,70 @@ fn a_slab_on_the_plane_occludes_its_foot_and_nothing_far_away() {
         "the slab occludes its foot"
     );
     assert!(far > 50 && far_changed == 0, "and nothing far from it");
+}
+
+#[test]
+fn bevy_ssao_multiplies_with_the_mesostructure_occlusion() {
+    if !gpu_or_skip() {
+        return;
+    }
+    // Ambient light only, so the picture is ambient × occlusion; a slab for SSAO to find.
+    let render = |ssao: bool| {
+        let mut app = app();
+        let target = target(&mut app, SIZE, SIZE);
+        let camera = camera(&mut app, &target, top_down(), Mesostructure::default());
+        if ssao {
+            app.world_mut()
+                .entity_mut(camera)
+                .insert(bevy::pbr::ScreenSpaceAmbientOcclusion::default());
+        }
+        app.insert_resource(bevy::light::GlobalAmbientLight {
+            brightness: 2000.0,
+            ..default()
+        });
+        let bricks = image(&mut app, HeightMap::bricks(256, 4, 0.15).to_image());
+        let grey = app
+            .world_mut()
+            .resource_mut::<Assets<StandardMaterial>>()
+            .add(Color::srgb(0.6, 0.6, 0.6));
+        mesostructure_plane(&mut app, MeshMaterial3d(grey.clone()), bricks, 0.05);
+        let slab = mesh(&mut app, Cuboid::new(0.3, 0.12, 0.3));
+        app.world_mut().spawn((
+            slab,
+            MeshMaterial3d(grey),
+            Transform::from_xyz(0.0, 0.06, 0.0),
+        ));
+        let frame = capture(&mut app, camera, 5);
+        (
+            crate::lighting::pixels(&screenshot(&mut app, &target)),
+            frame,
+        )
+    };
+    let (plain, frame) = render(false);
+    let (with_ssao, _) = render(true);
+    let (mut brighter, mut darker, mut total) = (0, 0, 0);
+    let mut sums = (0u32, 0u32);
+    for i in 0..plain.len() {
+        if frame.mhm[i][2] == 0.0 {
+            continue;
+        }
+        total += 1;
+        brighter += (with_ssao[i][1] > plain[i][1].saturating_add(1)) as u32;
+        darker += (with_ssao[i][1] + 2 < plain[i][1]) as u32;
+        sums.0 += plain[i][1] as u32;
+        sums.1 += with_ssao[i][1] as u32;
+    }
+    eprintln!(
+        "mean green without SSAO {}, with {}",
+        sums.0 / total,
+        sums.1 / total
+    );
+    eprintln!(
+        "SSAO on top of the mesostructure occlusion: {darker} of {total} mesostructure pixels \
+         darker, {brighter} brighter"
+    );
+    // Multiplying by SSAO's visibility (≤ 1) never brightens. (Bevy's SSAO darkens even a flat
+    // plane by about as much without this plugin: 160 → 151 in the same setting.)
+    assert!(brighter * 100 <= total, "SSAO brightened {brighter} pixels");
+    assert!(darker > 50, "SSAO darkened only {darker} pixels");
 }

@@ -3,6 +3,7 @@
 
 mod bad_input;
 mod bleeding;
+mod closed_forms;
 mod coarse;
 mod contract;
 mod deformation;
