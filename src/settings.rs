@@ -257,6 +257,21 @@ impl Mesostructure {
         (s, changed)
     }
 
+    /// Whether a frame needs the gradient map and the apex sets: a lighting term or a debug
+    /// view reads them. With none, the gradient and apex passes do not run.
+    pub fn needs_apex_sets(&self) -> bool {
+        self.occlusion
+            || self.micro_shadows
+            || crate::render::bleeding::bleeding_runs(self)
+            || self.debug_view != MesostructureDebugView::None
+    }
+
+    /// Whether a frame needs the height pass: the apex sets or the bump-mapped normal read its
+    /// images. With neither, no mesostructure pass runs and the surfaces are lit as by Bevy.
+    pub fn needs_height_map(&self) -> bool {
+        self.needs_apex_sets() || self.bump_mapping
+    }
+
     /// The apex search these settings describe (for the CPU oracle).
     pub fn apex_search(&self) -> ApexSearch {
         ApexSearch {

@@ -248,14 +248,15 @@ pub fn copy_capture(
         &ViewMesostructureTextures,
         &ExtractedCapture,
         &bevy::render::view::ExtractedView,
+        &crate::settings::ExtractedMesostructure,
     )>,
     phases: Res<bevy::render::render_phase::ViewSortedRenderPhases<super::height::HeightPhaseItem>>,
     device: Res<RenderDevice>,
     mut pending: ResMut<PendingCaptures>,
     mut ctx: RenderContext,
 ) {
-    let (t, capture, extracted_view) = view.into_inner();
-    if !super::view_has_mesostructure(&phases, extracted_view) {
+    let (t, capture, extracted_view, settings) = view.into_inner();
+    if !settings.0.needs_apex_sets() || !super::view_has_mesostructure(&phases, extracted_view) {
         return;
     }
     let readbacks = vec![

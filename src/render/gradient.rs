@@ -60,14 +60,15 @@ pub fn gradient_pass(
         &ViewMesostructureTextures,
         &ViewMesostructureBindGroups,
         &ViewMesostructureUniformOffset,
+        &crate::settings::ExtractedMesostructure,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     pipeline: Res<GradientPipeline>,
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, textures, bind_groups, offset) = view.into_inner();
-    if !view_has_mesostructure(&phases, extracted_view) {
+    let (extracted_view, textures, bind_groups, offset, settings) = view.into_inner();
+    if !settings.0.needs_apex_sets() || !view_has_mesostructure(&phases, extracted_view) {
         return;
     }
     let Some(compute) = pipeline_cache.get_compute_pipeline(pipeline.pipeline) else {

@@ -468,16 +468,18 @@ pub fn height_pass(
         &ViewDepthTexture,
         &ViewMesostructureTextures,
         Option<&MainPassResolutionOverride>,
+        &crate::settings::ExtractedMesostructure,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     mut ctx: RenderContext,
 ) {
     let view_entity = view.entity();
-    let (camera, extracted_view, depth, textures, resolution_override) = view.into_inner();
+    let (camera, extracted_view, depth, textures, resolution_override, settings) =
+        view.into_inner();
     let Some(phase) = phases.get(&extracted_view.retained_view_entity) else {
         return;
     };
-    if phase.items.is_empty() {
+    if phase.items.is_empty() || !settings.0.needs_height_map() {
         // No mesostructure surface in view: no pass at all (the later passes skip too).
         return;
     }

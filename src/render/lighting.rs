@@ -176,7 +176,7 @@ pub fn lighting_pass(
     };
     // The images are only current when their passes ran this frame; otherwise "open" and
     // "no mesostructure here".
-    let current = view_has_mesostructure(&phases, extracted_view);
+    let current = view_has_mesostructure(&phases, extracted_view) && settings.0.needs_height_map();
     let occlusion = if settings.0.occlusion && current {
         &textures.occlusion.default_view
     } else {

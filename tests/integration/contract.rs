@@ -463,10 +463,11 @@ fn effects_that_are_off_cost_nothing() {
     let mut app = app_with(|app| {
         app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
     });
-    let target = target(&mut app, 64, 64);
+    let first = target(&mut app, 64, 64);
+    // Every term off but bump mapping: only the height pass (for the bumped normal) runs.
     camera(
         &mut app,
-        &target,
+        &first,
         top_down(),
         Mesostructure {
             occlusion: false,
@@ -481,10 +482,47 @@ fn effects_that_are_off_cost_nothing() {
     mesostructure_plane(&mut app, material, map, 0.1);
     run(&mut app, 8);
     let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
-    assert!(pass_ran(store, "apex"), "the surface is on screen");
-    for pass in ["occlusion", "bleeding", "bleeding_composite"] {
+    assert!(pass_ran(store, "height"), "the surface is on screen");
+    for pass in [
+        "gradient",
+        "apex",
+        "occlusion",
+        "bleeding",
+        "bleeding_composite",
+    ] {
         assert!(!pass_ran(store, pass), "mesostructure/{pass} ran while off");
     }
+
+    // And without bump mapping, nothing runs at all.
+    let mut app = app_with(|app| {
+        app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
+    });
+    let target = target(&mut app, 64, 64);
+    camera(
+        &mut app,
+        &target,
+        top_down(),
+        Mesostructure {
+            occlusion: false,
+            bleeding: false,
+            micro_shadows: false,
+            bump_mapping: false,
+            ..default()
+        },
+    );
+    let map = image(&mut app, HeightMap::bricks(64, 4, 0.1).to_image());
+    let material = unlit(&mut app, Color::WHITE);
+    mesostructure_plane(&mut app, material, map, 0.1);
+    run(&mut app, 8);
+    let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
+    assert!(pass_ran(store, "lighting"), "the surface is lit");
+    for pass in ["height", "gradient", "apex"] {
+        assert!(
+            !pass_ran(store, pass),
+            "mesostructure/{pass} ran with every effect off"
+        );
+    }
+    let _ = camera;
 }
 
 /// Mean absolute error and RMSE of `values` against `truth`.

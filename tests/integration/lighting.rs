@@ -311,6 +311,7 @@ fn shared_materials_are_copied_not_changed() {
 /// off; returns (on, off) pixels and the captured frame.
 fn micro_shadow_pair(
     direction: Vec3,
+    map: &HeightMap,
 ) -> (
     Vec<[u8; 4]>,
     Vec<[u8; 4]>,
@@ -327,7 +328,7 @@ fn micro_shadow_pair(
             ..default()
         },
     );
-    let bricks = image(&mut app, HeightMap::bricks(256, 4, 0.15).to_image());
+    let bricks = image(&mut app, map.to_image());
     app.insert_resource(GlobalAmbientLight {
         brightness: 0.0,
         ..default()
@@ -361,7 +362,7 @@ fn light_from_straight_above_casts_no_micro_shadow() {
     if !gpu_or_skip() {
         return;
     }
-    let (on, off, _) = micro_shadow_pair(Vec3::NEG_Y);
+    let (on, off, _) = micro_shadow_pair(Vec3::NEG_Y, &HeightMap::bricks(256, 4, 0.15));
     let worst = on
         .iter()
         .zip(&off)
@@ -383,38 +384,42 @@ fn low_light_micro_shadows_agree_with_the_ground_truth() {
     // Light travelling towards +x, 20° above the horizon.
     let elevation = 20f32.to_radians();
     let direction = Vec3::new(elevation.cos(), -elevation.sin(), 0.0);
-    let (on, off, _) = micro_shadow_pair(direction);
-    let map = HeightMap::bricks(256, 4, 0.15);
-    let field = HeightField::new(256, 256, &map.values, 2.0, 0.1);
-    // The field's frame: x = u = world x, y = v = world z, z = up = world y.
-    let field_direction = Vec3::new(direction.x, direction.z, direction.y);
-    let (mut agree, mut total, mut shadowed, mut truly) = (0, 0, 0, 0);
-    for y in (4..SIZE - 4).step_by(2) {
-        for x in (4..SIZE - 4).step_by(2) {
-            let i = (y * SIZE + x) as usize;
-            if off[i][0] < 40 {
-                continue; // facing away from the light already: nothing to shadow
+    for (name, map) in [
+        ("bricks", HeightMap::bricks(256, 4, 0.15)),
+        ("stone", HeightMap::noise(256, 16, 3, 7)),
+    ] {
+        let (on, off, _) = micro_shadow_pair(direction, &map);
+        let field = HeightField::new(256, 256, &map.values, 2.0, 0.1);
+        // The field's frame: x = u = world x, y = v = world z, z = up = world y.
+        let field_direction = Vec3::new(direction.x, direction.z, direction.y);
+        let (mut agree, mut total, mut shadowed, mut truly) = (0, 0, 0, 0);
+        for y in (4..SIZE - 4).step_by(2) {
+            for x in (4..SIZE - 4).step_by(2) {
+                let i = (y * SIZE + x) as usize;
+                if off[i][0] < 40 {
+                    continue; // facing away from the light already: nothing to shadow
+                }
+                let ours = on[i][0] as f32 <= 0.5 * off[i][0] as f32;
+                let truth = !field.light_visible(top_down_uv(x, y, SIZE) * 256.0, field_direction);
+                agree += (ours == truth) as u32;
+                shadowed += ours as u32;
+                truly += truth as u32;
+                total += 1;
             }
-            let ours = on[i][0] as f32 <= 0.5 * off[i][0] as f32;
-            let truth = !field.light_visible(top_down_uv(x, y, SIZE) * 256.0, field_direction);
-            agree += (ours == truth) as u32;
-            shadowed += ours as u32;
-            truly += truth as u32;
-            total += 1;
         }
+        let share = agree as f32 / total as f32;
+        // Rendering without micro-shadows agrees wherever the truth is lit.
+        let baseline = (total - truly) as f32 / total as f32;
+        eprintln!(
+            "micro-shadows at 20°, {name}: {shadowed} of {total} lit pixels shadowed ({truly} in \
+             the ground truth); agreement {share:.3}, without micro-shadows {baseline:.3}"
+        );
+        assert!(shadowed > 10, "{name}: a low light casts micro-shadows");
+        assert!(
+            share > baseline,
+            "{name}: micro-shadows agree better than none: {share} vs {baseline}"
+        );
     }
-    let share = agree as f32 / total as f32;
-    // Rendering without micro-shadows agrees wherever the truth is lit.
-    let baseline = (total - truly) as f32 / total as f32;
-    eprintln!(
-        "micro-shadows at 20°: {shadowed} of {total} lit pixels shadowed ({truly} in the ground \
-         truth); agreement {share:.3}, without micro-shadows {baseline:.3}"
-    );
-    assert!(shadowed > 10, "a low light casts micro-shadows");
-    assert!(
-        share > baseline,
-        "micro-shadows agree better than none: {share} vs {baseline}"
-    );
 }
 
 #[test]
