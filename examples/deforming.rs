@@ -1,37 +1,33 @@
-//! The main example: a mesostructure object morphing between a sphere and a cube (the paper's
-//! Fig. 13), with a bricks height map, a moving light and a ground.
+//! The main example: a mesostructure object morphing between a sphere and a cube and back (the
+//! paper's Fig. 13), with a height map on it, a light circling it, and a ground.
 //!
-//! This build renders headless (no window support is compiled in yet) and writes PNG
-//! screenshots of the lit picture and of each debug view:
+//! Where there is a display it opens a window with a tuning panel (every camera and material
+//! setting, live; the frame time and the GPU time of each pass) and keys: O occlusion,
+//! M micro-shadows, B bleeding, N bump mapping, V next debug view, Space pause. Where there is
+//! none (or with `--headless`) it renders headless and writes PNG screenshots of the picture
+//! and of each debug view.
 //!
 //! ```text
-//! cargo run --example deforming -- [--frames N] [--out DIR] [--size WxH]
-//!     [--shape morph|sphere|plane] [--height-map bricks|rivets|weave|sine|stone|cone]
-//!     [--scale K] [--off occlusion,micro-shadows,bleeding,bump-mapping]
-//!     [--light-height H]
+//! cargo run --example deforming -- [--frames N] [--out DIR] [--size WxH] [--headless]
+//!     [--shape morph|sphere|cube|plane] [--height-map bricks|rivets|weave|sine|stone|cone]
+//!     [--scale K] [--off occlusion,micro-shadows,bleeding,bump-mapping] [--light-height H]
 //!     [--view none|height|gradient|apex-distance|apex-count|boundary|occlusion|
 //!             micro-shadow|bleeding|all]
 //! ```
 //!
-//! `--off` switches effects off (the file names get `_no-<effect>`); `--light-height` sets how
-//! high above the object the circling light stands (default 4; lower casts longer
-//! micro-shadows). The object is two-tone: the raised parts of the height map in brick red,
-//! the low parts in light grey, so that the bleeding of the red onto the grey shows.
+//! `--frames N` renders N frames, then the screenshots (in a window too, where they include the
+//! panel), then exits; `--off` switches effects off (the file names get `_no-<effect>`);
+//! `--light-height` sets how high the circling light stands (default 4; lower casts longer
+//! micro-shadows). The object is two-tone: the raised parts of the height map in brick red, the
+//! low parts in light grey, so that the bleeding of the red onto the grey shows.
 
-use std::{f32::consts::PI, path::PathBuf};
+#[path = "common/mod.rs"]
+mod common;
 
 use bevy::{
     asset::RenderAssetUsages,
-    camera::RenderTarget,
-    mesh::VertexAttributeValues,
+    mesh::{Indices, PrimitiveTopology},
     prelude::*,
-    render::{
-        RenderPlugin,
-        pipelined_rendering::PipelinedRenderingPlugin,
-        render_resource::{TextureFormat, TextureUsages},
-        view::screenshot::{Screenshot, save_to_disk},
-    },
-    window::ExitCondition,
 };
 use bevy_mesostructure::prelude::*;
 
@@ -39,11 +35,9 @@ use bevy_mesostructure::prelude::*;
 const EFFECTS: [&str; 4] = ["occlusion", "micro-shadows", "bleeding", "bump-mapping"];
 
 struct Args {
+    common: common::ExampleArgs,
     off: Vec<String>,
     light_height: f32,
-    frames: u32,
-    out: PathBuf,
-    size: UVec2,
     shape: String,
     height_map: String,
     scale: f32,
@@ -52,11 +46,9 @@ struct Args {
 
 fn parse_args() -> Args {
     let mut args = Args {
+        common: common::ExampleArgs::new("deforming"),
         off: vec![],
         light_height: 4.0,
-        frames: 30,
-        out: PathBuf::from("out/deforming"),
-        size: UVec2::new(512, 384),
         shape: "morph".into(),
         height_map: "bricks".into(),
         scale: 0.08,
@@ -65,17 +57,10 @@ fn parse_args() -> Args {
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
+        if args.common.take(&flag, &mut value) {
+            continue;
+        }
         match flag.as_str() {
-            "--frames" => args.frames = value().parse().expect("--frames N"),
-            "--out" => args.out = value().into(),
-            "--size" => {
-                let v = value();
-                let (w, h) = v.split_once('x').unwrap_or((&v, &v));
-                args.size = UVec2::new(
-                    w.parse().expect("--size WxH"),
-                    h.parse().expect("--size WxH"),
-                );
-            }
             "--shape" => args.shape = value(),
             "--height-map" => args.height_map = value(),
             "--scale" => args.scale = value().parse().expect("--scale K"),
@@ -115,117 +100,32 @@ fn parse_args() -> Args {
     args
 }
 
-/// A repeating sRGB colour texture over `map`: `high` where the height map is above 0.1 (the
-/// bumps and their walls), `low` on the floor between them.
-fn two_tone(map: &HeightMap, high: [u8; 3], low: [u8; 3]) -> Image {
-    use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
-    let data = map
-        .values
-        .iter()
-        .flat_map(|&v| {
-            let c = if v > 0.1 { high } else { low };
-            [c[0], c[1], c[2], 255]
-        })
-        .collect();
-    let mut image = Image::new(
-        bevy::render::render_resource::Extent3d {
-            width: map.width,
-            height: map.height,
-            depth_or_array_layers: 1,
-        },
-        bevy::render::render_resource::TextureDimension::D2,
-        data,
-        TextureFormat::Rgba8UnormSrgb,
-        RenderAssetUsages::RENDER_WORLD,
-    );
-    image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
-        address_mode_u: ImageAddressMode::Repeat,
-        address_mode_v: ImageAddressMode::Repeat,
-        ..ImageSamplerDescriptor::linear()
-    });
-    image
-}
-
-/// The morphing object: a UV sphere whose vertices blend towards the cube they project onto.
-#[derive(Component)]
-struct Morphing {
-    sphere: Vec<Vec3>,
-}
-
-fn cube_point(p: Vec3) -> Vec3 {
-    p / p.abs().max_element() * 0.8
-}
-
-fn morph(t: f32, m: &Morphing, mesh: &mut Mesh) {
-    let w = 0.5 - 0.5 * (t * 0.8).cos();
-    let positions: Vec<[f32; 3]> = m
-        .sphere
-        .iter()
-        .map(|p| p.lerp(cube_point(*p), w).to_array())
-        .collect();
-    let normals: Vec<[f32; 3]> = m
-        .sphere
-        .iter()
-        .map(|p| {
-            let n = p.normalize();
-            let a = n.abs();
-            let face = if a.x >= a.y && a.x >= a.z {
-                Vec3::X * n.x.signum()
-            } else if a.y >= a.z {
-                Vec3::Y * n.y.signum()
-            } else {
-                Vec3::Z * n.z.signum()
-            };
-            n.lerp(face, w).normalize().to_array()
-        })
-        .collect();
-    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
-    mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
-}
-
 fn main() {
     let args = parse_args();
-    std::fs::create_dir_all(&args.out).expect("cannot create the output folder");
-    println!(
-        "bevy_mesostructure deforming: no window support in this build; rendering {} frames \
-         headless, writing PNGs to {}",
-        args.frames,
-        args.out.display()
-    );
+    let suffix: String = args.off.iter().map(|e| format!("_no-{e}")).collect();
+    let shots = args
+        .views
+        .iter()
+        .map(|&view| common::view_shot(&format!("{}{suffix}", args.shape), view))
+        .collect();
+    let mut app = common::app(&args.common, "bevy_mesostructure: deforming", shots);
+    app.insert_resource(ClearColor(Color::srgb(0.55, 0.62, 0.72)))
+        // A bright sky: ambient light is what the mesostructure occlusion darkens.
+        .insert_resource(bevy::light::GlobalAmbientLight {
+            brightness: 1500.0,
+            ..default()
+        })
+        .insert_resource(LightHeight(args.light_height))
+        .add_systems(Update, (morph, circle_light));
+    setup(app.world_mut(), &args);
+    common::run(app);
+}
 
-    let mut app = App::new();
-    app.add_plugins(
-        DefaultPlugins
-            .set(WindowPlugin {
-                primary_window: None,
-                exit_condition: ExitCondition::DontExit,
-                ..default()
-            })
-            .set(RenderPlugin {
-                synchronous_pipeline_compilation: true,
-                ..default()
-            })
-            .disable::<PipelinedRenderingPlugin>(),
-    )
-    .add_plugins(MesostructurePlugin)
-    .insert_resource(ClearColor(Color::srgb(0.55, 0.62, 0.72)))
-    // A bright sky: ambient light is what the mesostructure occlusion darkens.
-    .insert_resource(bevy::light::GlobalAmbientLight {
-        brightness: 1500.0,
-        ..default()
-    });
-    app.finish();
-    app.cleanup();
+#[derive(Resource)]
+struct LightHeight(f32);
 
-    let world = app.world_mut();
-    let mut target = Image::new_target_texture(
-        args.size.x,
-        args.size.y,
-        TextureFormat::Rgba8UnormSrgb,
-        None,
-    );
-    target.texture_descriptor.usage |= TextureUsages::COPY_SRC;
-    let target = world.resource_mut::<Assets<Image>>().add(target);
+fn setup(world: &mut World, args: &Args) {
+    let target = world.resource::<common::Output>().target();
     let map = HeightMap::by_name(&args.height_map, 512).unwrap_or_else(|| {
         panic!(
             "unknown height map {}; one of {:?}",
@@ -234,33 +134,32 @@ fn main() {
         )
     });
     let height_map = world.resource_mut::<Assets<Image>>().add(map.to_image());
-    let colours =
-        world
-            .resource_mut::<Assets<Image>>()
-            .add(two_tone(&map, [191, 97, 71], [217, 214, 207]));
+    let colours = world.resource_mut::<Assets<Image>>().add(common::two_tone(
+        &map,
+        [191, 97, 71],
+        [217, 214, 207],
+    ));
 
-    let camera = world
-        .spawn((
-            Camera3d::default(),
-            RenderTarget::Image(target.clone().into()),
-            Msaa::Off,
-            Mesostructure {
-                occlusion: !args.off.iter().any(|e| e == "occlusion"),
-                micro_shadows: !args.off.iter().any(|e| e == "micro-shadows"),
-                bleeding: !args.off.iter().any(|e| e == "bleeding"),
-                bump_mapping: !args.off.iter().any(|e| e == "bump-mapping"),
-                ..default()
-            },
-            Transform::from_xyz(0.0, 1.3, 2.6).looking_at(Vec3::new(0.0, 0.1, 0.0), Vec3::Y),
-        ))
-        .id();
+    world.spawn((
+        Camera3d::default(),
+        target,
+        Msaa::Off,
+        Mesostructure {
+            occlusion: !args.off.iter().any(|e| e == "occlusion"),
+            micro_shadows: !args.off.iter().any(|e| e == "micro-shadows"),
+            bleeding: !args.off.iter().any(|e| e == "bleeding"),
+            bump_mapping: !args.off.iter().any(|e| e == "bump-mapping"),
+            ..default()
+        },
+        Transform::from_xyz(0.0, 1.3, 2.6).looking_at(Vec3::new(0.0, 0.1, 0.0), Vec3::Y),
+    ));
     world.spawn((
         DirectionalLight {
             illuminance: 8000.0,
             shadow_maps_enabled: true,
             ..default()
         },
-        Transform::from_xyz(2.0, 4.0, 1.5).looking_at(Vec3::ZERO, Vec3::Y),
+        Transform::from_xyz(2.0, args.light_height, 1.5).looking_at(Vec3::ZERO, Vec3::Y),
     ));
     let ground = world
         .resource_mut::<Assets<Mesh>>()
@@ -274,108 +173,154 @@ fn main() {
         Transform::from_xyz(0.0, -0.85, 0.0),
     ));
 
-    let uv_transform = if args.shape == "plane" {
-        bevy::math::Affine2::IDENTITY
-    } else {
-        bevy::math::Affine2::from_scale(Vec2::new(2.0, 1.0))
-    };
-    let brick_red = world
+    let bricks = world
         .resource_mut::<Assets<StandardMaterial>>()
         .add(StandardMaterial {
             base_color_texture: Some(colours),
-            uv_transform,
             perceptual_roughness: 0.8,
             ..default()
         });
     let material = MesostructureMaterial {
         height_map,
         scale: args.scale,
-        uv_transform,
+        ..default()
     };
-    match args.shape.as_str() {
-        "plane" => {
-            let plane = world
-                .resource_mut::<Assets<Mesh>>()
-                .add(Plane3d::default().mesh().size(2.4, 2.4));
-            world.spawn((
-                Mesh3d(plane),
-                MeshMaterial3d(brick_red),
-                material,
-                Transform::from_xyz(0.0, -0.2, 0.0),
-            ));
-        }
-        shape @ ("sphere" | "morph") => {
-            let mut sphere_mesh = Sphere::new(0.8).mesh().uv(96, 48);
-            sphere_mesh.asset_usage = RenderAssetUsages::default();
-            let Some(VertexAttributeValues::Float32x3(p)) =
-                sphere_mesh.attribute(Mesh::ATTRIBUTE_POSITION)
-            else {
-                unreachable!("a sphere has positions")
-            };
-            let morphing = Morphing {
-                sphere: p.iter().map(|q| Vec3::from_array(*q)).collect(),
-            };
-            let handle = world.resource_mut::<Assets<Mesh>>().add(sphere_mesh);
-            let mut entity = world.spawn((
-                Mesh3d(handle),
-                MeshMaterial3d(brick_red),
-                material,
-                Transform::from_rotation(Quat::from_rotation_y(0.4)),
-            ));
-            if shape == "morph" {
-                entity.insert(morphing);
-            }
-        }
+    let (mesh, transform, blend) = match args.shape.as_str() {
+        "plane" => (
+            Plane3d::default().mesh().size(2.4, 2.4).build(),
+            Transform::from_xyz(0.0, -0.2, 0.0),
+            None,
+        ),
+        "sphere" => (cube_sphere(24, 0.0), Transform::default(), None),
+        "cube" => (cube_sphere(24, 1.0), Transform::default(), None),
+        "morph" => (cube_sphere(24, 0.0), Transform::default(), Some(())),
         other => panic!("unknown shape {other}"),
+    };
+    let mesh = world.resource_mut::<Assets<Mesh>>().add(mesh);
+    let mut entity = world.spawn((
+        Mesh3d(mesh),
+        MeshMaterial3d(bricks),
+        material,
+        transform.with_rotation(Quat::from_rotation_y(0.4)),
+    ));
+    if blend.is_some() {
+        entity.insert(Morphing);
     }
+}
 
-    for frame in 0..args.frames {
-        let t = frame as f32 / 30.0;
-        let world = app.world_mut();
-        let mut q = world.query::<(&Morphing, &Mesh3d)>();
-        let updates: Vec<_> = q
-            .iter(world)
-            .map(|(m, h)| {
-                (
-                    Morphing {
-                        sphere: m.sphere.clone(),
-                    },
-                    h.0.clone(),
-                )
-            })
-            .collect();
-        for (m, h) in updates {
-            if let Some(mut mesh) = world.resource_mut::<Assets<Mesh>>().get_mut(&h) {
-                morph(t + PI * 0.6, &m, &mut mesh);
+/// The morphing object.
+#[derive(Component)]
+struct Morphing;
+
+/// A sphere of radius 0.8 made of six subdivided cube faces (`n × n` quads each), blended by
+/// `w` towards the cube of half-size 0.8 it projects onto. Each face has its own vertices and
+/// UVs (0–1), so the cube's edges are mesh edges: at `w = 1` the faces are flat with hard
+/// edges, at `w = 0` the duplicated edge vertices coincide and the sphere is smooth.
+fn cube_sphere(n: u32, w: f32) -> Mesh {
+    let mut positions = vec![];
+    let mut normals = vec![];
+    let mut uvs = vec![];
+    let mut indices = vec![];
+    for (face, up) in [
+        Vec3::X,
+        Vec3::NEG_X,
+        Vec3::Y,
+        Vec3::NEG_Y,
+        Vec3::Z,
+        Vec3::NEG_Z,
+    ]
+    .into_iter()
+    .zip([Vec3::Y, Vec3::Y, Vec3::NEG_Z, Vec3::Z, Vec3::Y, Vec3::Y])
+    {
+        let right = up.cross(face);
+        let base = positions.len() as u32;
+        for j in 0..=n {
+            for i in 0..=n {
+                let (s, t) = (i as f32 / n as f32, j as f32 / n as f32);
+                let cube = face + right * (2.0 * s - 1.0) + up * (1.0 - 2.0 * t);
+                let (p, normal) = morph_point(cube, face, w);
+                positions.push(p.to_array());
+                normals.push(normal.to_array());
+                uvs.push([s, t]);
             }
         }
-        // The light circles the object.
-        let mut lights = world.query_filtered::<&mut Transform, With<DirectionalLight>>();
-        for mut light in lights.iter_mut(world) {
-            let (s, c) = (t * 0.5).sin_cos();
-            *light = Transform::from_xyz(2.5 * c, args.light_height, 2.5 * s)
-                .looking_at(Vec3::ZERO, Vec3::Y);
+        for j in 0..n {
+            for i in 0..n {
+                let a = base + j * (n + 1) + i;
+                let (b, c, d) = (a + 1, a + n + 1, a + n + 2);
+                indices.extend([a, c, b, b, c, d]);
+            }
         }
-        app.update();
     }
-    for view in &args.views {
-        app.world_mut()
-            .get_mut::<Mesostructure>(camera)
-            .unwrap()
-            .debug_view = *view;
-        for _ in 0..2 {
-            app.update();
+    Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::default(),
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+    .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uvs)
+    .with_inserted_indices(Indices::U32(indices))
+}
+
+/// The point of the unit cube `cube` (on face `face`) on the blend from the sphere (w = 0) to
+/// the cube (w = 1), radius/half-size 0.8, and its normal.
+fn morph_point(cube: Vec3, face: Vec3, w: f32) -> (Vec3, Vec3) {
+    let sphere = cube.normalize();
+    let p = sphere.lerp(cube, w) * 0.8;
+    (p, sphere.lerp(face, w).normalize())
+}
+
+fn morph(
+    clock: Res<common::Clock>,
+    objects: Query<&Mesh3d, With<Morphing>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+) {
+    let w = 0.5 - 0.5 * ((clock.t + 1.9) * 0.8).cos();
+    for handle in &objects {
+        let Some(mut mesh) = meshes.get_mut(&handle.0) else {
+            continue;
+        };
+        // Positions and normals of the blend, recomputed from the cube point each vertex's UV
+        // and face stand for.
+        let Some(bevy::mesh::VertexAttributeValues::Float32x3(old)) =
+            mesh.attribute(Mesh::ATTRIBUTE_NORMAL)
+        else {
+            continue;
+        };
+        let Some(bevy::mesh::VertexAttributeValues::Float32x2(uvs)) =
+            mesh.attribute(Mesh::ATTRIBUTE_UV_0)
+        else {
+            continue;
+        };
+        let per_face = old.len() / 6;
+        let (mut positions, mut normals) = (Vec::with_capacity(old.len()), vec![]);
+        for (k, uv) in uvs.iter().enumerate() {
+            let face = [
+                Vec3::X,
+                Vec3::NEG_X,
+                Vec3::Y,
+                Vec3::NEG_Y,
+                Vec3::Z,
+                Vec3::NEG_Z,
+            ][k / per_face];
+            let up = [Vec3::Y, Vec3::Y, Vec3::NEG_Z, Vec3::Z, Vec3::Y, Vec3::Y][k / per_face];
+            let cube = face + up.cross(face) * (2.0 * uv[0] - 1.0) + up * (1.0 - 2.0 * uv[1]);
+            let (p, n) = morph_point(cube, face, w);
+            positions.push(p.to_array());
+            normals.push(n.to_array());
         }
-        let suffix: String = args.off.iter().map(|e| format!("_no-{e}")).collect();
-        let path = args
-            .out
-            .join(format!("{}_{}{suffix}.png", args.shape, view.name()));
-        app.world_mut()
-            .spawn(Screenshot::image(target.clone()))
-            .observe(save_to_disk(path.clone()));
-        for _ in 0..3 {
-            app.update();
-        }
-        println!("wrote {}", path.display());
+        mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+        mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
+    }
+}
+
+fn circle_light(
+    clock: Res<common::Clock>,
+    height: Res<LightHeight>,
+    mut lights: Query<&mut Transform, With<DirectionalLight>>,
+) {
+    let (s, c) = (clock.t * 0.5).sin_cos();
+    for mut light in &mut lights {
+        *light = Transform::from_xyz(2.5 * c, height.0, 2.5 * s).looking_at(Vec3::ZERO, Vec3::Y);
     }
 }

@@ -189,28 +189,48 @@ impl MesostructureDebugView {
 }
 
 impl Mesostructure {
+    /// The valid range of each numeric field, `(name, min, max)`: what [`Self::sanitized`]
+    /// clamps to, and what an inspector's sliders should offer.
+    pub const RANGES: [(&'static str, f32, f32); 9] = [
+        ("apex_directions", 0.0, MAX_APEX_DIRECTIONS as f32),
+        ("max_ascent_steps", 1.0, 512.0),
+        ("max_sample_radius", 1.0, 256.0),
+        ("depth_discontinuity", 0.0001, 1.0),
+        ("micro_shadow_softness", 0.0, 0.5),
+        ("bleeding_samples", 1.0, 16.0),
+        ("ambient_weight", 0.0, 4.0),
+        ("direct_weight", 0.0, 4.0),
+        ("bleeding_weight", 0.0, 4.0),
+    ];
+
+    /// The valid range of the numeric field `name` (see [`Self::RANGES`]).
+    pub fn range(name: &str) -> Option<(f32, f32)> {
+        Self::RANGES
+            .iter()
+            .find(|(n, _, _)| *n == name)
+            .map(|&(_, lo, hi)| (lo, hi))
+    }
+
     /// A copy with every field inside its documented range; the names of the fields that had
     /// to be changed.
     pub fn sanitized(&self) -> (Self, Vec<&'static str>) {
         let d = Self::default();
         let mut s = self.clone();
         let mut changed = Vec::new();
-        let mut clamp_u32 = |v: &mut u32, lo: u32, hi: u32, name| {
+        let mut clamp_u32 = |v: &mut u32, name: &'static str| {
+            let (lo, hi) = Self::range(name).expect("a documented range");
+            let (lo, hi) = (lo as u32, hi as u32);
             if *v < lo || *v > hi {
                 *v = (*v).clamp(lo, hi);
                 changed.push(name);
             }
         };
-        clamp_u32(
-            &mut s.apex_directions,
-            0,
-            MAX_APEX_DIRECTIONS,
-            "apex_directions",
-        );
-        clamp_u32(&mut s.max_ascent_steps, 1, 512, "max_ascent_steps");
-        clamp_u32(&mut s.max_sample_radius, 1, 256, "max_sample_radius");
-        clamp_u32(&mut s.bleeding_samples, 1, 16, "bleeding_samples");
-        let mut clamp_f32 = |v: &mut f32, default: f32, lo: f32, hi: f32, name| {
+        clamp_u32(&mut s.apex_directions, "apex_directions");
+        clamp_u32(&mut s.max_ascent_steps, "max_ascent_steps");
+        clamp_u32(&mut s.max_sample_radius, "max_sample_radius");
+        clamp_u32(&mut s.bleeding_samples, "bleeding_samples");
+        let mut clamp_f32 = |v: &mut f32, default: f32, name: &'static str| {
+            let (lo, hi) = Self::range(name).expect("a documented range");
             if !v.is_finite() {
                 *v = default;
                 changed.push(name);
@@ -219,39 +239,17 @@ impl Mesostructure {
                 changed.push(name);
             }
         };
-        clamp_f32(
-            &mut s.ambient_weight,
-            d.ambient_weight,
-            0.0,
-            4.0,
-            "ambient_weight",
-        );
-        clamp_f32(
-            &mut s.direct_weight,
-            d.direct_weight,
-            0.0,
-            4.0,
-            "direct_weight",
-        );
-        clamp_f32(
-            &mut s.bleeding_weight,
-            d.bleeding_weight,
-            0.0,
-            4.0,
-            "bleeding_weight",
-        );
+        clamp_f32(&mut s.ambient_weight, d.ambient_weight, "ambient_weight");
+        clamp_f32(&mut s.direct_weight, d.direct_weight, "direct_weight");
+        clamp_f32(&mut s.bleeding_weight, d.bleeding_weight, "bleeding_weight");
         clamp_f32(
             &mut s.micro_shadow_softness,
             d.micro_shadow_softness,
-            0.0,
-            0.5,
             "micro_shadow_softness",
         );
         clamp_f32(
             &mut s.depth_discontinuity,
             d.depth_discontinuity,
-            0.0001,
-            1.0,
             "depth_discontinuity",
         );
         (s, changed)
@@ -411,6 +409,25 @@ mod tests {
         assert_eq!((s.bleeding_weight, s.direct_weight), (1.0, 0.0));
         assert_eq!(s.bleeding_samples, 1);
         assert!(Mesostructure::default().sanitized().1.is_empty());
+    }
+
+    #[test]
+    fn every_range_names_a_field_and_holds_its_default() {
+        use bevy::reflect::{Reflect, structs::Struct};
+        let d = Mesostructure::default();
+        for (name, lo, hi) in Mesostructure::RANGES {
+            let value = d.field(name).unwrap_or_else(|| panic!("no field {name}"));
+            let v = value
+                .try_downcast_ref::<f32>()
+                .copied()
+                .or(value.try_downcast_ref::<u32>().map(|&u| u as f32))
+                .unwrap_or_else(|| panic!("{name} is not a number"));
+            assert!(
+                (lo..=hi).contains(&v),
+                "default {name} = {v} outside {lo}..={hi}"
+            );
+        }
+        let _ = d.as_reflect();
     }
 
     #[test]

@@ -61,7 +61,9 @@ fn build_app(plugin: bool, more: impl FnOnce(&mut App)) -> App {
             synchronous_pipeline_compilation: true,
             ..default()
         })
-        .disable::<PipelinedRenderingPlugin>();
+        .disable::<PipelinedRenderingPlugin>()
+        // Headless: no event loop (the examples' window support is compiled in).
+        .disable::<bevy::winit::WinitPlugin>();
     if std::env::var_os("MESOSTRUCTURE_TEST_LOG").is_some() {
         app.add_plugins(plugins);
     } else {

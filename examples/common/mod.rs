@@ -1,0 +1,326 @@
+//! Shared by the examples: a window with a tuning panel where there is a display, headless PNG
+//! screenshots where there is none; `--frames N --out DIR` in both; keys; on-screen timings.
+//!
+//! Each example includes it with `#[path = "common/mod.rs"] mod common;`.
+
+#![allow(dead_code)] // Each example uses its own part of it.
+
+pub mod meshes;
+pub mod panel;
+
+use std::path::PathBuf;
+
+use bevy::{
+    app::AppExit,
+    camera::RenderTarget,
+    diagnostic::FrameTimeDiagnosticsPlugin,
+    prelude::*,
+    render::{
+        RenderPlugin,
+        diagnostic::RenderDiagnosticsPlugin,
+        pipelined_rendering::PipelinedRenderingPlugin,
+        render_resource::{TextureFormat, TextureUsages},
+        view::screenshot::{Screenshot, save_to_disk},
+    },
+    window::{ExitCondition, WindowResolution},
+};
+use bevy_mesostructure::prelude::*;
+
+/// The options every example takes.
+pub struct ExampleArgs {
+    /// Frames to render before the screenshots; `None` in a window = run until closed.
+    pub frames: Option<u32>,
+    /// Where the screenshots go.
+    pub out: PathBuf,
+    /// Picture size in pixels (`--size`; default 512×384 headless, 1280×720 in a window).
+    pub size: UVec2,
+    /// Whether `--size` was given.
+    pub sized: bool,
+    /// Render without a window even where there is a display.
+    pub headless: bool,
+}
+
+impl ExampleArgs {
+    /// The defaults: 512×384 into `out/<name>/`.
+    pub fn new(name: &str) -> Self {
+        Self {
+            frames: None,
+            out: PathBuf::from("out").join(name),
+            size: UVec2::new(512, 384),
+            sized: false,
+            headless: false,
+        }
+    }
+
+    /// Takes `flag` (and its value) if it is one of the common flags.
+    pub fn take(&mut self, flag: &str, value: &mut dyn FnMut() -> String) -> bool {
+        match flag {
+            "--frames" => self.frames = Some(value().parse().expect("--frames N")),
+            "--out" => self.out = value().into(),
+            "--headless" => self.headless = true,
+            "--size" => {
+                let v = value();
+                let (w, h) = v.split_once('x').unwrap_or((&v, &v));
+                self.size = UVec2::new(
+                    w.parse().expect("--size N or WxH"),
+                    h.parse().expect("--size N or WxH"),
+                );
+                self.sized = true;
+            }
+            _ => return false,
+        }
+        true
+    }
+
+    /// Whether this run opens a window.
+    pub fn windowed(&self) -> bool {
+        !self.headless && display_available()
+    }
+
+    /// Frames before the first screenshot.
+    pub fn warm_up(&self) -> u32 {
+        self.frames.unwrap_or(30)
+    }
+}
+
+/// Whether a window can be opened here: an X11 or Wayland display is named.
+pub fn display_available() -> bool {
+    ["DISPLAY", "WAYLAND_DISPLAY"]
+        .iter()
+        .any(|v| std::env::var(v).is_ok_and(|s| !s.is_empty()))
+}
+
+/// Where the camera renders: the window, or an image that the screenshots read.
+#[derive(Resource, Clone)]
+pub struct Output(pub Option<Handle<Image>>);
+
+impl Output {
+    /// The render target for the example's camera.
+    pub fn target(&self) -> RenderTarget {
+        match &self.0 {
+            Some(image) => RenderTarget::Image(image.clone().into()),
+            None => RenderTarget::default(),
+        }
+    }
+}
+
+/// One scripted screenshot: `apply` changes the world, two frames later the picture is saved
+/// as `file` (in `--out`).
+pub struct Shot {
+    /// File name.
+    pub file: String,
+    /// What to change before it.
+    pub apply: Box<dyn Fn(&mut World) + Send + Sync>,
+}
+
+/// The screenshots to take after the warm-up, and where the script is.
+#[derive(Resource)]
+pub struct Script {
+    shots: Vec<Shot>,
+    frame: u32,
+    warm_up: u32,
+    next: usize,
+    wait: u32,
+    exit_when_done: bool,
+    pub(crate) out: PathBuf,
+}
+
+/// The app: Bevy with a window (and the tuning panel) or headless, the plugin, timing
+/// diagnostics, and the screenshot script.
+pub fn app(args: &ExampleArgs, title: &str, shots: Vec<Shot>) -> App {
+    std::fs::create_dir_all(&args.out).expect("cannot create the output folder");
+    let windowed = args.windowed();
+    let size = if windowed && !args.sized {
+        UVec2::new(1280, 720)
+    } else {
+        args.size
+    };
+    let mut app = App::new();
+    let window = WindowPlugin {
+        primary_window: windowed.then(|| Window {
+            title: title.into(),
+            resolution: WindowResolution::new(size.x, size.y),
+            ..default()
+        }),
+        exit_condition: if windowed {
+            ExitCondition::OnPrimaryClosed
+        } else {
+            ExitCondition::DontExit
+        },
+        ..default()
+    };
+    let plugins = DefaultPlugins.set(window).set(RenderPlugin {
+        synchronous_pipeline_compilation: !windowed,
+        ..default()
+    });
+    if windowed {
+        app.add_plugins(plugins);
+    } else {
+        // Headless: no event loop (no display to connect to); the frames are driven one by one
+        // by `run`.
+        app.add_plugins(
+            plugins
+                .disable::<bevy::winit::WinitPlugin>()
+                .disable::<PipelinedRenderingPlugin>(),
+        );
+    }
+    app.add_plugins((
+        MesostructurePlugin,
+        FrameTimeDiagnosticsPlugin::default(),
+        RenderDiagnosticsPlugin,
+    ));
+    let output = if windowed {
+        panel::add(&mut app);
+        println!(
+            "{title}: window {}×{}; keys: O occlusion, M micro-shadows, B bleeding, N bump \
+             mapping, V next debug view, Space pause, F12 screenshot (into {})",
+            size.x,
+            size.y,
+            args.out.display()
+        );
+        Output(None)
+    } else {
+        println!(
+            "{title}: no display (or --headless): rendering {} frames headless, writing PNGs to {}",
+            args.warm_up(),
+            args.out.display()
+        );
+        let mut image = Image::new_target_texture(
+            args.size.x,
+            args.size.y,
+            TextureFormat::Rgba8UnormSrgb,
+            None,
+        );
+        image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+        Output(Some(
+            app.world_mut().resource_mut::<Assets<Image>>().add(image),
+        ))
+    };
+    app.insert_resource(output)
+        .insert_resource(Script {
+            shots,
+            frame: 0,
+            warm_up: args.warm_up(),
+            next: 0,
+            wait: 0,
+            exit_when_done: !windowed || args.frames.is_some(),
+            out: args.out.clone(),
+        })
+        .init_resource::<Clock>()
+        .add_systems(Update, advance_clock)
+        .add_systems(Last, run_script);
+    app
+}
+
+/// Runs the app: the window's event loop, or frame by frame until the script is done.
+pub fn run(mut app: App) {
+    if app.world().resource::<Output>().0.is_some() {
+        app.finish();
+        app.cleanup();
+        while app.should_exit().is_none() {
+            app.update();
+        }
+        panel::print_timings(app.world());
+    } else {
+        app.run();
+    }
+}
+
+/// Animation time: 1/30 s per frame (so that screenshots do not depend on the frame rate),
+/// stopped while paused.
+#[derive(Resource, Default)]
+pub struct Clock {
+    /// Seconds of animation.
+    pub t: f32,
+    /// Space toggles it.
+    pub paused: bool,
+}
+
+fn advance_clock(mut clock: ResMut<Clock>) {
+    if !clock.paused {
+        clock.t += 1.0 / 30.0;
+    }
+}
+
+fn run_script(world: &mut World) {
+    let mut script = world.resource_mut::<Script>();
+    script.frame += 1;
+    if script.frame < script.warm_up || !script.exit_when_done {
+        return;
+    }
+    if script.wait > 0 {
+        script.wait -= 1;
+        return;
+    }
+    let index = script.next / 2;
+    let stage = script.next % 2;
+    if index >= script.shots.len() {
+        world.write_message(AppExit::Success);
+        return;
+    }
+    script.next += 1;
+    if stage == 0 {
+        // Change the world, let two frames pass.
+        let shot = std::mem::replace(&mut script.shots[index].apply, Box::new(|_: &mut World| {}));
+        script.wait = 2;
+        shot(world);
+    } else {
+        let path = script.out.join(&script.shots[index].file);
+        script.wait = 3;
+        let screenshot = match &world.resource::<Output>().0 {
+            Some(image) => Screenshot::image(image.clone()),
+            None => Screenshot::primary_window(),
+        };
+        world.spawn(screenshot).observe(save_to_disk(path.clone()));
+        println!("wrote {}", path.display());
+    }
+}
+
+/// A shot of the camera's debug view `view` (after the other settings of `apply`), named
+/// `<prefix>_<view>.png`.
+pub fn view_shot(prefix: &str, view: MesostructureDebugView) -> Shot {
+    Shot {
+        file: format!("{prefix}_{}.png", view.name()),
+        apply: Box::new(move |world: &mut World| {
+            let mut q = world.query::<&mut Mesostructure>();
+            for mut m in q.iter_mut(world) {
+                m.debug_view = view;
+            }
+        }),
+    }
+}
+
+/// A repeating sRGB colour texture over `map`: `high` where the height map is above 0.1 (the
+/// bumps and their walls), `low` on the floor between them.
+pub fn two_tone(map: &HeightMap, high: [u8; 3], low: [u8; 3]) -> Image {
+    let data = map
+        .values
+        .iter()
+        .flat_map(|&v| {
+            let c = if v > 0.1 { high } else { low };
+            [c[0], c[1], c[2], 255]
+        })
+        .collect();
+    use bevy::{
+        asset::RenderAssetUsages,
+        image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor},
+        render::render_resource::{Extent3d, TextureDimension},
+    };
+    let mut image = Image::new(
+        Extent3d {
+            width: map.width,
+            height: map.height,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        data,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
+        address_mode_u: ImageAddressMode::Repeat,
+        address_mode_v: ImageAddressMode::Repeat,
+        ..ImageSamplerDescriptor::linear()
+    });
+    image
+}

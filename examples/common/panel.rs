@@ -1,0 +1,211 @@
+//! The tuning panel of the windowed examples: every camera and material setting, edited live
+//! through bevy-inspector-egui (field docs as tooltips, sliders over the documented ranges),
+//! the frame time and the GPU time of each pass, and keys for the effects.
+
+use bevy::{
+    diagnostic::{DiagnosticPath, DiagnosticsStore, FrameTimeDiagnosticsPlugin},
+    prelude::*,
+    reflect::{TypeInfo, Typed},
+};
+use bevy_egui::{EguiContext, EguiPlugin, EguiPrimaryContextPass, PrimaryEguiContext, egui};
+use bevy_inspector_egui::{
+    DefaultInspectorConfigPlugin,
+    inspector_options::{
+        InspectorOptions, ReflectInspectorOptions, Target,
+        std_options::{NumberDisplay, NumberOptions},
+    },
+};
+use bevy_mesostructure::prelude::*;
+
+/// The passes whose GPU time the panel shows, in frame order.
+pub const PASSES: [&str; 7] = [
+    "height",
+    "gradient",
+    "apex",
+    "occlusion",
+    "lighting",
+    "bleeding",
+    "bleeding_composite",
+];
+
+/// Adds egui, the inspector's type support, the slider ranges, the panel and the keys.
+pub fn add(app: &mut App) {
+    app.add_plugins((EguiPlugin::default(), DefaultInspectorConfigPlugin))
+        .add_systems(EguiPrimaryContextPass, panel)
+        .add_systems(Update, keys);
+    register_ranges(app);
+}
+
+/// Slider ranges from `Mesostructure::RANGES` (the same ranges the plugin clamps to) and for
+/// the material's scale.
+fn register_ranges(app: &mut App) {
+    let registry = app.world().resource::<AppTypeRegistry>().clone();
+    let mut registry = registry.write();
+    let field_index = |info: &TypeInfo, name: &str| match info {
+        TypeInfo::Struct(s) => s.index_of(name),
+        _ => None,
+    };
+    let mut camera = InspectorOptions::new();
+    for (name, lo, hi) in Mesostructure::RANGES {
+        let Some(i) = field_index(Mesostructure::type_info(), name) else {
+            continue;
+        };
+        if matches!(
+            name,
+            "apex_directions" | "max_ascent_steps" | "max_sample_radius" | "bleeding_samples"
+        ) {
+            camera.insert(
+                Target::Field(i),
+                NumberOptions::<u32>::between(lo as u32, hi as u32),
+            );
+        } else {
+            camera.insert(Target::Field(i), slider(lo, hi));
+        }
+    }
+    if let Some(registration) = registry.get_mut(std::any::TypeId::of::<Mesostructure>()) {
+        registration.insert(ReflectInspectorOptions(camera));
+    }
+    let mut material = InspectorOptions::new();
+    if let Some(i) = field_index(MesostructureMaterial::type_info(), "scale") {
+        material.insert(Target::Field(i), slider(0.0, 1.0));
+    }
+    if let Some(registration) = registry.get_mut(std::any::TypeId::of::<MesostructureMaterial>()) {
+        registration.insert(ReflectInspectorOptions(material));
+    }
+}
+
+fn slider(lo: f32, hi: f32) -> NumberOptions<f32> {
+    let mut options = NumberOptions::between(lo, hi);
+    options.display = NumberDisplay::Slider;
+    options
+}
+
+/// Average GPU (or, where the driver has no timestamps, CPU) milliseconds of a pass.
+pub fn pass_time(store: &DiagnosticsStore, pass: &str) -> Option<f64> {
+    let path = |kind| DiagnosticPath::new(format!("render/mesostructure/{pass}/elapsed_{kind}"));
+    store
+        .get(&path("gpu"))
+        .and_then(|d| d.average())
+        .or_else(|| store.get(&path("cpu")).and_then(|d| d.average()))
+}
+
+fn panel(world: &mut World) {
+    let Ok(mut context) = world
+        .query_filtered::<&mut EguiContext, With<PrimaryEguiContext>>()
+        .single_mut(world)
+        .map(|c| c.clone())
+    else {
+        return;
+    };
+    egui::Window::new("Mesostructure")
+        .default_width(320.0)
+        .show(context.get_mut(), |ui| {
+            ui.label(
+                "O occlusion · M micro-shadows · B bleeding · N bump mapping · V view · \
+                 Space pause · F12 screenshot",
+            );
+            let store = world.resource::<DiagnosticsStore>();
+            let frame = store
+                .get(&FrameTimeDiagnosticsPlugin::FRAME_TIME)
+                .and_then(|d| d.smoothed());
+            ui.label(format!("frame {:.2} ms", frame.unwrap_or(0.0)));
+            let mut total = 0.0;
+            for pass in PASSES {
+                if let Some(ms) = pass_time(store, pass) {
+                    total += ms;
+                    ui.label(format!("  {pass}: {ms:.3} ms"));
+                }
+            }
+            ui.label(format!("  all passes: {total:.3} ms"));
+            egui::ScrollArea::vertical().show(ui, |ui| {
+                let cameras: Vec<Entity> = world
+                    .query_filtered::<Entity, With<Mesostructure>>()
+                    .iter(world)
+                    .collect();
+                for camera in cameras {
+                    egui::CollapsingHeader::new(format!("camera {camera}: Mesostructure"))
+                        .default_open(true)
+                        .show(ui, |ui| {
+                            let mut settings = world.get::<Mesostructure>(camera).unwrap().clone();
+                            if bevy_inspector_egui::bevy_inspector::ui_for_value(
+                                &mut settings,
+                                ui,
+                                world,
+                            ) {
+                                world.entity_mut(camera).insert(settings);
+                            }
+                        });
+                }
+                let meshes: Vec<Entity> = world
+                    .query_filtered::<Entity, With<MesostructureMaterial>>()
+                    .iter(world)
+                    .collect();
+                for mesh in meshes {
+                    ui.collapsing(format!("mesh {mesh}: MesostructureMaterial"), |ui| {
+                        let mut material =
+                            world.get::<MesostructureMaterial>(mesh).unwrap().clone();
+                        if bevy_inspector_egui::bevy_inspector::ui_for_value(
+                            &mut material,
+                            ui,
+                            world,
+                        ) {
+                            world.entity_mut(mesh).insert(material);
+                        }
+                    });
+                }
+            });
+        });
+}
+
+fn keys(
+    mut commands: Commands,
+    input: Res<ButtonInput<KeyCode>>,
+    mut cameras: Query<&mut Mesostructure>,
+    mut clock: ResMut<super::Clock>,
+    script: Res<super::Script>,
+    mut taken: Local<u32>,
+) {
+    if input.just_pressed(KeyCode::Space) {
+        clock.paused = !clock.paused;
+    }
+    if input.just_pressed(KeyCode::F12) {
+        *taken += 1;
+        let path = script.out.join(format!("screenshot-{}.png", *taken));
+        println!("F12: writing {}", path.display());
+        commands
+            .spawn(bevy::render::view::screenshot::Screenshot::primary_window())
+            .observe(bevy::render::view::screenshot::save_to_disk(path));
+    }
+    for mut m in &mut cameras {
+        if input.just_pressed(KeyCode::KeyO) {
+            m.occlusion = !m.occlusion;
+        }
+        if input.just_pressed(KeyCode::KeyM) {
+            m.micro_shadows = !m.micro_shadows;
+        }
+        if input.just_pressed(KeyCode::KeyB) {
+            m.bleeding = !m.bleeding;
+        }
+        if input.just_pressed(KeyCode::KeyN) {
+            m.bump_mapping = !m.bump_mapping;
+        }
+        if input.just_pressed(KeyCode::KeyV) {
+            m.debug_view = m.debug_view.next();
+        }
+    }
+}
+
+/// Prints the average time of each pass (headless runs: the software driver's figures are
+/// relative only).
+pub fn print_timings(world: &World) {
+    let Some(store) = world.get_resource::<DiagnosticsStore>() else {
+        return;
+    };
+    let times: Vec<String> = PASSES
+        .iter()
+        .filter_map(|p| pass_time(store, p).map(|ms| format!("{p} {ms:.2} ms")))
+        .collect();
+    if !times.is_empty() {
+        println!("average time per pass: {}", times.join(", "));
+    }
+}
