@@ -7,6 +7,7 @@ mod closed_forms;
 mod coarse;
 mod contract;
 mod deformation;
+mod files;
 mod harness;
 mod lighting;
 mod micro_shadows;
