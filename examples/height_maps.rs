@@ -6,8 +6,8 @@
 //! cargo run --example height_maps [-- SIZE]
 //! ```
 
-use image::{DynamicImage, ImageBuffer, Luma, Rgb};
 use bevy_mesostructure::height_maps::HeightMap;
+use image::{DynamicImage, ImageBuffer, Luma, Rgb};
 
 fn main() {
     let size: u32 = std::env::args()

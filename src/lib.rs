@@ -55,8 +55,21 @@
 //! Missing or still-loading height maps, unsupported formats, meshes without UVs or normals,
 //! scales that are not finite and positive, MSAA on the camera, zero-sized viewports: each gets
 //! one warning, and the mesh or camera renders as it would without the plugin.
+//!
+//! ## Settings
+//! Every field of [`Mesostructure`] and [`MesostructureMaterial`] is documented with its unit and
+//! range ([`Mesostructure::RANGES`]); each effect switches off by itself and then costs nothing
+//! (with every term off and no bump mapping, no pass runs at all). The weights λa, λs, λd of the
+//! paper's eq. (2) are `ambient_weight`, `direct_weight` and `bleeding_weight`.
+//!
+//! ## Limits
+//! Silhouettes are not displaced; near the screen edge and behind other objects the occluders
+//! of a point may be out of sight and the effect fades; horizons are measured from the local
+//! tangent plane, so structures as large as the core's curvature over-darken; structures
+//! narrower than about two pixels fade to the filtered height map. The README says what to do
+//! about each; `docs/accuracy.md` has the measured errors.
 
-#![warn(missing_docs)]
+#![deny(missing_docs)]
 
 pub mod height_map_import;
 pub mod height_maps;

@@ -27,12 +27,8 @@ fn png_8_and_16_bit_and_exr_height_maps_load_like_the_map_in_memory() {
     if !gpu_or_skip() {
         return;
     }
-    let reference = rendered(|app| {
-        image(
-            app,
-            HeightMap::by_name("stone", 128).unwrap().to_image(),
-        )
-    });
+    let reference =
+        rendered(|app| image(app, HeightMap::by_name("stone", 128).unwrap().to_image()));
     // 8-bit quantization is 1/255 ≈ 0.004.
     for (file, tolerance) in [
         ("stone_8bit.png", 0.004),

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# Re-makes every picture in docs/images/ with the examples (headless; the windowed one needs a
+# display, e.g. `xvfb-run -a bash docs/make_images.sh`). Run from the repository root.
+set -euo pipefail
+out=out/images
+rm -rf "$out"
+run() { cargo run -q --example "$@" 2>&1 | grep '^wrote' || true; }
+
+# The README's headline: the sphere→cube morph, and every debug view of bricks on a plane and
+# on the sphere.
+run deforming -- --frames 40 --view none --out "$out/morph" --headless
+cp "$out/morph/morph_none.png" docs/images/morph_lit.png
+run deforming -- --shape plane --view all --frames 8 --out "$out/plane" --headless
+run deforming -- --shape sphere --view all --frames 8 --out "$out/sphere" --headless
+for v in height apex-distance occlusion; do cp "$out/plane/plane_$v.png" "docs/images/plane_$v.png"; done
+for v in gradient apex-count boundary occlusion; do cp "$out/sphere/sphere_$v.png" "docs/images/sphere_$v.png"; done
+
+# Each effect on and off, bricks and rivets, light low from the side.
+for map in bricks rivets; do
+  for off in "" occlusion micro-shadows bleeding; do
+    run deforming -- --shape plane --height-map "$map" --view none --light-height 1.2 \
+      --frames 8 --out "$out/$map" --headless ${off:+--off $off}
+  done
+  for view in micro-shadow bleeding; do
+    run deforming -- --shape plane --height-map "$map" --view "$view" --light-height 1.2 \
+      --frames 8 --out "$out/$map" --headless
+  done
+  cp "$out/$map/plane_none.png" "docs/images/${map}_lit.png"
+  for e in occlusion micro-shadows bleeding; do
+    cp "$out/$map/plane_no-${e}_none.png" "docs/images/${map}_no-$e.png"
+  done
+  cp "$out/$map/plane_micro-shadow.png" "docs/images/${map}_micro-shadow.png"
+  cp "$out/$map/plane_bleeding.png" "docs/images/${map}_bleeding.png"
+done
+
+# Gallery and comparison.
+run gallery -- --frames 10 --out "$out/gallery" --headless
+cp "$out/gallery/gallery_none.png" docs/images/gallery.png
+run compare -- --frames 10 --out "$out/compare" --headless
+cp "$out"/compare/compare_*.png docs/images/
+
+# The window with the tuning panel (needs a display).
+if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ]; then
+  run deforming -- --frames 20 --view none --out "$out/window"
+  cp "$out/window/morph_none.png" docs/images/deforming_window.png
+fi
