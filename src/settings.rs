@@ -63,7 +63,8 @@ pub struct Mesostructure {
     /// §3.2), inside the regions Bevy's shadow maps light.
     pub micro_shadows: bool,
     /// Width of the micro-shadow edge, as a difference of sines of elevation (0–0.5): 0 is the
-    /// paper's hard test; a little softness hides aliasing of the horizon.
+    /// paper's hard test; a little softness hides aliasing of the horizon. Never wider than the
+    /// horizon itself, so that an open profile leaves grazing light unshadowed.
     pub micro_shadow_softness: f32,
     /// Shade mesostructure surfaces with the normal of the height map (Blinn bump mapping)
     /// where their material has no normal map of its own.

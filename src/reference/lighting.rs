@@ -64,7 +64,8 @@ pub fn sector_horizons(
 /// Micro-shadow visibility (1 = lit) of the light seen from the pixel in direction `to_light`
 /// (unit, world): the light's azimuth on screen placed between the two nearest profiles, the
 /// horizon interpolated between them, and P in shadow where the light is lower above the
-/// tangent plane than that horizon; soft over `softness` (in sine), hard at 0.
+/// tangent plane than that horizon; soft over `softness` (in sine, at most the horizon's own
+/// sine), hard at 0.
 pub fn micro_shadow(view: &ViewGeometry, h: &SectorHorizons, to_light: Vec3, softness: f32) -> f32 {
     let sin_l = to_light.dot(h.normal);
     if sin_l <= 0.0 {
@@ -84,10 +85,13 @@ pub fn micro_shadow(view: &ViewGeometry, h: &SectorHorizons, to_light: Vec3, sof
     let i0 = (lower as i32).rem_euclid(OCCLUSION_SECTORS as i32) as usize;
     let i1 = (i0 + 1) % OCCLUSION_SECTORS;
     let horizon = h.sin_h[i0] + (h.sin_h[i1] - h.sin_h[i0]) * (a - lower);
-    if softness <= 0.0 {
+    // The soft edge is never wider than the horizon itself: an open profile (horizon 0) leaves
+    // every light above the tangent plane unshadowed.
+    let w = softness.min(horizon);
+    if w <= 0.0 {
         return if sin_l >= horizon { 1.0 } else { 0.0 };
     }
-    let t = ((sin_l - horizon + softness) / (2.0 * softness)).clamp(0.0, 1.0);
+    let t = ((sin_l - horizon + w) / (2.0 * w)).clamp(0.0, 1.0);
     t * t * (3.0 - 2.0 * t)
 }
 

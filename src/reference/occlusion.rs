@@ -117,7 +117,27 @@ pub fn mesostructure_normal(
         return n0;
     }
     let n = n / len;
-    if n.dot(n0) < 0.0 { -n } else { n }
+    limit_tilt(if n.dot(n0) < 0.0 { -n } else { n }, n0)
+}
+
+/// Cosine of the largest angle N' may make with n0 (see `limit_tilt`).
+pub const MAX_NORMAL_TILT_COS: f32 = 0.5;
+
+/// N' turned back towards n0 to at most the angle of [`MAX_NORMAL_TILT_COS`]: steeper walls
+/// (cliffs a pixel or two wide) have no reliable tangent plane on screen, and horizons sorted by
+/// screen azimuth stop describing a hemisphere about a near-horizontal normal. Mirrors
+/// `limit_tilt` in `surface.wgsl`.
+pub fn limit_tilt(n: Vec3, n0: Vec3) -> Vec3 {
+    let c = n.dot(n0);
+    if c >= MAX_NORMAL_TILT_COS {
+        return n;
+    }
+    let side = n - n0 * c;
+    let len = side.length();
+    if !(len > 0.0) {
+        return n0;
+    }
+    n0 * MAX_NORMAL_TILT_COS + side / len * (1.0 - MAX_NORMAL_TILT_COS * MAX_NORMAL_TILT_COS).sqrt()
 }
 
 /// Ambient occlusion of pixel `(x, y)` from its apex set (1 = open): per apex H the horizon

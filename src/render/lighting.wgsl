@@ -99,7 +99,9 @@ fn micro_shadow(h: Horizons, to_light: vec3<f32>) -> f32 {
     let lower = floor(a);
     let i0 = wrap_sector(i32(lower));
     let horizon = mix(h.sin_h[i0], h.sin_h[(i0 + 1u) % SECTORS], a - lower);
-    let w = settings.micro_shadow_softness;
+    // The soft edge is never wider than the horizon itself: an open profile (horizon 0)
+    // leaves every light above the tangent plane unshadowed.
+    let w = min(settings.micro_shadow_softness, horizon);
     if w <= 0.0 {
         return select(0.0, 1.0, sin_l >= horizon);
     }

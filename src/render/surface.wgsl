@@ -76,7 +76,26 @@ fn mesostructure_normal(
     if !(len > 0.0) {
         return n0;
     }
-    return select(n / len, -n / len, dot(n, n0) < 0.0);
+    return limit_tilt(select(n / len, -n / len, dot(n, n0) < 0.0), n0);
+}
+
+// Cosine of the largest angle N' may make with n0. Steeper walls (cliffs a pixel or two wide)
+// have no reliable tangent plane on screen, and horizons sorted by screen azimuth stop
+// describing a hemisphere about a near-horizontal normal; past this tilt N' is turned back to
+// it. Mirrors `reference::MAX_NORMAL_TILT_COS`.
+const MAX_NORMAL_TILT_COS: f32 = 0.5;
+
+fn limit_tilt(n: vec3<f32>, n0: vec3<f32>) -> vec3<f32> {
+    let c = dot(n, n0);
+    if c >= MAX_NORMAL_TILT_COS {
+        return n;
+    }
+    let side = n - n0 * c;
+    let len = length(side);
+    if !(len > 0.0) {
+        return n0;
+    }
+    return n0 * MAX_NORMAL_TILT_COS + side / len * sqrt(1.0 - MAX_NORMAL_TILT_COS * MAX_NORMAL_TILT_COS);
 }
 
 // The azimuth of a screen-space direction, in sectors (sector i is centred on i).

@@ -11,3 +11,4 @@ mod files;
 mod harness;
 mod lighting;
 mod micro_shadows;
+mod stability;
