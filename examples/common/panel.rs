@@ -54,10 +54,7 @@ fn register_ranges(app: &mut App) {
             name,
             "apex_directions" | "max_ascent_steps" | "max_sample_radius" | "bleeding_samples"
         ) {
-            camera.insert(
-                Target::Field(i),
-                NumberOptions::<u32>::between(lo as u32, hi as u32),
-            );
+            camera.insert(Target::Field(i), slider(lo as u32, hi as u32));
         } else {
             camera.insert(Target::Field(i), slider(lo, hi));
         }
@@ -74,7 +71,7 @@ fn register_ranges(app: &mut App) {
     }
 }
 
-fn slider(lo: f32, hi: f32) -> NumberOptions<f32> {
+fn slider<T>(lo: T, hi: T) -> NumberOptions<T> {
     let mut options = NumberOptions::between(lo, hi);
     options.display = NumberDisplay::Slider;
     options
