@@ -1,0 +1,366 @@
+//! GPU time per pass, from timestamp queries, for the paper's two experiments (its Tables 1 and
+//! 2), with Bevy's SSAO and contact shadows measured on the same scenes as peers.
+//!
+//! ```text
+//! cargo run --release --example bench -- [--out FILE.csv] [--frames N] [--warm-up N]
+//!     [--table 1|2|both] [--quick]
+//! ```
+//!
+//! Table 1: resolutions 256², 512², 1024² and 1920×1080 over a torus (2,880 triangles, the
+//! paper's), a sphere of ~40 thousand and one of ~1 million triangles (its teapot and Happy
+//! Buddha), bricks at scale 0.2. Table 2: scales 0.05–1 on the torus at 1024². Every run renders
+//! headless with the default `Mesostructure` and Bevy's SSAO on the camera; a second run with
+//! Bevy's contact shadows on adds the row `contact_shadows` (its cost, the difference in the
+//! lighting pass, which evaluates them for these pixels). For each pass: median and 95th
+//! percentile over N frames after the warm-up, and the sums `mesostructure/total` and
+//! `mesostructure/total_without_lighting` (the lighting pass replaces Bevy's own deferred
+//! lighting for these pixels, so it is not all added cost). `--quick` keeps 256² and 512² and three scales
+//! (for the software driver, whose figures are relative only).
+//!
+//! Writes `FILE.csv` (default `out/bench.csv`) with the columns
+//! `scene,triangles,width,height,scale,pass,gpu_ms_median,gpu_ms_p95,frames,adapter` and prints
+//! a Markdown table.
+
+use std::{fmt::Write as _, path::PathBuf};
+
+use bevy::{
+    camera::RenderTarget,
+    diagnostic::{DiagnosticPath, DiagnosticsStore},
+    pbr::{ContactShadows, ScreenSpaceAmbientOcclusion},
+    prelude::*,
+    render::{
+        RenderPlugin,
+        diagnostic::RenderDiagnosticsPlugin,
+        pipelined_rendering::PipelinedRenderingPlugin,
+        render_resource::{TextureFormat, TextureUsages},
+        renderer::RenderAdapterInfo,
+    },
+    window::ExitCondition,
+};
+use bevy_mesostructure::prelude::*;
+
+/// The plugin's passes, in frame order.
+const PASSES: [&str; 7] = [
+    "height",
+    "gradient",
+    "apex",
+    "occlusion",
+    "lighting",
+    "bleeding",
+    "bleeding_composite",
+];
+
+#[derive(Clone, Copy)]
+struct Config {
+    scene: &'static str,
+    size: UVec2,
+    scale: f32,
+}
+
+struct Row {
+    config: Config,
+    triangles: usize,
+    pass: String,
+    median: f64,
+    p95: f64,
+    frames: usize,
+}
+
+fn mesh(scene: &str) -> Mesh {
+    match scene {
+        "torus" => Torus::new(0.45, 0.8)
+            .mesh()
+            .major_resolution(48)
+            .minor_resolution(30)
+            .build(),
+        "sphere-40k" => Sphere::new(0.8).mesh().uv(200, 100),
+        "sphere-1M" => Sphere::new(0.8).mesh().uv(1000, 500),
+        other => panic!("unknown scene {other}"),
+    }
+}
+
+fn triangles(mesh: &Mesh) -> usize {
+    mesh.indices().map_or(mesh.count_vertices(), |i| i.len()) / 3
+}
+
+/// Renders `config` for `warm_up + frames` frames; the per-frame GPU milliseconds of each span
+/// in `spans`, and the adapter's name.
+fn measure(
+    config: Config,
+    contact_shadows: bool,
+    frames: usize,
+    warm_up: usize,
+) -> (Vec<(String, Vec<f64>)>, usize, String) {
+    let mut app = App::new();
+    app.add_plugins(
+        DefaultPlugins
+            .set(WindowPlugin {
+                primary_window: None,
+                exit_condition: ExitCondition::DontExit,
+                ..default()
+            })
+            .set(RenderPlugin {
+                synchronous_pipeline_compilation: true,
+                ..default()
+            })
+            .disable::<bevy::winit::WinitPlugin>()
+            .disable::<PipelinedRenderingPlugin>()
+            .disable::<bevy::log::LogPlugin>(),
+    )
+    .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
+    app.finish();
+    app.cleanup();
+    let world = app.world_mut();
+    let mut image = Image::new_target_texture(
+        config.size.x,
+        config.size.y,
+        TextureFormat::Rgba8UnormSrgb,
+        None,
+    );
+    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+    let target = world.resource_mut::<Assets<Image>>().add(image);
+    let mut camera = world.spawn((
+        Camera3d::default(),
+        RenderTarget::Image(target.into()),
+        Msaa::Off,
+        Mesostructure::default(),
+        ScreenSpaceAmbientOcclusion::default(),
+        Transform::from_xyz(0.0, 1.2, 2.2).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    if contact_shadows {
+        camera.insert(ContactShadows::default());
+    }
+    world.spawn((
+        DirectionalLight {
+            illuminance: 8000.0,
+            shadow_maps_enabled: true,
+            contact_shadows_enabled: contact_shadows,
+            ..default()
+        },
+        Transform::from_xyz(2.0, 3.0, 1.5).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    world.insert_resource(bevy::light::GlobalAmbientLight {
+        brightness: 1000.0,
+        ..default()
+    });
+    let object = mesh(config.scene);
+    let count = triangles(&object);
+    let object = world.resource_mut::<Assets<Mesh>>().add(object);
+    let height_map = world
+        .resource_mut::<Assets<Image>>()
+        .add(HeightMap::bricks(512, 8, 0.15).to_image());
+    let material = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(Color::srgb(0.75, 0.4, 0.3));
+    world.spawn((
+        Mesh3d(object),
+        MeshMaterial3d(material),
+        MesostructureMaterial {
+            height_map,
+            scale: config.scale,
+            uv_transform: bevy::math::Affine2::from_scale(Vec2::new(6.0, 3.0)),
+        },
+        Transform::from_rotation(Quat::from_rotation_x(0.5)),
+    ));
+    for _ in 0..warm_up + frames {
+        app.update();
+    }
+    let adapter = app
+        .world()
+        .get_resource::<RenderAdapterInfo>()
+        .map_or("unknown".to_string(), |a| a.0.name.clone());
+    let store = app.world().resource::<DiagnosticsStore>();
+    let mut spans: Vec<String> = PASSES
+        .iter()
+        .map(|p| format!("mesostructure/{p}"))
+        .collect();
+    spans.push("ssao".into());
+    let series = spans
+        .into_iter()
+        .filter_map(|span| {
+            let path = DiagnosticPath::new(format!("render/{span}/elapsed_gpu"));
+            let values: Vec<f64> = store.get(&path)?.values().copied().collect();
+            let tail = values[values.len().saturating_sub(frames)..].to_vec();
+            (!tail.is_empty()).then_some((span, tail))
+        })
+        .collect();
+    (series, count, adapter)
+}
+
+fn percentile(values: &[f64], p: f64) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+fn main() {
+    let mut out = PathBuf::from("out/bench.csv");
+    let (mut frames, mut warm_up, mut table, mut quick) =
+        (60usize, 20usize, "both".to_string(), false);
+    let mut it = std::env::args().skip(1);
+    while let Some(flag) = it.next() {
+        let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
+        match flag.as_str() {
+            "--out" => out = value().into(),
+            "--frames" => frames = value().parse().expect("--frames N"),
+            "--warm-up" => warm_up = value().parse().expect("--warm-up N"),
+            "--table" => table = value(),
+            "--quick" => quick = true,
+            "--help" | "-h" => {
+                println!("see the doc comment at the top of examples/bench.rs");
+                return;
+            }
+            other => panic!("unknown argument {other}"),
+        }
+    }
+    // The diagnostics keep 120 values.
+    frames = frames.clamp(1, 100);
+    let sizes: Vec<UVec2> = if quick {
+        vec![UVec2::splat(256), UVec2::splat(512)]
+    } else {
+        vec![
+            UVec2::splat(256),
+            UVec2::splat(512),
+            UVec2::splat(1024),
+            UVec2::new(1920, 1080),
+        ]
+    };
+    let mut configs = vec![];
+    if table == "1" || table == "both" {
+        for scene in ["torus", "sphere-40k", "sphere-1M"] {
+            for &size in &sizes {
+                configs.push(Config {
+                    scene,
+                    size,
+                    scale: 0.2,
+                });
+            }
+        }
+    }
+    if table == "2" || table == "both" {
+        let scales: &[f32] = if quick {
+            &[0.05, 0.2, 1.0]
+        } else {
+            &[0.05, 0.1, 0.2, 0.4, 0.6, 0.8, 1.0]
+        };
+        let size = if quick {
+            UVec2::splat(512)
+        } else {
+            UVec2::splat(1024)
+        };
+        for &scale in scales {
+            configs.push(Config {
+                scene: "torus",
+                size,
+                scale,
+            });
+        }
+    }
+
+    let mut rows = vec![];
+    let mut adapter = String::new();
+    for config in configs {
+        println!(
+            "bench: {} at {}×{}, scale {} ...",
+            config.scene, config.size.x, config.size.y, config.scale
+        );
+        let (series, triangles, name) = measure(config, false, frames, warm_up);
+        adapter = name;
+        // All passes, and all but the lighting pass (which replaces Bevy's own deferred lighting
+        // for these pixels rather than adding to it).
+        let mut total = vec![0.0; frames];
+        let mut added = vec![0.0; frames];
+        let mut lighting_without = None;
+        for (span, values) in &series {
+            if span.starts_with("mesostructure/") {
+                for (t, v) in total.iter_mut().zip(values) {
+                    *t += v;
+                }
+                if span != "mesostructure/lighting" {
+                    for (t, v) in added.iter_mut().zip(values) {
+                        *t += v;
+                    }
+                }
+            }
+            if span == "mesostructure/lighting" {
+                lighting_without = Some(percentile(values, 0.5));
+            }
+            rows.push(Row {
+                config,
+                triangles,
+                pass: span.clone(),
+                median: percentile(values, 0.5),
+                p95: percentile(values, 0.95),
+                frames: values.len(),
+            });
+        }
+        rows.push(Row {
+            config,
+            triangles,
+            pass: "mesostructure/total".into(),
+            median: percentile(&total, 0.5),
+            p95: percentile(&total, 0.95),
+            frames,
+        });
+        rows.push(Row {
+            config,
+            triangles,
+            pass: "mesostructure/total_without_lighting".into(),
+            median: percentile(&added, 0.5),
+            p95: percentile(&added, 0.95),
+            frames,
+        });
+        // Contact shadows: the same scene with them on; their cost is the lighting pass's growth.
+        let (with, _, _) = measure(config, true, frames, warm_up);
+        if let (Some(without), Some((_, values))) = (
+            lighting_without,
+            with.iter().find(|(s, _)| s == "mesostructure/lighting"),
+        ) {
+            rows.push(Row {
+                config,
+                triangles,
+                pass: "contact_shadows".into(),
+                median: percentile(values, 0.5) - without,
+                p95: percentile(values, 0.95) - without,
+                frames: values.len(),
+            });
+        }
+    }
+
+    let mut csv = String::from(
+        "scene,triangles,width,height,scale,pass,gpu_ms_median,gpu_ms_p95,frames,adapter\n",
+    );
+    let mut table = String::from(
+        "| scene | triangles | size | scale | pass | median ms | p95 ms |\n|---|---|---|---|---|---|---|\n",
+    );
+    for r in &rows {
+        let c = r.config;
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{:.4},{:.4},{},\"{}\"",
+            c.scene,
+            r.triangles,
+            c.size.x,
+            c.size.y,
+            c.scale,
+            r.pass,
+            r.median,
+            r.p95,
+            r.frames,
+            adapter
+        );
+        let _ = writeln!(
+            table,
+            "| {} | {} | {}×{} | {} | {} | {:.3} | {:.3} |",
+            c.scene, r.triangles, c.size.x, c.size.y, c.scale, r.pass, r.median, r.p95
+        );
+    }
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir).expect("cannot create the output folder");
+    }
+    std::fs::write(&out, csv).expect("cannot write the CSV");
+    println!(
+        "\nGPU time per pass on {adapter} ({frames} frames after {warm_up} of warm-up):\n\n{table}"
+    );
+    println!("wrote {}", out.display());
+}
