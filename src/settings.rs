@@ -1,6 +1,7 @@
 //! The per-camera settings component.
 
 use bevy::{
+    camera::Hdr,
     core_pipeline::prepass::{DeferredPrepass, DepthPrepass},
     prelude::*,
     render::render_resource::ShaderType,
@@ -24,11 +25,14 @@ use crate::reference::{
 /// lighting pass id; other meshes keep forward or deferred as they were). A second camera
 /// with a deferred prepass but without this component leaves those meshes unlit.
 ///
+/// Also pulls in [`Hdr`]: the bleeding is gathered from, and added to, linear radiance before
+/// tonemapping (without `Hdr`, Bevy tonemaps inside the lighting shaders).
+///
 /// Out-of-range values are clamped to their documented range and non-finite ones replaced by the
 /// default, with a one-time warning; they never reach the GPU.
 #[derive(Component, Reflect, Clone, Debug, PartialEq)]
 #[reflect(Component, Default, Clone, Debug, PartialEq)]
-#[require(DepthPrepass, DeferredPrepass)]
+#[require(DepthPrepass, DeferredPrepass, Hdr)]
 pub struct Mesostructure {
     /// What the camera shows: the lit scene, or one of the intermediate images.
     pub debug_view: MesostructureDebugView,
