@@ -1,0 +1,560 @@
+//! Error against the ground truth, for each method at each cost it offers: the numbers behind
+//! the speed/accuracy chart.
+//!
+//! ```text
+//! cargo run --release --example accuracy -- [--out FILE.csv] [--chart FILE.png] [--quick]
+//!     [--size N]
+//! ```
+//!
+//! Scenes: the 2 × 2 plane seen straight down (Bevy's default 45° field of view from 2 units)
+//! with bricks, rivets, stone (fBm noise) and sine height maps at scales 0.05, 0.1, 0.2 and 0.4,
+//! one directional light at 20°, 45° and 70° elevation (travelling towards +x), no ambient
+//! light for the light terms. Ground truth: `reference::ground_truth` on the height field
+//! itself, every 4th pixel at least 8 px from the edge (AO with 8 × 16 rays, light visibility,
+//! one-bounce with 6 × 16 rays).
+//!
+//! Methods: `none` (no mesostructure term); `bevy-ssao` (Bevy's SSAO on the same bricks built as
+//! real geometry — a 256² grid — its AO taken as the ratio of an ambient-only picture with and
+//! without it; it has no shadow or bounce term); `mesostructure` at 4, 8 and 16 apex directions.
+//! Errors: MAE and RMSE of AO and of the one-bounce term (relative to the irradiance of a
+//! surface facing the light), the share of directly lit pixels whose micro-shadow agrees. Time:
+//! the median GPU time of the passes each method adds (for this plugin: all passes but the
+//! lighting pass, which replaces Bevy's own). Not yet measured: a brute-force horizon search
+//! (no GPU implementation to time) and NVIDIA FLIP (`flip_mean` is left empty).
+//!
+//! Writes `FILE.csv` (default `out/accuracy.csv`) with the columns
+//! `scene,method,setting,width,height,gpu_ms,ao_mae,ao_rmse,shadow_agreement,bounce_mae,flip_mean`
+//! and `FILE.png` (default `out/accuracy.png`): GPU time against AO error, one line per method.
+//! `--quick`: bricks and stone at 0.1 under the 45° light.
+
+use std::{fmt::Write as _, path::PathBuf};
+
+use bevy::{
+    camera::{Hdr, RenderTarget},
+    core_pipeline::tonemapping::Tonemapping,
+    diagnostic::{DiagnosticPath, DiagnosticsStore},
+    pbr::ScreenSpaceAmbientOcclusion,
+    prelude::*,
+    render::{
+        RenderPlugin,
+        diagnostic::RenderDiagnosticsPlugin,
+        pipelined_rendering::PipelinedRenderingPlugin,
+        render_resource::{TextureFormat, TextureUsages},
+    },
+    window::ExitCondition,
+};
+use bevy_mesostructure::{
+    CapturedFrame, MesostructureCapture, MesostructureCaptures, prelude::*,
+    reference::ground_truth::HeightField,
+};
+
+const HEIGHT: f32 = 2.0;
+
+/// What one render gives back.
+struct Render {
+    frame: Option<CapturedFrame>,
+    /// Green channel of the lit picture, linear (from the capture's opaque image).
+    gpu_ms: f64,
+}
+
+/// Renders the plane top-down once: with the plugin (and `settings`) on the flat plane with
+/// `map`, or as real geometry (`grid`) with or without SSAO. Lights: `elevation` (None =
+/// ambient only).
+fn render(
+    map: &HeightMap,
+    k: f32,
+    size: u32,
+    settings: Option<Mesostructure>,
+    ssao: bool,
+    elevation: Option<f32>,
+) -> (Render, Vec<f32>) {
+    let mut app = App::new();
+    app.add_plugins(
+        DefaultPlugins
+            .set(WindowPlugin {
+                primary_window: None,
+                exit_condition: ExitCondition::DontExit,
+                ..default()
+            })
+            .set(RenderPlugin {
+                synchronous_pipeline_compilation: true,
+                ..default()
+            })
+            .disable::<bevy::winit::WinitPlugin>()
+            .disable::<PipelinedRenderingPlugin>()
+            .disable::<bevy::log::LogPlugin>(),
+    )
+    .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
+    app.finish();
+    app.cleanup();
+    let world = app.world_mut();
+    let mut image = Image::new_target_texture(size, size, TextureFormat::Rgba8UnormSrgb, None);
+    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+    let target = world.resource_mut::<Assets<Image>>().add(image);
+    let mut camera = world.spawn((
+        Camera3d::default(),
+        RenderTarget::Image(target.clone().into()),
+        Msaa::Off,
+        Hdr,
+        Tonemapping::None,
+        Transform::from_xyz(0.0, HEIGHT, 0.0).looking_at(Vec3::ZERO, Vec3::NEG_Z),
+    ));
+    if let Some(s) = settings.clone() {
+        camera.insert((s, MesostructureCapture));
+    }
+    if ssao {
+        camera.insert(ScreenSpaceAmbientOcclusion::default());
+    }
+    let camera = camera.id();
+    world.insert_resource(bevy::light::GlobalAmbientLight {
+        brightness: if elevation.is_some() { 0.0 } else { 2000.0 },
+        ..default()
+    });
+    if let Some(e) = elevation {
+        let e = e.to_radians();
+        world.spawn((
+            DirectionalLight {
+                illuminance: 3000.0,
+                ..default()
+            },
+            Transform::default().looking_to(Vec3::new(e.cos(), -e.sin(), 0.0), Vec3::Y),
+        ));
+    }
+    let material = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            perceptual_roughness: 1.0,
+            reflectance: 0.0,
+            ..default()
+        });
+    if settings.is_some() {
+        let plane = world
+            .resource_mut::<Assets<Mesh>>()
+            .add(Plane3d::default().mesh().size(2.0, 2.0));
+        let height_map = world.resource_mut::<Assets<Image>>().add(map.to_image());
+        world.spawn((
+            Mesh3d(plane),
+            MeshMaterial3d(material),
+            MesostructureMaterial {
+                height_map,
+                scale: k,
+                ..default()
+            },
+        ));
+    } else {
+        let grid = world
+            .resource_mut::<Assets<Mesh>>()
+            .add(displaced_plane(map, k, 256));
+        world.spawn((Mesh3d(grid), MeshMaterial3d(material)));
+    }
+    for _ in 0..12 {
+        app.update();
+    }
+    let captures = app.world().resource::<MesostructureCaptures>().clone();
+    let mut frame = None;
+    for _ in 0..10 {
+        app.update();
+        if let Some(f) = captures.take(camera) {
+            frame = Some(f);
+            break;
+        }
+    }
+    let store = app.world().resource::<DiagnosticsStore>();
+    let median = |span: &str| {
+        let path = DiagnosticPath::new(format!("render/{span}/elapsed_gpu"));
+        let mut v: Vec<f64> = store
+            .get(&path)
+            .map(|d| d.values().copied().collect())
+            .unwrap_or_default();
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    let gpu_ms = if ssao {
+        median("ssao")
+    } else if settings.is_some() {
+        [
+            "height",
+            "gradient",
+            "apex",
+            "occlusion",
+            "bleeding",
+            "bleeding_composite",
+        ]
+        .iter()
+        .map(|p| median(&format!("mesostructure/{p}")))
+        .sum()
+    } else {
+        0.0
+    };
+    // The picture, linear green (Tonemapping::None onto an sRGB target).
+    app.world_mut()
+        .spawn(bevy::render::view::screenshot::Screenshot::image(
+            target.clone(),
+        ))
+        .observe(
+            |shot: On<bevy::render::view::screenshot::ScreenshotCaptured>,
+             mut out: ResMut<Picture>| {
+                out.0 = shot.image.data.clone().unwrap_or_default();
+            },
+        );
+    app.init_resource::<Picture>();
+    for _ in 0..3 {
+        app.update();
+    }
+    let picture = app
+        .world()
+        .resource::<Picture>()
+        .0
+        .chunks_exact(4)
+        .map(|c| srgb(c[1]))
+        .collect();
+    (Render { frame, gpu_ms }, picture)
+}
+
+#[derive(Resource, Default)]
+struct Picture(Vec<u8>);
+
+fn srgb(v: u8) -> f32 {
+    let v = v as f32 / 255.0;
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// The map as real geometry: a 2 × 2 grid of `n`² quads lifted by `k · dis`.
+fn displaced_plane(map: &HeightMap, k: f32, n: u32) -> Mesh {
+    let mut mesh = Plane3d::default()
+        .mesh()
+        .size(2.0, 2.0)
+        .subdivisions(n - 1)
+        .build();
+    let Some(bevy::mesh::VertexAttributeValues::Float32x2(uvs)) =
+        mesh.attribute(Mesh::ATTRIBUTE_UV_0).cloned()
+    else {
+        unreachable!("a plane has UVs")
+    };
+    if let Some(bevy::mesh::VertexAttributeValues::Float32x3(positions)) =
+        mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+    {
+        for (p, uv) in positions.iter_mut().zip(&uvs) {
+            let x = ((uv[0] * map.width as f32) as u32).min(map.width - 1);
+            let y = ((uv[1] * map.height as f32) as u32).min(map.height - 1);
+            p[1] = k * map.values[(y * map.width + x) as usize];
+        }
+    }
+    mesh.compute_smooth_normals();
+    mesh
+}
+
+/// UV of the plane under pixel (x, y) of the top-down camera.
+fn uv(x: u32, y: u32, size: u32) -> Vec2 {
+    let t = std::f32::consts::FRAC_PI_8.tan() * HEIGHT;
+    let ndc = |p: u32| ((p as f32 + 0.5) / size as f32) * 2.0 - 1.0;
+    Vec2::new((ndc(x) * t + 1.0) * 0.5, (ndc(y) * t + 1.0) * 0.5)
+}
+
+fn errors(values: &[f32], truth: &[f32]) -> (f32, f32) {
+    let n = values.len().max(1) as f32;
+    let mae = values
+        .iter()
+        .zip(truth)
+        .map(|(v, t)| (v - t).abs())
+        .sum::<f32>()
+        / n;
+    let rmse = (values
+        .iter()
+        .zip(truth)
+        .map(|(v, t)| (v - t).powi(2))
+        .sum::<f32>()
+        / n)
+        .sqrt();
+    (mae, rmse)
+}
+
+struct Row {
+    scene: String,
+    method: &'static str,
+    setting: String,
+    gpu_ms: f64,
+    ao: (f32, f32),
+    shadow: f32,
+    bounce: f32,
+}
+
+fn main() {
+    let (mut out, mut chart, mut quick, mut size) = (
+        PathBuf::from("out/accuracy.csv"),
+        PathBuf::from("out/accuracy.png"),
+        false,
+        96u32,
+    );
+    let mut it = std::env::args().skip(1);
+    while let Some(flag) = it.next() {
+        let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
+        match flag.as_str() {
+            "--out" => out = value().into(),
+            "--chart" => chart = value().into(),
+            "--quick" => quick = true,
+            "--size" => size = value().parse().expect("--size N"),
+            "--help" | "-h" => {
+                println!("see the doc comment at the top of examples/accuracy.rs");
+                return;
+            }
+            other => panic!("unknown argument {other}"),
+        }
+    }
+    let maps: Vec<(&str, HeightMap)> = if quick {
+        vec![
+            ("bricks", HeightMap::bricks(256, 4, 0.12)),
+            ("stone", HeightMap::noise(256, 16, 3, 7)),
+        ]
+    } else {
+        vec![
+            ("bricks", HeightMap::bricks(256, 4, 0.12)),
+            ("rivets", HeightMap::rivets(256, 4, 0.35)),
+            ("stone", HeightMap::noise(256, 16, 3, 7)),
+            ("sine", HeightMap::sine(256, 4)),
+        ]
+    };
+    let scales: &[f32] = if quick {
+        &[0.1]
+    } else {
+        &[0.05, 0.1, 0.2, 0.4]
+    };
+    let elevations: &[f32] = if quick { &[45.0] } else { &[20.0, 45.0, 70.0] };
+    let samples: Vec<(u32, u32)> = (8..size - 8)
+        .step_by(4)
+        .flat_map(|y| (8..size - 8).step_by(4).map(move |x| (x, y)))
+        .collect();
+    let index = |&(x, y): &(u32, u32)| (y * size + x) as usize;
+    // The radiance unit ρ E0 / π (exposure applied) of a surface facing the light, from a flat
+    // map under a light from the zenith.
+    let flat = HeightMap::from_fn(16, 16, |_, _| 0.5);
+    let (calibration, _) = render(
+        &flat,
+        0.1,
+        size,
+        Some(Mesostructure::default()),
+        false,
+        Some(90.0),
+    );
+    let calibration = calibration.frame.expect("the flat plane renders");
+    let unit = samples
+        .iter()
+        .map(|s| calibration.lit[index(s)][1])
+        .sum::<f32>()
+        / samples.len() as f32;
+    println!("radiance unit ρE0/π = {unit:.5}");
+
+    let mut rows = vec![];
+    for (name, map) in &maps {
+        for &k in scales {
+            let field = HeightField::new(map.width, map.height, &map.values, 2.0, k);
+            let at = |s: &(u32, u32)| uv(s.0, s.1, size) * map.width as f32;
+            let ao_truth: Vec<f32> = samples
+                .iter()
+                .map(|s| field.ambient_occlusion(at(s), 8, 16))
+                .collect();
+            // SSAO on real geometry: its AO is the ratio of ambient-only pictures.
+            let (with, lit_with) = render(map, k, size, None, true, None);
+            let (_, lit_without) = render(map, k, size, None, false, None);
+            let ssao_ao: Vec<f32> = samples
+                .iter()
+                .map(|s| (lit_with[index(s)] / lit_without[index(s)].max(1e-6)).min(1.0))
+                .collect();
+            for &e in elevations {
+                let scene = format!("{name}/k{k}/light{e}");
+                println!("accuracy: {scene}");
+                let r = e.to_radians();
+                let light = Vec3::new(r.cos(), 0.0, -r.sin()); // the field's frame: z up
+                let visible: Vec<bool> = samples
+                    .iter()
+                    .map(|s| field.light_visible(at(s), light))
+                    .collect();
+                let facing: Vec<bool> = samples
+                    .iter()
+                    .map(|s| field.normal(at(s)).dot(-light) > 0.05)
+                    .collect();
+                let bounce_truth: Vec<f32> = samples
+                    .iter()
+                    .map(|s| field.one_bounce(at(s), light, 6, 16))
+                    .collect();
+                let agreement = |shadowed: &dyn Fn(usize) -> bool| {
+                    let (mut agree, mut n) = (0, 0);
+                    for (j, _) in samples.iter().enumerate() {
+                        if facing[j] {
+                            n += 1;
+                            agree += (shadowed(j) == !visible[j]) as u32;
+                        }
+                    }
+                    agree as f32 / n.max(1) as f32
+                };
+                let none_bounce = errors(&vec![0.0; samples.len()], &bounce_truth).0;
+                rows.push(Row {
+                    scene: scene.clone(),
+                    method: "none",
+                    setting: "-".into(),
+                    gpu_ms: 0.0,
+                    ao: errors(&vec![1.0; samples.len()], &ao_truth),
+                    shadow: agreement(&|_| false),
+                    bounce: none_bounce,
+                });
+                rows.push(Row {
+                    scene: scene.clone(),
+                    method: "bevy-ssao",
+                    setting: "default".into(),
+                    gpu_ms: with.gpu_ms,
+                    ao: errors(&ssao_ao, &ao_truth),
+                    shadow: agreement(&|_| false),
+                    bounce: none_bounce,
+                });
+                for dirs in [4u32, 8, 16] {
+                    let settings = Mesostructure {
+                        apex_directions: dirs,
+                        ..default()
+                    };
+                    // AO under ambient light alone is not needed: the capture carries it.
+                    let (lit, _) = render(map, k, size, Some(settings), false, Some(e));
+                    let Some(frame) = lit.frame else { continue };
+                    let ao: Vec<f32> = samples.iter().map(|s| frame.occlusion[index(s)]).collect();
+                    let bounce: Vec<f32> = samples
+                        .iter()
+                        .map(|s| frame.bleeding.get(index(s)).map_or(0.0, |b| b[1] / unit))
+                        .collect();
+                    rows.push(Row {
+                        scene: scene.clone(),
+                        method: "mesostructure",
+                        setting: format!("apex_directions={dirs}"),
+                        gpu_ms: lit.gpu_ms,
+                        ao: errors(&ao, &ao_truth),
+                        shadow: agreement(&|j| {
+                            frame
+                                .micro_shadow
+                                .get(index(&samples[j]))
+                                .is_some_and(|&v| v < 0.5)
+                        }),
+                        bounce: errors(&bounce, &bounce_truth).0,
+                    });
+                }
+            }
+        }
+    }
+
+    let mut csv = String::from(
+        "scene,method,setting,width,height,gpu_ms,ao_mae,ao_rmse,shadow_agreement,bounce_mae,flip_mean\n",
+    );
+    for r in &rows {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{size},{size},{:.4},{:.4},{:.4},{:.4},{:.4},",
+            r.scene, r.method, r.setting, r.gpu_ms, r.ao.0, r.ao.1, r.shadow, r.bounce
+        );
+    }
+    for path in [&out, &chart] {
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir).expect("cannot create the output folder");
+        }
+    }
+    std::fs::write(&out, csv).expect("cannot write the CSV");
+    println!("wrote {}", out.display());
+    draw_chart(&rows, &chart);
+    println!("wrote {}", chart.display());
+}
+
+/// Mean over the scenes of each (method, setting): GPU time against AO MAE.
+fn draw_chart(rows: &[Row], path: &PathBuf) {
+    use plotters::prelude::*;
+    plotters::style::register_font(
+        "sans-serif",
+        FontStyle::Normal,
+        epaint_default_fonts::UBUNTU_LIGHT,
+    )
+    .map_err(|_| ())
+    .expect("the font registers");
+    let mut series: Vec<(&str, Vec<(f64, f64)>)> = vec![];
+    for method in ["none", "bevy-ssao", "mesostructure"] {
+        let mut settings: Vec<&String> = rows
+            .iter()
+            .filter(|r| r.method == method)
+            .map(|r| &r.setting)
+            .collect();
+        settings.dedup();
+        settings.sort();
+        settings.dedup();
+        let mut points = vec![];
+        for s in settings {
+            let of: Vec<&Row> = rows
+                .iter()
+                .filter(|r| r.method == method && &r.setting == s)
+                .collect();
+            let n = of.len() as f64;
+            points.push((
+                of.iter().map(|r| r.gpu_ms).sum::<f64>() / n,
+                of.iter().map(|r| r.ao.0 as f64).sum::<f64>() / n,
+            ));
+        }
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        series.push((method, points));
+    }
+    let max_x = series
+        .iter()
+        .flat_map(|(_, p)| p.iter().map(|q| q.0))
+        .fold(1e-3, f64::max)
+        * 1.1;
+    let max_y = series
+        .iter()
+        .flat_map(|(_, p)| p.iter().map(|q| q.1))
+        .fold(1e-3, f64::max)
+        * 1.1;
+    let (w, h) = (800u32, 500u32);
+    let mut buffer = vec![0u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
+        root.fill(&WHITE).expect("draw");
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                "Ambient occlusion: GPU time against error (mean over scenes)",
+                ("sans-serif", 20),
+            )
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..max_x, 0.0..max_y)
+            .expect("draw");
+        chart
+            .configure_mesh()
+            .x_desc("GPU time of the added passes, ms")
+            .y_desc("AO mean absolute error")
+            .label_style(("sans-serif", 14))
+            .draw()
+            .expect("draw");
+        for (i, (method, points)) in series.iter().enumerate() {
+            let color = [BLACK, BLUE, RED][i % 3].to_rgba();
+            chart
+                .draw_series(LineSeries::new(
+                    points.iter().copied(),
+                    color.stroke_width(2),
+                ))
+                .expect("draw")
+                .label(*method)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+            chart
+                .draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                .expect("draw");
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .draw()
+            .expect("draw");
+        root.present().expect("draw");
+    }
+    image::RgbImage::from_raw(w, h, buffer)
+        .expect("w × h pixels")
+        .save(path)
+        .expect("cannot write the chart");
+}
