@@ -2,7 +2,7 @@
 //! the speed/accuracy chart.
 //!
 //! ```text
-//! cargo run --release --example accuracy -- [--out FILE.csv] [--chart FILE.png] [--quick]
+//! cargo run --example accuracy -- [--out FILE.csv] [--chart FILE.png] [--quick]
 //!     [--size N]
 //! ```
 //!

@@ -2,7 +2,7 @@
 //! 2), with Bevy's SSAO and contact shadows measured on the same scenes as peers.
 //!
 //! ```text
-//! cargo run --release --example bench -- [--out FILE.csv] [--frames N] [--warm-up N]
+//! cargo run --example bench -- [--out FILE.csv] [--frames N] [--warm-up N]
 //!     [--table 1|2|both] [--quick]
 //! ```
 //!
