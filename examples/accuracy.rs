@@ -15,12 +15,14 @@
 //!
 //! Methods: `none` (no mesostructure term); `bevy-ssao` (Bevy's SSAO on the same bricks built as
 //! real geometry — a 256² grid — its AO taken as the ratio of an ambient-only picture with and
-//! without it; it has no shadow or bounce term); `mesostructure` at 4, 8 and 16 apex directions.
+//! without it; it has no shadow or bounce term); `horizon-search` (the brute-force baseline,
+//! `Mesostructure::horizon_search_steps`: 8 directions out to 32 px with 4, 8, 16 and 32
+//! samples each; AO only); `mesostructure` at 4, 8 and 16 apex directions.
 //! Errors: MAE and RMSE of AO and of the one-bounce term (relative to the irradiance of a
 //! surface facing the light), the share of directly lit pixels whose micro-shadow agrees. Time:
 //! the median GPU time of the passes each method adds (for this plugin: all passes but the
-//! lighting pass, which replaces Bevy's own). Not yet measured: a brute-force horizon search
-//! (no GPU implementation to time) and NVIDIA FLIP (`flip_mean` is left empty).
+//! lighting pass, which replaces Bevy's own). Not yet measured: NVIDIA FLIP (`flip_mean` is
+//! left empty).
 //!
 //! Writes `FILE.csv` (default `out/accuracy.csv`) with the columns
 //! `scene,method,setting,width,height,gpu_ms,ao_mae,ao_rmse,shadow_agreement,bounce_mae,flip_mean`
@@ -364,6 +366,26 @@ fn main() {
                 .iter()
                 .map(|s| (lit_with[index(s)] / lit_without[index(s)].max(1e-6)).min(1.0))
                 .collect();
+            // The brute-force, fixed-radius horizon search (8 directions out to 32 px) at
+            // several sample counts: AO only, independent of the light.
+            let searches: Vec<(u32, f64, Vec<f32>)> = [4u32, 8, 16, 32]
+                .into_iter()
+                .filter_map(|steps| {
+                    let settings = Mesostructure {
+                        horizon_search_steps: steps,
+                        micro_shadows: false,
+                        bleeding: false,
+                        ..default()
+                    };
+                    let (r, _) = render(map, k, size, Some(settings), false, None);
+                    let frame = r.frame?;
+                    Some((
+                        steps,
+                        r.gpu_ms,
+                        samples.iter().map(|s| frame.occlusion[index(s)]).collect(),
+                    ))
+                })
+                .collect();
             for &e in elevations {
                 let scene = format!("{name}/k{k}/light{e}");
                 println!("accuracy: {scene}");
@@ -410,6 +432,17 @@ fn main() {
                     shadow: agreement(&|_| false),
                     bounce: none_bounce,
                 });
+                for (steps, gpu_ms, ao) in &searches {
+                    rows.push(Row {
+                        scene: scene.clone(),
+                        method: "horizon-search",
+                        setting: format!("steps={steps}"),
+                        gpu_ms: *gpu_ms,
+                        ao: errors(ao, &ao_truth),
+                        shadow: agreement(&|_| false),
+                        bounce: none_bounce,
+                    });
+                }
                 for dirs in [4u32, 8, 16] {
                     let settings = Mesostructure {
                         apex_directions: dirs,
@@ -474,7 +507,7 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
     .map_err(|_| ())
     .expect("the font registers");
     let mut series: Vec<(&str, Vec<(f64, f64)>)> = vec![];
-    for method in ["none", "bevy-ssao", "mesostructure"] {
+    for method in ["none", "bevy-ssao", "horizon-search", "mesostructure"] {
         let mut settings: Vec<&String> = rows
             .iter()
             .filter(|r| r.method == method)
@@ -531,7 +564,7 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
             .draw()
             .expect("draw");
         for (i, (method, points)) in series.iter().enumerate() {
-            let color = [BLACK, BLUE, RED][i % 3].to_rgba();
+            let color = [BLACK, BLUE, GREEN, RED][i % 4].to_rgba();
             chart
                 .draw_series(LineSeries::new(
                     points.iter().copied(),

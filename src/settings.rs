@@ -58,6 +58,11 @@ pub struct Mesostructure {
     /// The integral that turns horizon angles into occlusion: the physically based
     /// cosine-weighted form (default) or the paper's eq. (6).
     pub occlusion_form: OcclusionForm,
+    /// 0 (default): horizons from the apex sets, the paper's method. N (1–64): a brute-force
+    /// horizon search instead — N samples along each of `apex_directions` directions out to
+    /// `max_sample_radius` pixels — a fixed-radius baseline for comparisons (the `accuracy`
+    /// example), not a quality setting.
+    pub horizon_search_steps: u32,
     /// Multiply the mesostructure occlusion with a coarse horizon-based AO on the depth buffer
     /// (Bavoil et al. 2008), whose step is the adaptive `(min + max) / 2` of the pixel's apex
     /// distances (paper §3.1): the occlusion of the core geometry around the bumps. Pixels
@@ -105,6 +110,7 @@ impl Default for Mesostructure {
             depth_discontinuity: 0.02,
             occlusion: true,
             occlusion_form: OcclusionForm::CosineWeighted,
+            horizon_search_steps: 0,
             coarse_occlusion: true,
             micro_shadows: true,
             micro_shadow_softness: 0.05,
@@ -196,13 +202,14 @@ impl MesostructureDebugView {
 impl Mesostructure {
     /// The valid range of each numeric field, `(name, min, max)`: what [`Self::sanitized`]
     /// clamps to, and what an inspector's sliders should offer.
-    pub const RANGES: [(&'static str, f32, f32); 9] = [
+    pub const RANGES: [(&'static str, f32, f32); 10] = [
         ("apex_directions", 0.0, MAX_APEX_DIRECTIONS as f32),
         ("max_ascent_steps", 1.0, 512.0),
         ("max_sample_radius", 1.0, 256.0),
         ("depth_discontinuity", 0.0001, 1.0),
         ("micro_shadow_softness", 0.0, 0.5),
         ("bleeding_samples", 1.0, 16.0),
+        ("horizon_search_steps", 0.0, 64.0),
         ("ambient_weight", 0.0, 4.0),
         ("direct_weight", 0.0, 4.0),
         ("bleeding_weight", 0.0, 4.0),
@@ -234,6 +241,7 @@ impl Mesostructure {
         clamp_u32(&mut s.max_ascent_steps, "max_ascent_steps");
         clamp_u32(&mut s.max_sample_radius, "max_sample_radius");
         clamp_u32(&mut s.bleeding_samples, "bleeding_samples");
+        clamp_u32(&mut s.horizon_search_steps, "horizon_search_steps");
         let mut clamp_f32 = |v: &mut f32, default: f32, name: &'static str| {
             let (lo, hi) = Self::range(name).expect("a documented range");
             if !v.is_finite() {
@@ -263,7 +271,7 @@ impl Mesostructure {
     /// Whether a frame needs the gradient map and the apex sets: a lighting term or a debug
     /// view reads them. With none, the gradient and apex passes do not run.
     pub fn needs_apex_sets(&self) -> bool {
-        self.occlusion
+        (self.occlusion && self.horizon_search_steps == 0)
             || self.micro_shadows
             || crate::render::bleeding::bleeding_runs(self)
             || self.debug_view != MesostructureDebugView::None
@@ -272,7 +280,13 @@ impl Mesostructure {
     /// Whether a frame needs the height pass: the apex sets or the bump-mapped normal read its
     /// images. With neither, no mesostructure pass runs and the surfaces are lit as by Bevy.
     pub fn needs_height_map(&self) -> bool {
-        self.needs_apex_sets() || self.bump_mapping
+        self.needs_gradient_map() || self.bump_mapping
+    }
+
+    /// Whether a frame needs the gradient map (its connectivity flags give the surface normal
+    /// N'): the apex sets, or the brute-force horizon search.
+    pub fn needs_gradient_map(&self) -> bool {
+        self.needs_apex_sets() || self.occlusion
     }
 
     /// The apex search these settings describe (for the CPU oracle).
@@ -306,8 +320,8 @@ pub struct MesostructureUniform {
     pub max_ascent_steps: u32,
     /// Longest valley walk, pixels.
     pub max_walk: u32,
-    /// Padding (keeps the WGSL struct's layout explicit).
-    pub _padding: u32,
+    /// Steps of the brute-force horizon search (0 = apex sets).
+    pub horizon_search_steps: u32,
     /// Relative depth jump of a discontinuity.
     pub depth_relative: f32,
     /// Slope factor of the depth-continuity test.
@@ -357,7 +371,7 @@ impl From<&Mesostructure> for MesostructureUniform {
             apex_directions: s.apex_directions,
             max_ascent_steps: s.max_ascent_steps,
             max_walk: s.max_sample_radius,
-            _padding: 0,
+            horizon_search_steps: s.horizon_search_steps,
             depth_relative: continuity.relative,
             depth_slope_factor: continuity.slope_factor,
             debug_view: s.debug_view.code(),

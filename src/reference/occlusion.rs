@@ -181,6 +181,54 @@ pub fn occlusion(
         / OCCLUSION_SECTORS as f32
 }
 
+/// The brute-force, fixed-radius baseline (`Mesostructure::horizon_search_steps` > 0): along
+/// each direction of `directions` (unit, screen space), `steps` samples out to `radius` pixels
+/// on the same object; per direction the highest horizon; the form's integral over the
+/// directions. Mirrors `horizon_search` in `occlusion.wgsl`.
+#[allow(clippy::too_many_arguments)]
+pub fn horizon_search_occlusion(
+    mhm: &ScreenHeightMap,
+    mhgm: &GradientMap,
+    normals: &[Vec3],
+    view: &ViewGeometry,
+    (x, y): (u32, u32),
+    directions: &[[f32; 2]],
+    steps: u32,
+    radius: u32,
+    form: OcclusionForm,
+) -> f32 {
+    let i = mhm.index(x, y);
+    let object = mhm.objects[i];
+    if object == 0 {
+        return 1.0;
+    }
+    let p = surface_point(mhm, normals, view, x, y);
+    let n = match form {
+        OcclusionForm::CosineWeighted => mesostructure_normal(mhm, mhgm, normals, view, (x, y)),
+        OcclusionForm::Paper => normals[i],
+    };
+    let count = directions.len().max(1);
+    let mut visibility = 0.0;
+    for k in 0..count {
+        let d = directions.get(k).copied().unwrap_or([0.0, 0.0]);
+        let mut sin_h = 0.0f32;
+        for j in 1..=steps {
+            let o = |c: f32| (c * radius as f32 * j as f32 / steps as f32).round_ties_even() as i32;
+            let (qx, qy) = (x as i32 + o(d[0]), y as i32 + o(d[1]));
+            if !mhm.contains(qx, qy) || mhm.objects[mhm.index(qx as u32, qy as u32)] != object {
+                break;
+            }
+            let v = surface_point(mhm, normals, view, qx as u32, qy as u32) - p;
+            let len = v.length();
+            if len > 0.0 {
+                sin_h = sin_h.max((v.dot(n) / len).clamp(0.0, 1.0));
+            }
+        }
+        visibility += form.sector_visibility(sin_h);
+    }
+    visibility / count as f32
+}
+
 /// The sector of a screen-space offset: `round(atan2(dy, dx) / (2π) · N) mod N`. The GPU
 /// shader uses the same formula.
 pub fn sector_of(dx: i32, dy: i32) -> usize {

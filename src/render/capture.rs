@@ -256,7 +256,7 @@ pub fn copy_capture(
     mut ctx: RenderContext,
 ) {
     let (t, capture, extracted_view, settings) = view.into_inner();
-    if !settings.0.needs_apex_sets() || !super::view_has_mesostructure(&phases, extracted_view) {
+    if !settings.0.needs_gradient_map() || !super::view_has_mesostructure(&phases, extracted_view) {
         return;
     }
     let readbacks = vec![

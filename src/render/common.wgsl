@@ -6,7 +6,7 @@ struct MesostructureUniform {
     apex_directions: u32,
     max_ascent_steps: u32,
     max_walk: u32,
-    _padding: u32,
+    horizon_search_steps: u32,
     depth_relative: f32,
     depth_slope_factor: f32,
     debug_view: u32,

@@ -68,7 +68,7 @@ pub fn gradient_pass(
     mut ctx: RenderContext,
 ) {
     let (extracted_view, textures, bind_groups, offset, settings) = view.into_inner();
-    if !settings.0.needs_apex_sets() || !view_has_mesostructure(&phases, extracted_view) {
+    if !settings.0.needs_gradient_map() || !view_has_mesostructure(&phases, extracted_view) {
         return;
     }
     let Some(compute) = pipeline_cache.get_compute_pipeline(pipeline.pipeline) else {

@@ -7,7 +7,7 @@
 
 #import bevy_render::view::View
 #import bevy_mesostructure::common::{
-    MesostructureUniform, APEX_COUNT_MASK, on_screen, unpack_offset,
+    MesostructureUniform, APEX_COUNT_MASK, on_screen, unpack_offset, sample_direction,
 }
 #import bevy_mesostructure::surface
 #import bevy_mesostructure::surface::{SECTORS, sector_of}
@@ -77,6 +77,34 @@ fn coarse_occlusion(p: vec2<i32>, n0: vec3<f32>, step: f32) -> f32 {
     return visibility / f32(COARSE_DIRECTIONS);
 }
 
+// A baseline, not the paper's method (`horizon_search_steps` > 0): a brute-force horizon search
+// with a fixed radius — along each of `apex_directions` directions, `horizon_search_steps`
+// samples out to `max_walk` pixels on the same surface — and the same integral over the
+// directions. Mirrors `reference::horizon_search_occlusion`.
+fn horizon_search(p: vec2<i32>, size: vec2<i32>, sp: vec3<f32>, n: vec3<f32>) -> f32 {
+    let object = textureLoad(mhm, p, 0).z;
+    let directions = max(settings.apex_directions, 1u);
+    let steps = settings.horizon_search_steps;
+    var visibility = 0.0;
+    for (var i = 0u; i < directions; i++) {
+        let dir = sample_direction(settings, i);
+        var sin_h = 0.0;
+        for (var j = 1u; j <= steps; j++) {
+            let q = p + vec2<i32>(round(dir * f32(settings.max_walk) * f32(j) / f32(steps)));
+            if !on_screen(q, size) || textureLoad(mhm, q, 0).z != object {
+                break;
+            }
+            let d = surface_point(q) - sp;
+            let len = length(d);
+            if len > 0.0 {
+                sin_h = max(sin_h, clamp(dot(d, n) / len, 0.0, 1.0));
+            }
+        }
+        visibility += select(1.0 - sin_h * sin_h, 1.0 - sin_h, settings.occlusion_form == 1u);
+    }
+    return visibility / f32(directions);
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     let size = vec2<i32>(textureDimensions(mhm));
@@ -98,6 +126,10 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     if settings.occlusion_form == 0u {
         n = surface::mesostructure_normal(
             mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, sp, n0);
+    }
+    if settings.horizon_search_steps > 0u {
+        textureStore(occlusion_out, p, vec4<f32>(horizon_search(p, size, sp, n)));
+        return;
     }
     var sin_h = array<f32, 8>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     var nearest = 1.0e9;

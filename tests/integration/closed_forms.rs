@@ -20,9 +20,13 @@ fn grooves(slope_deg: f32) -> (HeightMap, f32) {
 /// Renders the grooves top-down with one directional light travelling towards +x at
 /// `elevation_deg` and returns the capture.
 fn render(slope_deg: f32, elevation_deg: f32) -> CapturedFrame {
+    render_with(slope_deg, elevation_deg, Mesostructure::default())
+}
+
+fn render_with(slope_deg: f32, elevation_deg: f32, settings: Mesostructure) -> CapturedFrame {
     let mut app = app();
     let target = target(&mut app, SIZE, SIZE);
-    let camera = camera(&mut app, &target, top_down(), Mesostructure::default());
+    let camera = camera(&mut app, &target, top_down(), settings);
     let (map, k) = grooves(slope_deg);
     let height_map = image(&mut app, map.to_image());
     app.insert_resource(GlobalAmbientLight {
@@ -110,5 +114,60 @@ fn v_groove_bottoms_match_the_closed_forms() {
                 assert_eq!(lit, visible.len(), "{slope}° groove, light at {elevation}°");
             }
         }
+    }
+}
+
+#[test]
+fn brute_force_horizon_search_matches_its_oracle_and_the_closed_form() {
+    if !gpu_or_skip() {
+        return;
+    }
+    // The fixed-radius baseline of the accuracy chart: 16 directions, 32 samples out to 24 px
+    // (each half-groove is ~10 px wide here).
+    let settings = Mesostructure {
+        horizon_search_steps: 32,
+        apex_directions: 16,
+        max_sample_radius: 24,
+        micro_shadows: false,
+        bleeding: false,
+        ..default()
+    };
+    for slope in [25.0f32, 40.0] {
+        let frame = render_with(slope, 60.0, settings.clone());
+        // Against the CPU oracle on the same captured images, every pixel.
+        let mhm = frame.screen_height_map();
+        let mhgm = frame.gradient_map();
+        let normals = frame.normals();
+        let directions = bevy_mesostructure::reference::sample_directions(16);
+        let mut worst = 0.0f32;
+        for y in 0..SIZE {
+            for x in 0..SIZE {
+                let cpu = bevy_mesostructure::reference::horizon_search_occlusion(
+                    &mhm,
+                    &mhgm,
+                    &normals,
+                    &frame.view,
+                    (x, y),
+                    &directions,
+                    32,
+                    24,
+                    bevy_mesostructure::reference::OcclusionForm::CosineWeighted,
+                );
+                worst = worst.max((cpu - frame.occlusion[(y * SIZE + x) as usize]).abs());
+            }
+        }
+        // And at the groove bottoms, against cos α.
+        let bottom = bottoms(&frame);
+        let ao = bottom.iter().map(|&i| frame.occlusion[i]).sum::<f32>() / bottom.len() as f32;
+        eprintln!(
+            "horizon search, V-groove {slope}°: AO at the bottom {ao:.4} (closed form {:.4}); \
+             GPU vs oracle worst {worst:.2e}",
+            slope.to_radians().cos()
+        );
+        assert!(worst < 1e-4, "GPU vs oracle: {worst}");
+        assert!(
+            (ao - slope.to_radians().cos()).abs() < 0.03,
+            "{slope}°: {ao}"
+        );
     }
 }
