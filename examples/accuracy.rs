@@ -29,6 +29,9 @@
 //! and `FILE.png` (default `out/accuracy.png`): GPU time against AO error, one line per method.
 //! `--quick`: bricks and stone at 0.1 under the 45° light.
 
+#[path = "common/mod.rs"]
+mod common;
+
 use std::{fmt::Write as _, path::PathBuf};
 
 use bevy::{
@@ -38,12 +41,9 @@ use bevy::{
     pbr::ScreenSpaceAmbientOcclusion,
     prelude::*,
     render::{
-        RenderPlugin,
         diagnostic::RenderDiagnosticsPlugin,
-        pipelined_rendering::PipelinedRenderingPlugin,
         render_resource::{TextureFormat, TextureUsages},
     },
-    window::ExitCondition,
 };
 use bevy_mesostructure::{
     CapturedFrame, MesostructureCapture, MesostructureCaptures, prelude::*,
@@ -71,22 +71,8 @@ fn render(
     elevation: Option<f32>,
 ) -> (Render, Vec<f32>) {
     let mut app = App::new();
-    app.add_plugins(
-        DefaultPlugins
-            .set(WindowPlugin {
-                primary_window: None,
-                exit_condition: ExitCondition::DontExit,
-                ..default()
-            })
-            .set(RenderPlugin {
-                synchronous_pipeline_compilation: true,
-                ..default()
-            })
-            .disable::<bevy::winit::WinitPlugin>()
-            .disable::<PipelinedRenderingPlugin>()
-            .disable::<bevy::log::LogPlugin>(),
-    )
-    .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
+    app.add_plugins(common::headless_plugins().disable::<bevy::log::LogPlugin>())
+        .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
     app.finish();
     app.cleanup();
     let world = app.world_mut();
@@ -146,7 +132,7 @@ fn render(
     } else {
         let grid = world
             .resource_mut::<Assets<Mesh>>()
-            .add(displaced_plane(map, k, 256));
+            .add(map.displaced_plane(k, 256));
         world.spawn((Mesh3d(grid), MeshMaterial3d(material)));
     }
     for _ in 0..12 {
@@ -223,31 +209,6 @@ fn srgb(v: u8) -> f32 {
     } else {
         ((v + 0.055) / 1.055).powf(2.4)
     }
-}
-
-/// The map as real geometry: a 2 × 2 grid of `n`² quads lifted by `k · dis`.
-fn displaced_plane(map: &HeightMap, k: f32, n: u32) -> Mesh {
-    let mut mesh = Plane3d::default()
-        .mesh()
-        .size(2.0, 2.0)
-        .subdivisions(n - 1)
-        .build();
-    let Some(bevy::mesh::VertexAttributeValues::Float32x2(uvs)) =
-        mesh.attribute(Mesh::ATTRIBUTE_UV_0).cloned()
-    else {
-        unreachable!("a plane has UVs")
-    };
-    if let Some(bevy::mesh::VertexAttributeValues::Float32x3(positions)) =
-        mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
-    {
-        for (p, uv) in positions.iter_mut().zip(&uvs) {
-            let x = ((uv[0] * map.width as f32) as u32).min(map.width - 1);
-            let y = ((uv[1] * map.height as f32) as u32).min(map.height - 1);
-            p[1] = k * map.values[(y * map.width + x) as usize];
-        }
-    }
-    mesh.compute_smooth_normals();
-    mesh
 }
 
 /// UV of the plane under pixel (x, y) of the top-down camera.

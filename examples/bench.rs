@@ -21,6 +21,9 @@
 //! `scene,triangles,width,height,scale,pass,gpu_ms_median,gpu_ms_p95,frames,adapter` and prints
 //! a Markdown table.
 
+#[path = "common/mod.rs"]
+mod common;
+
 use std::{fmt::Write as _, path::PathBuf};
 
 use bevy::{
@@ -29,13 +32,10 @@ use bevy::{
     pbr::{ContactShadows, ScreenSpaceAmbientOcclusion},
     prelude::*,
     render::{
-        RenderPlugin,
         diagnostic::RenderDiagnosticsPlugin,
-        pipelined_rendering::PipelinedRenderingPlugin,
         render_resource::{TextureFormat, TextureUsages},
         renderer::RenderAdapterInfo,
     },
-    window::ExitCondition,
 };
 use bevy_mesostructure::prelude::*;
 
@@ -92,22 +92,8 @@ fn measure(
     warm_up: usize,
 ) -> (Vec<(String, Vec<f64>)>, usize, String) {
     let mut app = App::new();
-    app.add_plugins(
-        DefaultPlugins
-            .set(WindowPlugin {
-                primary_window: None,
-                exit_condition: ExitCondition::DontExit,
-                ..default()
-            })
-            .set(RenderPlugin {
-                synchronous_pipeline_compilation: true,
-                ..default()
-            })
-            .disable::<bevy::winit::WinitPlugin>()
-            .disable::<PipelinedRenderingPlugin>()
-            .disable::<bevy::log::LogPlugin>(),
-    )
-    .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
+    app.add_plugins(common::headless_plugins().disable::<bevy::log::LogPlugin>())
+        .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
     app.finish();
     app.cleanup();
     let world = app.world_mut();

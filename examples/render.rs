@@ -40,12 +40,9 @@ use bevy::{
     image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor},
     prelude::*,
     render::{
-        RenderPlugin,
-        pipelined_rendering::PipelinedRenderingPlugin,
         render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages},
         view::screenshot::{Screenshot, save_to_disk},
     },
-    window::ExitCondition,
 };
 use bevy_mesostructure::{CapturedFrame, MesostructureCapture, MesostructureCaptures, prelude::*};
 
@@ -194,26 +191,13 @@ fn main() {
         std::fs::create_dir_all(dir).expect("cannot create the output folder");
     }
     let mut app = App::new();
-    app.add_plugins(
-        DefaultPlugins
-            .set(WindowPlugin {
-                primary_window: None,
-                exit_condition: ExitCondition::DontExit,
-                ..default()
-            })
-            .set(RenderPlugin {
-                synchronous_pipeline_compilation: true,
-                ..default()
-            })
-            .disable::<bevy::winit::WinitPlugin>()
-            .disable::<PipelinedRenderingPlugin>(),
-    )
-    .add_plugins(MesostructurePlugin)
-    .insert_resource(ClearColor(Color::BLACK))
-    .insert_resource(bevy::light::GlobalAmbientLight {
-        brightness: 500.0,
-        ..default()
-    });
+    app.add_plugins(common::headless_plugins())
+        .add_plugins(MesostructurePlugin)
+        .insert_resource(ClearColor(Color::BLACK))
+        .insert_resource(bevy::light::GlobalAmbientLight {
+            brightness: 500.0,
+            ..default()
+        });
     app.finish();
     app.cleanup();
     let world = app.world_mut();

@@ -137,6 +137,37 @@ impl HeightMap {
         )
     }
 
+    /// The map as real geometry, for methods that only see the depth buffer (Bevy's SSAO in
+    /// the comparisons): the 2 × 2 plane of `Plane3d` (XZ, normal +Y) as a grid of `n`² vertices,
+    /// each lifted by `k · dis` at its UV (nearest texel), with smooth normals.
+    pub fn displaced_plane(&self, k: f32, n: u32) -> bevy::mesh::Mesh {
+        use bevy::{
+            math::primitives::Plane3d,
+            mesh::{Mesh, MeshBuilder, Meshable, VertexAttributeValues},
+        };
+        let mut mesh = Plane3d::default()
+            .mesh()
+            .size(2.0, 2.0)
+            .subdivisions(n.max(2) - 1)
+            .build();
+        let Some(VertexAttributeValues::Float32x2(uvs)) =
+            mesh.attribute(Mesh::ATTRIBUTE_UV_0).cloned()
+        else {
+            unreachable!("a plane has UVs")
+        };
+        if let Some(VertexAttributeValues::Float32x3(positions)) =
+            mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+        {
+            for (p, uv) in positions.iter_mut().zip(&uvs) {
+                let x = ((uv[0] * self.width as f32) as u32).min(self.width - 1);
+                let y = ((uv[1] * self.height as f32) as u32).min(self.height - 1);
+                p[1] = k * self.values[(y * self.width + x) as usize];
+            }
+        }
+        mesh.compute_smooth_normals();
+        mesh
+    }
+
     /// The map as an 8-bit grey [`Image`] (`R8Unorm`), e.g. to save as PNG.
     pub fn to_image_gray8(&self) -> Image {
         Image::new(

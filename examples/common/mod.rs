@@ -156,13 +156,7 @@ pub fn app(args: &ExampleArgs, title: &str, shots: Vec<Shot>) -> App {
     if windowed {
         app.add_plugins(plugins);
     } else {
-        // Headless: no event loop (no display to connect to); the frames are driven one by one
-        // by `run`.
-        app.add_plugins(
-            plugins
-                .disable::<bevy::winit::WinitPlugin>()
-                .disable::<PipelinedRenderingPlugin>(),
-        );
+        app.add_plugins(headless_plugins());
     }
     app.add_plugins((
         MesostructurePlugin,
@@ -210,6 +204,24 @@ pub fn app(args: &ExampleArgs, title: &str, shots: Vec<Shot>) -> App {
         .add_systems(Update, advance_clock)
         .add_systems(Last, run_script);
     app
+}
+
+/// Bevy's plugins for a run without a window: no event loop (there may be no display to
+/// connect to), frames driven one by one by the caller, pipelines compiled before the first
+/// frame that needs them.
+pub fn headless_plugins() -> bevy::app::PluginGroupBuilder {
+    DefaultPlugins
+        .set(WindowPlugin {
+            primary_window: None,
+            exit_condition: ExitCondition::DontExit,
+            ..default()
+        })
+        .set(RenderPlugin {
+            synchronous_pipeline_compilation: true,
+            ..default()
+        })
+        .disable::<bevy::winit::WinitPlugin>()
+        .disable::<PipelinedRenderingPlugin>()
 }
 
 /// Runs the app: the window's event loop, or frame by frame until the script is done.

@@ -38,12 +38,32 @@ pub fn sector_horizons(
     }
     let point = surface_point(mhm, normals, view, x, y);
     let normal = mesostructure_normal(mhm, mhgm, normals, view, (x, y));
-    let mut h = SectorHorizons {
+    let (sin_h, apex) = horizons_about(mhm, normals, view, set, (x, y), point, normal);
+    Some(SectorHorizons {
         point,
         normal,
-        sin_h: [0.0; OCCLUSION_SECTORS],
-        apex: [None; OCCLUSION_SECTORS],
-    };
+        sin_h,
+        apex,
+    })
+}
+
+/// Per azimuth sector, the highest horizon of the apexes of `set` seen from `point` above the
+/// plane of `normal` (sine, clamped to [0, 1]), and the offset of the apex that sets it. Shared
+/// by the occlusion, micro-shadow and bleeding oracles.
+pub(crate) fn horizons_about(
+    mhm: &ScreenHeightMap,
+    normals: &[Vec3],
+    view: &ViewGeometry,
+    set: &ApexSet,
+    (x, y): (u32, u32),
+    point: Vec3,
+    normal: Vec3,
+) -> (
+    [f32; OCCLUSION_SECTORS],
+    [Option<(i32, i32)>; OCCLUSION_SECTORS],
+) {
+    let mut sin_h = [0.0; OCCLUSION_SECTORS];
+    let mut apex = [None; OCCLUSION_SECTORS];
     for a in set.iter() {
         let d = surface_point(mhm, normals, view, a.x as u32, a.y as u32) - point;
         let len = d.length();
@@ -53,12 +73,12 @@ pub fn sector_horizons(
         let s = d.dot(normal) / len;
         let (dx, dy) = (a.x - x as i32, a.y - y as i32);
         let sector = sector_of(dx, dy);
-        if s > h.sin_h[sector] {
-            h.sin_h[sector] = s.min(1.0);
-            h.apex[sector] = Some((dx, dy));
+        if s > sin_h[sector] {
+            sin_h[sector] = s.min(1.0);
+            apex[sector] = Some((dx, dy));
         }
     }
-    Some(h)
+    (sin_h, apex)
 }
 
 /// Micro-shadow visibility (1 = lit) of the light seen from the pixel in direction `to_light`

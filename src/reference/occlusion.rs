@@ -162,18 +162,7 @@ pub fn occlusion(
         OcclusionForm::CosineWeighted => mesostructure_normal(mhm, mhgm, normals, view, (x, y)),
         OcclusionForm::Paper => normals[i],
     };
-    let mut sin_h = [0.0f32; OCCLUSION_SECTORS];
-    for a in set.iter() {
-        let h = surface_point(mhm, normals, view, a.x as u32, a.y as u32);
-        let d = h - p;
-        let len = d.length();
-        if len <= 0.0 {
-            continue;
-        }
-        let s = (d.dot(n) / len).clamp(0.0, 1.0);
-        let sector = sector_of(a.x - x as i32, a.y - y as i32);
-        sin_h[sector] = sin_h[sector].max(s);
-    }
+    let (sin_h, _) = super::lighting::horizons_about(mhm, normals, view, set, (x, y), p, n);
     sin_h
         .iter()
         .map(|&s| form.sector_visibility(s))

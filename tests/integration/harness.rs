@@ -238,6 +238,25 @@ pub fn assert_pipelines_ready(app: &App) {
     }
 }
 
+/// Spawns a directional light of `illuminance` lux travelling along `direction` (any direction,
+/// straight down included).
+pub fn sun(app: &mut App, direction: Vec3, illuminance: f32) -> Entity {
+    let up = if direction.cross(Vec3::Y).length() < 1e-3 {
+        Vec3::Z
+    } else {
+        Vec3::Y
+    };
+    app.world_mut()
+        .spawn((
+            DirectionalLight {
+                illuminance,
+                ..default()
+            },
+            Transform::default().looking_to(direction, up),
+        ))
+        .id()
+}
+
 /// Spawns the 2 × 2 plane (XZ plane, centred at the origin, normal +Y; see [`top_down_uv`])
 /// with `material` and `height_map` at scale `k`.
 pub fn mesostructure_plane(

@@ -333,20 +333,7 @@ fn micro_shadow_pair(
         brightness: 0.0,
         ..default()
     });
-    app.world_mut().spawn((
-        DirectionalLight {
-            illuminance: 3000.0,
-            ..default()
-        },
-        Transform::default().looking_to(
-            direction,
-            if direction.cross(Vec3::Y).length() < 1e-3 {
-                Vec3::Z
-            } else {
-                Vec3::Y
-            },
-        ),
-    ));
+    sun(&mut app, direction, 3000.0);
     let grey = app
         .world_mut()
         .resource_mut::<Assets<StandardMaterial>>()

@@ -26,20 +26,7 @@ fn render(
         brightness: 800.0,
         ..default()
     });
-    app.world_mut().spawn((
-        DirectionalLight {
-            illuminance: 3000.0,
-            ..default()
-        },
-        Transform::default().looking_to(
-            light,
-            if light.cross(Vec3::Y).length() < 1e-3 {
-                Vec3::Z
-            } else {
-                Vec3::Y
-            },
-        ),
-    ));
+    sun(&mut app, light, 3000.0);
     let grey = app
         .world_mut()
         .resource_mut::<Assets<StandardMaterial>>()
@@ -290,32 +277,6 @@ fn unproject(camera: &Transform, pixel: UVec2) -> Option<Vec3> {
     (s > 0.0).then(|| camera.translation + dir * s)
 }
 
-/// The bricks plane as real geometry: a 2 × 2 grid of `n`² quads lifted by `k · dis` (for the
-/// screen-space methods that only see the depth buffer).
-fn displaced_plane(map: &HeightMap, k: f32, n: u32) -> Mesh {
-    let mut mesh = Plane3d::default()
-        .mesh()
-        .size(2.0, 2.0)
-        .subdivisions(n - 1)
-        .build();
-    let uvs: Vec<[f32; 2]> = match mesh.attribute(Mesh::ATTRIBUTE_UV_0) {
-        Some(bevy::mesh::VertexAttributeValues::Float32x2(uv)) => uv.clone(),
-        _ => unreachable!("a plane has UVs"),
-    };
-    let Some(bevy::mesh::VertexAttributeValues::Float32x3(positions)) =
-        mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
-    else {
-        unreachable!("a plane has positions")
-    };
-    for (p, uv) in positions.iter_mut().zip(&uvs) {
-        let x = ((uv[0] * map.width as f32) as u32).min(map.width - 1);
-        let y = ((uv[1] * map.height as f32) as u32).min(map.height - 1);
-        p[1] = k * map.values[(y * map.width + x) as usize];
-    }
-    mesh.compute_smooth_normals();
-    mesh
-}
-
 #[test]
 fn an_orbiting_camera_sees_steady_occlusion_compared_with_ssao() {
     if !gpu_or_skip() {
@@ -372,7 +333,7 @@ fn an_orbiting_camera_sees_steady_occlusion_compared_with_ssao() {
                     .entity_mut(camera)
                     .remove::<Mesostructure>()
                     .insert(bevy::pbr::ScreenSpaceAmbientOcclusion::default());
-                let grid = mesh(&mut app, displaced_plane(&map, k, 256));
+                let grid = mesh(&mut app, map.displaced_plane(k, 256));
                 let grey = app
                     .world_mut()
                     .resource_mut::<Assets<StandardMaterial>>()
