@@ -88,13 +88,15 @@ use bevy::{
 
 pub use material::MesostructureMaterial;
 pub use render::capture::{CapturedFrame, MesostructureCapture, MesostructureCaptures};
-pub use settings::{Mesostructure, MesostructureDebugView};
+pub use settings::{
+    Mesostructure, MesostructureDebugView, MesostructureQuality, WorkingResolution,
+};
 
 /// Everything an app needs.
 pub mod prelude {
     pub use crate::{
         Mesostructure, MesostructureDebugView, MesostructureMaterial, MesostructurePlugin,
-        height_maps::HeightMap,
+        MesostructureQuality, WorkingResolution, height_maps::HeightMap,
     };
 }
 
@@ -106,6 +108,7 @@ pub struct MesostructurePlugin;
 impl Plugin for MesostructurePlugin {
     fn build(&self, app: &mut App) {
         app.register_type::<Mesostructure>()
+            .register_type::<MesostructureQuality>()
             .register_type::<MesostructureMaterial>()
             .init_resource::<warn_once::WarnedOnce>()
             .init_resource::<material::HeightMapMips>()

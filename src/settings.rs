@@ -50,6 +50,13 @@ pub struct Mesostructure {
     /// where it stops rising), so the apex set adapts to the size of the structures; this only
     /// bounds them.
     pub max_sample_radius: u32,
+    /// The resolution the apex sets are searched at: every pixel (`Full`, the paper's), or once
+    /// per 2×2 (`Half`) or 4×4 (`Quarter`) block of pixels, whose pixels then share that set
+    /// (the apex search is the largest pass; it costs about a quarter or a sixteenth). The
+    /// occlusion, micro-shadows and bleeding stay per pixel: each measures its own horizons
+    /// against the shared apexes. Pixels across a depth jump or on another object than the
+    /// block's searched pixel get no apexes.
+    pub working_resolution: WorkingResolution,
     /// Relative depth jump (fraction of NDC depth, 0.0001–1) above which two neighbouring pixels
     /// of the same object count as separated (a depth discontinuity ends the visible region).
     pub depth_discontinuity: f32,
@@ -107,6 +114,7 @@ impl Default for Mesostructure {
             apex_directions: 8,
             max_ascent_steps: 64,
             max_sample_radius: 32,
+            working_resolution: WorkingResolution::Full,
             depth_discontinuity: 0.02,
             occlusion: true,
             occlusion_form: OcclusionForm::CosineWeighted,
@@ -121,6 +129,80 @@ impl Default for Mesostructure {
             direct_weight: 1.0,
             bleeding_weight: 1.0,
         }
+    }
+}
+
+/// The resolution the apex sets are searched at (see [`Mesostructure::working_resolution`]).
+#[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[reflect(Default, Clone, Debug, PartialEq, Hash)]
+pub enum WorkingResolution {
+    /// One apex set per pixel (the paper's).
+    #[default]
+    Full,
+    /// One apex set per 2×2 pixels.
+    Half,
+    /// One apex set per 4×4 pixels.
+    Quarter,
+}
+
+impl WorkingResolution {
+    /// All of them, finest first.
+    pub const ALL: [Self; 3] = [Self::Full, Self::Half, Self::Quarter];
+
+    /// Side, in pixels, of the block that shares one apex set.
+    pub fn block(self) -> u32 {
+        match self {
+            Self::Full => 1,
+            Self::Half => 2,
+            Self::Quarter => 4,
+        }
+    }
+
+    /// The name in lower case (`half`), for command lines and file names.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Full => "full",
+            Self::Half => "half",
+            Self::Quarter => "quarter",
+        }
+    }
+}
+
+/// Quality presets: the settings that trade cost for accuracy, together (see
+/// [`Mesostructure::with_quality`]). `docs/accuracy.md` charts each one's error and GPU time.
+#[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[reflect(Default, Clone, Debug, PartialEq, Hash)]
+pub enum MesostructureQuality {
+    /// Apex sets per 4×4 pixels, 4 directions, walks of 16 px, 32 ascent steps, 2 bleeding
+    /// samples.
+    Low,
+    /// Apex sets per 2×2 pixels, otherwise as `High`.
+    Medium,
+    /// The defaults: apex sets per pixel, 8 directions, walks of 32 px, 64 ascent steps, 4
+    /// bleeding samples.
+    #[default]
+    High,
+    /// Apex sets per pixel, 16 directions, walks of 64 px, 128 ascent steps, 8 bleeding samples.
+    Ultra,
+}
+
+impl MesostructureQuality {
+    /// All presets, cheapest first.
+    pub const ALL: [Self; 4] = [Self::Low, Self::Medium, Self::High, Self::Ultra];
+
+    /// The name in lower case (`medium`), for command lines and file names.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Low => "low",
+            Self::Medium => "medium",
+            Self::High => "high",
+            Self::Ultra => "ultra",
+        }
+    }
+
+    /// The preset of a [`Self::name`].
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|q| q.name() == name)
     }
 }
 
@@ -200,6 +282,24 @@ impl MesostructureDebugView {
 }
 
 impl Mesostructure {
+    /// These settings with the cost/accuracy fields of a preset (`apex_directions`,
+    /// `max_ascent_steps`, `max_sample_radius`, `working_resolution`, `bleeding_samples`);
+    /// the effects, weights and views stay as they are.
+    pub fn with_quality(mut self, quality: MesostructureQuality) -> Self {
+        let (resolution, directions, steps, radius, bleeding) = match quality {
+            MesostructureQuality::Low => (WorkingResolution::Quarter, 4, 32, 16, 2),
+            MesostructureQuality::Medium => (WorkingResolution::Half, 8, 64, 32, 4),
+            MesostructureQuality::High => (WorkingResolution::Full, 8, 64, 32, 4),
+            MesostructureQuality::Ultra => (WorkingResolution::Full, 16, 128, 64, 8),
+        };
+        self.working_resolution = resolution;
+        self.apex_directions = directions;
+        self.max_ascent_steps = steps;
+        self.max_sample_radius = radius;
+        self.bleeding_samples = bleeding;
+        self
+    }
+
     /// The valid range of each numeric field, `(name, min, max)`: what [`Self::sanitized`]
     /// clamps to, and what an inspector's sliders should offer.
     pub const RANGES: [(&'static str, f32, f32); 10] = [
@@ -346,6 +446,8 @@ pub struct MesostructureUniform {
     pub bleeding_samples: u32,
     /// Whether the coarse depth-buffer AO multiplies the occlusion (1) or not (0).
     pub coarse_occlusion: u32,
+    /// Side of the pixel block sharing one apex set (the working resolution).
+    pub apex_block: u32,
     /// λa, λs, λd of eq. (2), and one spare float.
     pub weights: Vec4,
     /// `(cos θ_i, sin θ_i)` of the sample directions, two per vector.
@@ -384,6 +486,7 @@ impl From<&Mesostructure> for MesostructureUniform {
             bleeding_enabled: crate::render::bleeding::bleeding_runs(s) as u32,
             bleeding_samples: s.bleeding_samples,
             coarse_occlusion: s.coarse_occlusion as u32,
+            apex_block: s.working_resolution.block(),
             weights: Vec4::new(s.ambient_weight, s.direct_weight, s.bleeding_weight, 0.0),
             directions,
         }
@@ -428,6 +531,38 @@ mod tests {
         assert_eq!((s.bleeding_weight, s.direct_weight), (1.0, 0.0));
         assert_eq!(s.bleeding_samples, 1);
         assert!(Mesostructure::default().sanitized().1.is_empty());
+    }
+
+    #[test]
+    fn presets_stay_in_range_and_high_is_the_default() {
+        assert_eq!(
+            Mesostructure::default().with_quality(MesostructureQuality::High),
+            Mesostructure::default()
+        );
+        let mut previous_cost = 0;
+        for q in MesostructureQuality::ALL {
+            let s = Mesostructure {
+                micro_shadows: false,
+                ..default()
+            }
+            .with_quality(q);
+            assert!(s.sanitized().1.is_empty(), "{q:?} leaves a range");
+            assert!(!s.micro_shadows, "a preset touched an effect switch");
+            assert_eq!(MesostructureQuality::from_name(q.name()), Some(q));
+            // The bound on texel reads of one apex search, per pixel.
+            let block = s.working_resolution.block();
+            let cost = (s.max_ascent_steps + 2 * s.apex_directions * s.max_sample_radius) * 16
+                / (block * block);
+            assert!(
+                cost > previous_cost,
+                "{q:?} is not dearer than the preset before"
+            );
+            previous_cost = cost;
+        }
+        let u = MesostructureUniform::from(
+            &Mesostructure::default().with_quality(MesostructureQuality::Low),
+        );
+        assert_eq!(u.apex_block, 4);
     }
 
     #[test]

@@ -344,6 +344,17 @@ pub mod packed {
     pub const TRUNCATED: u32 = 1 << 7;
     /// Bit `BOUNDARY_SHIFT + slot` marks a boundary point.
     pub const BOUNDARY_SHIFT: u32 = 8;
+    /// Bits `ORIGIN_SHIFT..+2` and `ORIGIN_SHIFT + 2..+4`: x and y of the searched pixel inside
+    /// its block, at a reduced working resolution (offsets are relative to it).
+    pub const ORIGIN_SHIFT: u32 = 25;
+
+    /// The pixel a set was searched from, from its header and its block's top-left pixel.
+    pub const fn origin(header: u32, (x, y): (i32, i32)) -> (i32, i32) {
+        (
+            x + ((header >> ORIGIN_SHIFT) & 3) as i32,
+            y + ((header >> (ORIGIN_SHIFT + 2)) & 3) as i32,
+        )
+    }
 
     /// Words per pixel for `directions` indirect samples: header, direct apex, indirect apexes.
     pub const fn stride(directions: u32) -> u32 {

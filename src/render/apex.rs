@@ -81,7 +81,8 @@ pub fn apex_pass(
         compute,
         &bind_groups.apex,
         &[offset.0],
-        textures.size,
+        // One invocation per block of pixels that shares an apex set.
+        (textures.size + textures.apex_block - 1) / textures.apex_block,
         |encoder| encoder.clear_buffer(&textures.apex_stats, 0, None),
     );
 }

@@ -3,12 +3,14 @@
 // direction (walk to the valley, climb along the direction to the steepest rise), boundary
 // points where a climb would leave the visible region.
 // Work per pixel is bounded by `max_ascent_steps + 2 × apex_directions × max_sample_radius`
-// texel reads.
+// texel reads. At a reduced working resolution one invocation searches for a block of
+// `apex_block`² pixels, from its first mesostructure pixel (the others share that set).
 // Mirrors `reference::apex_set`.
 
 #import bevy_mesostructure::common::{
     MesostructureUniform, FLAG_VALID, APEX_DIRECT_PRESENT, APEX_TRUNCATED, APEX_BOUNDARY_SHIFT,
-    APEX_MIN_RISE, neighbour_offset, on_screen, is_connected, pack_offset, sample_direction,
+    APEX_MIN_RISE, APEX_ORIGIN_SHIFT, neighbour_offset, on_screen, is_connected, pack_offset,
+    sample_direction,
 }
 
 @group(0) @binding(0) var mhm: texture_2d<f32>;
@@ -166,18 +168,29 @@ fn line_climb(p: vec2<i32>, h0: f32, d: vec2<f32>, start: vec3<i32>) -> Ascent {
 @compute @workgroup_size(8, 8, 1)
 fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
     let size = vec2<i32>(textureDimensions(mhgm));
-    let p = vec2<i32>(id.xy);
-    if !on_screen(p, size) {
+    let b = settings.apex_block;
+    let corner = vec2<i32>(id.xy * b);
+    if !on_screen(corner, size) {
         return;
     }
-    let base = (id.y * u32(size.x) + id.x) * settings.apex_stride;
-    let c = textureLoad(mhgm, p, 0);
-    if (u32(c.w) & FLAG_VALID) == 0u {
+    let base = (id.y * ((u32(size.x) + b - 1u) / b) + id.x) * settings.apex_stride;
+    // The block's origin: its first mesostructure pixel in row order.
+    var p = vec2(-1);
+    for (var i = 0u; i < b * b; i++) {
+        let q = corner + vec2<i32>(vec2(i % b, i / b));
+        if on_screen(q, size) && (u32(textureLoad(mhgm, q, 0).w) & FLAG_VALID) != 0u {
+            p = q;
+            break;
+        }
+    }
+    if p.x < 0 {
         apex_sets[base] = 0u;
         return;
     }
+    let c = textureLoad(mhgm, p, 0);
     let h0 = c.z;
-    var header = 0u;
+    let inside = vec2<u32>(p - corner);
+    var header = (inside.x << APEX_ORIGIN_SHIFT) | (inside.y << (APEX_ORIGIN_SHIFT + 2u));
     var count = 0u;
     var truncated = false;
 

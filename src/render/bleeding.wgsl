@@ -11,7 +11,9 @@
 
 #import bevy_render::view::View
 #import bevy_pbr::pbr_deferred_types::{unpack_unorm4x8_, unpack_flags, DEFERRED_FLAGS_UNLIT_BIT}
-#import bevy_mesostructure::common::{MesostructureUniform, APEX_COUNT_MASK, on_screen, unpack_offset}
+#import bevy_mesostructure::common::{
+    MesostructureUniform, on_screen, unpack_offset, apex_base, apex_set_of,
+}
 #import bevy_mesostructure::surface
 #import bevy_mesostructure::surface::{SECTORS, TAU, sector_of}
 
@@ -65,8 +67,8 @@ fn bleeding(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let albedo = diffuse_albedo(p);
-    let base = (id.y * u32(size.x) + id.x) * settings.apex_stride;
-    let count = apex_sets[base] & APEX_COUNT_MASK;
+    let base = apex_base(settings, p, size);
+    let apexes = apex_set_of(mhm, settings, p, apex_sets[base], base);
     let sp = surface_point(p);
     let n = surface::mesostructure_normal(
         mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, sp,
@@ -74,8 +76,8 @@ fn bleeding(@builtin(global_invocation_id) id: vec3<u32>) {
     // Per sector, the apex with the highest horizon (as the occlusion pass takes it).
     var sin_h = array<f32, 8>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     var apex = array<vec2<i32>, 8>();
-    for (var i = 0u; i < count; i++) {
-        let o = unpack_offset(apex_sets[base + 1u + i]);
+    for (var i = 0u; i < apexes.count; i++) {
+        let o = unpack_offset(apex_sets[apexes.first + i]) + apexes.shift;
         let d = surface_point(p + o) - sp;
         let len = length(d);
         if len <= 0.0 {

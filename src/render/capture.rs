@@ -40,11 +40,14 @@ pub struct CapturedFrame {
     pub core_normal: Vec<[f32; 4]>,
     /// MHGM: (∂h/∂x, ∂h/∂y, h, flags).
     pub mhgm: Vec<[f32; 4]>,
-    /// Apex sets, `apex_stride` words per pixel.
+    /// Apex sets, `apex_stride` words per `apex_block`² block of pixels.
     pub apex_sets: Vec<u32>,
-    /// Words per pixel in `apex_sets`.
+    /// Words per apex set in `apex_sets`.
     pub apex_stride: u32,
-    /// Apex-pass counters: mesostructure pixels, pixels whose search hit the step bound,
+    /// Side of the pixel block that shares one apex set (1 at full working resolution).
+    pub apex_block: u32,
+    /// Apex-pass counters: apex searches (one per mesostructure pixel, or per block at a reduced
+    /// working resolution), searches that hit the step bound,
     /// ascent steps in all.
     pub apex_stats: [u32; 3],
     /// Mesostructure ambient occlusion per pixel (1 = open; 1 where not computed).
@@ -95,14 +98,18 @@ impl CapturedFrame {
         }
     }
 
-    /// The apex set of pixel `(x, y)`.
+    /// The apex set of pixel `(x, y)`: at a reduced working resolution, that of its block (as
+    /// searched from the block's first mesostructure pixel).
     pub fn apex_set(&self, x: u32, y: u32) -> ApexSet {
         let i = (y * self.width + x) as usize;
         if self.mhgm[i][3] as u32 & FLAG_VALID == 0 {
             return ApexSet::default();
         }
-        let s = self.apex_stride as usize;
-        unpack_apex_set(&self.apex_sets[i * s..(i + 1) * s], (x as i32, y as i32))
+        let (s, b) = (self.apex_stride as usize, self.apex_block.max(1));
+        let block = ((y / b) * self.width.div_ceil(b) + x / b) as usize;
+        let words = &self.apex_sets[block * s..(block + 1) * s];
+        let corner = ((x / b * b) as i32, (y / b * b) as i32);
+        unpack_apex_set(words, crate::reference::packed::origin(words[0], corner))
     }
 
     /// The normal each pixel faces with in the bleeding gather: its bump-mapped normal, or n0
@@ -180,6 +187,7 @@ struct PendingCapture {
     camera: Entity,
     size: UVec2,
     apex_stride: u32,
+    apex_block: u32,
     view: ViewGeometry,
     readbacks: Vec<Readback>,
     micro_shadow: Option<Readback>,
@@ -284,6 +292,7 @@ pub fn copy_capture(
         camera: capture.0,
         size: t.size,
         apex_stride: t.apex_stride,
+        apex_block: t.apex_block,
         view: ViewGeometry {
             world_from_clip,
             viewport: extracted_view.viewport.as_vec4(),
@@ -379,6 +388,7 @@ pub fn map_captures(
         camera,
         size,
         apex_stride,
+        apex_block,
         view,
         readbacks,
         micro_shadow,
@@ -426,6 +436,7 @@ pub fn map_captures(
             mhgm: floats(read(&device, &readbacks[2], size.y)),
             apex_sets: bytemuck::cast_slice(&read(&device, &readbacks[3], 1)).to_vec(),
             apex_stride,
+            apex_block,
             apex_stats: [stats[0], stats[1], stats[2]],
             occlusion: bytemuck::cast_slice(&read(&device, &readbacks[5], size.y)).to_vec(),
             bump_normal: half4(read(&device, &readbacks[6], size.y)),

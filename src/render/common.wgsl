@@ -19,6 +19,8 @@ struct MesostructureUniform {
     bleeding_enabled: u32,
     bleeding_samples: u32,
     coarse_occlusion: u32,
+    // Side of the pixel block that shares one apex set (1, 2 or 4: the working resolution).
+    apex_block: u32,
     // λa, λs, λd of eq. (2), spare.
     weights: vec4<f32>,
     // (cos θ_i, sin θ_i) of the indirect sample directions, two per vector.
@@ -37,6 +39,8 @@ const APEX_DIRECT_PRESENT: u32 = 64u;
 const APEX_TRUNCATED: u32 = 128u;
 const APEX_BOUNDARY_SHIFT: u32 = 8u;
 const APEX_MIN_RISE: f32 = 1.0e-6;
+// Position of the searched pixel inside its block (x in bits 25–26, y in 27–28).
+const APEX_ORIGIN_SHIFT: u32 = 25u;
 
 // The 8 neighbours in the order of the connectivity bits (y down).
 fn neighbour_offset(dir: u32) -> vec2<i32> {
@@ -67,4 +71,61 @@ fn unpack_offset(w: u32) -> vec2<i32> {
 fn sample_direction(settings: MesostructureUniform, i: u32) -> vec2<f32> {
     let v = settings.directions[i / 2u];
     return select(v.zw, v.xy, i % 2u == 0u);
+}
+
+// Apex sets are searched once per `apex_block`² block of pixels (the working resolution): from
+// the block's first mesostructure pixel, its origin. Every pixel of the block shares that set,
+// whose offsets are relative to the origin. Index of the set that covers pixel p.
+fn apex_base(settings: MesostructureUniform, p: vec2<i32>, size: vec2<i32>) -> u32 {
+    let b = settings.apex_block;
+    let blocks_x = (u32(size.x) + b - 1u) / b;
+    let q = vec2<u32>(p) / b;
+    return (q.y * blocks_x + q.x) * settings.apex_stride;
+}
+
+// The pixel the set covering p was searched from, given the set's header.
+fn apex_origin(settings: MesostructureUniform, p: vec2<i32>, header: u32) -> vec2<i32> {
+    let b = i32(settings.apex_block);
+    let inside = vec2<i32>(
+        i32((header >> APEX_ORIGIN_SHIFT) & 3u),
+        i32((header >> (APEX_ORIGIN_SHIFT + 2u)) & 3u),
+    );
+    return (p / b) * b + inside;
+}
+
+// Whether pixel p may use the apex set searched from `origin`: the same object, no depth jump
+// between them (the threshold of one pixel step, scaled by the block's side).
+fn shares_apex_set(
+    mhm: texture_2d<f32>,
+    settings: MesostructureUniform,
+    p: vec2<i32>,
+    origin: vec2<i32>,
+) -> bool {
+    if all(p == origin) {
+        return true;
+    }
+    let a = textureLoad(mhm, p, 0);
+    let o = textureLoad(mhm, origin, 0);
+    return a.z == o.z
+        && abs(a.y - o.y) <= settings.depth_relative * f32(settings.apex_block) * max(a.y, o.y);
+}
+
+// Pixel p's apex set: where its offsets start in the buffer, how many there are (0 where p may
+// not share its block's set), and what to add to an unpacked offset to make it relative to p.
+struct ApexSetOf {
+    first: u32,
+    count: u32,
+    shift: vec2<i32>,
+}
+
+fn apex_set_of(
+    mhm: texture_2d<f32>,
+    settings: MesostructureUniform,
+    p: vec2<i32>,
+    header: u32,
+    base: u32,
+) -> ApexSetOf {
+    let origin = apex_origin(settings, p, header);
+    let count = select(0u, header & APEX_COUNT_MASK, shares_apex_set(mhm, settings, p, origin));
+    return ApexSetOf(base + 1u, count, origin - p);
 }

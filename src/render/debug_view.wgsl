@@ -4,7 +4,8 @@
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_mesostructure::common::{
     MesostructureUniform, FLAG_VALID, FLAG_SCREEN_EDGE, FLAG_OBJECT_EDGE, FLAG_DEPTH_EDGE,
-    FLAG_BOUNDARY, APEX_COUNT_MASK, APEX_DIRECT_PRESENT, APEX_TRUNCATED, unpack_offset,
+    FLAG_BOUNDARY, APEX_COUNT_MASK, APEX_DIRECT_PRESENT, APEX_TRUNCATED, unpack_offset, apex_base,
+    apex_set_of,
 }
 
 @group(0) @binding(0) var mhm: texture_2d<f32>;
@@ -43,8 +44,9 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     if (flags & FLAG_VALID) == 0u {
         discard;
     }
-    let base = (u32(p.y) * u32(size.x) + u32(p.x)) * settings.apex_stride;
+    let base = apex_base(settings, p, size);
     let header = apex_sets[base];
+    let apexes = apex_set_of(mhm, settings, p, header, base);
     var color = vec3<f32>(0.0);
     switch settings.debug_view {
         case VIEW_HEIGHT: {
@@ -55,13 +57,13 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
             color = select(vec3(0.5 + 0.5 * g.xy / len, 0.25), vec3(0.5), len == 0.0);
         }
         case VIEW_APEX_DISTANCE: {
-            if (header & APEX_DIRECT_PRESENT) != 0u {
-                let d = length(vec2<f32>(unpack_offset(apex_sets[base + 1u])));
+            if (header & APEX_DIRECT_PRESENT) != 0u && apexes.count > 0u {
+                let d = length(vec2<f32>(unpack_offset(apex_sets[apexes.first]) + apexes.shift));
                 color = ramp(d / 32.0);
             }
         }
         case VIEW_APEX_COUNT: {
-            let count = header & APEX_COUNT_MASK;
+            let count = apexes.count;
             if (header & APEX_TRUNCATED) != 0u {
                 color = vec3(1.0, 0.0, 1.0);
             } else if count > 0u {

@@ -20,7 +20,7 @@
     shadows,
     ssao_utils::ssao_multibounce,
 }
-#import bevy_mesostructure::common::{MesostructureUniform, APEX_COUNT_MASK, unpack_offset}
+#import bevy_mesostructure::common::{MesostructureUniform, unpack_offset, apex_base, apex_set_of}
 #import bevy_mesostructure::surface
 #import bevy_mesostructure::surface::{SECTORS, sector_of, sector_position, wrap_sector}
 
@@ -57,14 +57,14 @@ fn horizons(p: vec2<i32>) -> Horizons {
         return h;
     }
     let size = vec2<i32>(textureDimensions(mhm));
-    let base = (u32(p.y) * u32(size.x) + u32(p.x)) * settings.apex_stride;
-    let count = apex_sets[base] & APEX_COUNT_MASK;
+    let base = apex_base(settings, p, size);
+    let apexes = apex_set_of(mhm, settings, p, apex_sets[base], base);
     h.sp = surface_point(p);
     h.n = surface::mesostructure_normal(
         mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, h.sp,
         textureLoad(core_normal, p, 0).xyz);
-    for (var i = 0u; i < count; i++) {
-        let o = unpack_offset(apex_sets[base + 1u + i]);
+    for (var i = 0u; i < apexes.count; i++) {
+        let o = unpack_offset(apex_sets[apexes.first + i]) + apexes.shift;
         let d = surface_point(p + o) - h.sp;
         let len = length(d);
         if len <= 0.0 {

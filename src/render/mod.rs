@@ -82,14 +82,16 @@ pub struct ViewMesostructureTextures {
     pub micro_shadow: CachedTexture,
     /// Bleeding radiance.
     pub bleeding: CachedTexture,
-    /// Apex sets, `apex_stride` words per pixel (see `reference::packed`).
+    /// Apex sets, `apex_stride` words per `apex_block`² block of pixels (see `reference::packed`).
     pub apex_sets: Buffer,
     /// Apex-pass counters: mesostructure pixels, pixels that hit the step bound, ascent steps.
     pub apex_stats: Buffer,
     /// Size in pixels (the render target's).
     pub size: UVec2,
-    /// Words per pixel in `apex_sets`.
+    /// Words per apex set in `apex_sets`.
     pub apex_stride: u32,
+    /// Side of the pixel block that shares one apex set (the working resolution).
+    pub apex_block: u32,
 }
 
 /// Bind groups of the compute passes and the debug view of one view.
@@ -379,7 +381,9 @@ fn prepare_view_textures(
             continue;
         };
         let apex_stride = crate::reference::packed::stride(settings.0.apex_directions);
-        let apex_bytes = size.x as u64 * size.y as u64 * apex_stride as u64 * 4;
+        let apex_block = settings.0.working_resolution.block();
+        let blocks = (size + apex_block - 1) / apex_block;
+        let apex_bytes = blocks.x as u64 * blocks.y as u64 * apex_stride as u64 * 4;
         if apex_bytes > device.limits().max_storage_buffer_binding_size as u64 {
             warned.warn(format!("apex buffer {entity} {size}"), || {
                 format!(
@@ -492,6 +496,7 @@ fn prepare_view_textures(
             apex_stats,
             size,
             apex_stride,
+            apex_block,
         });
     }
 }

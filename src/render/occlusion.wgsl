@@ -7,7 +7,7 @@
 
 #import bevy_render::view::View
 #import bevy_mesostructure::common::{
-    MesostructureUniform, APEX_COUNT_MASK, on_screen, unpack_offset, sample_direction,
+    MesostructureUniform, on_screen, unpack_offset, sample_direction, apex_base, apex_set_of,
 }
 #import bevy_mesostructure::surface
 #import bevy_mesostructure::surface::{SECTORS, sector_of}
@@ -116,8 +116,8 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
         textureStore(occlusion_out, p, vec4<f32>(1.0));
         return;
     }
-    let base = (id.y * u32(size.x) + id.x) * settings.apex_stride;
-    let count = apex_sets[base] & APEX_COUNT_MASK;
+    let base = apex_base(settings, p, size);
+    let apexes = apex_set_of(mhm, settings, p, apex_sets[base], base);
     let sp = surface_point(p);
     let n0 = textureLoad(core_normal, p, 0).xyz;
     // The paper's eq. (6) measures from the core plane; the cosine-weighted form from the
@@ -134,8 +134,8 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     var sin_h = array<f32, 8>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     var nearest = 1.0e9;
     var farthest = 0.0;
-    for (var i = 0u; i < count; i++) {
-        let o = unpack_offset(apex_sets[base + 1u + i]);
+    for (var i = 0u; i < apexes.count; i++) {
+        let o = unpack_offset(apex_sets[apexes.first + i]) + apexes.shift;
         let distance = length(vec2<f32>(o));
         if distance > 0.0 {
             nearest = min(nearest, distance);
