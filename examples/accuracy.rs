@@ -3,26 +3,39 @@
 //!
 //! ```text
 //! cargo run --example accuracy -- [--out FILE.csv] [--chart FILE.png] [--quick]
-//!     [--size N]
+//!     [--size N] [--maps bricks,rivets,stone,sine] [--scales 0.05,0.1,0.2,0.4]
+//! cargo run --example accuracy -- --from A.csv --from B.csv [--out FILE.csv] [--chart FILE.png]
 //! ```
+//!
+//! `--maps` and `--scales` keep some of the scenes (to split a run: each scene renders ~20
+//! headless apps, and some drivers run out of devices after ~40 in one process); `--from` renders nothing and merges
+//! earlier runs' CSVs into one CSV and chart.
 //!
 //! Scenes: the 2 × 2 plane seen straight down (Bevy's default 45° field of view from 2 units)
 //! with bricks, rivets, stone (fBm noise) and sine height maps at scales 0.05, 0.1, 0.2 and 0.4,
 //! one directional light at 20°, 45° and 70° elevation (travelling towards +x), no ambient
 //! light for the light terms. Ground truth: `reference::ground_truth` on the height field
-//! itself, every 4th pixel at least 8 px from the edge (AO with 8 × 16 rays, light visibility,
+//! itself, every 4th pixel (jittered in its 4 × 4 cell) at least 8 px from the edge (AO with 8 × 16 rays, light visibility,
 //! one-bounce with 6 × 16 rays).
 //!
 //! Methods: `none` (no mesostructure term); `bevy-ssao` (Bevy's SSAO on the same bricks built as
 //! real geometry — a 256² grid — its AO taken as the ratio of an ambient-only picture with and
 //! without it; it has no shadow or bounce term); `horizon-search` (the brute-force baseline,
 //! `Mesostructure::horizon_search_steps`: 8 directions out to 32 px with 4, 8, 16 and 32
-//! samples each; AO only); `mesostructure` at 4, 8 and 16 apex directions.
+//! samples each; AO only); `mesostructure` at each quality preset (`low`, `medium`, `high`,
+//! `ultra`) and the default at quarter working resolution (`high@quarter`; `medium` is `high`
+//! at half).
 //! Errors: MAE and RMSE of AO and of the one-bounce term (relative to the irradiance of a
-//! surface facing the light), the share of directly lit pixels whose micro-shadow agrees. Time:
-//! the median GPU time of the passes each method adds (for this plugin: all passes but the
-//! lighting pass, which replaces Bevy's own). Not yet measured: NVIDIA FLIP (`flip_mean` is
-//! left empty).
+//! surface facing the light), the share of directly lit pixels whose micro-shadow agrees, and
+//! the mean NVIDIA FLIP (`nv-flip`, LDR, 67 pixels per degree) of a shaded picture of the
+//! central half of the view (every pixel): radiance `A·AO + V·max(N·l, 0) + B` in units of
+//! a surface facing the light (A = 0.25, an ambient light a quarter of the sun), shown ×0.75 in
+//! sRGB grey. The reference takes AO, light visibility V, normal N and bounce B from the ground
+//! truth; each method its own terms (where it has none: AO 1, V 1, B 0, and the flat plane's
+//! normal — or the true one for SSAO, which runs on real geometry). Shading all of them with one
+//! Lambert model leaves the BRDF out, so FLIP measures what each method's terms change in the
+//! picture. Time: the median GPU time of the passes each method adds (for this plugin: all
+//! passes but the lighting pass, which replaces Bevy's own).
 //!
 //! Writes `FILE.csv` (default `out/accuracy.csv`) with the columns
 //! `scene,method,setting,width,height,gpu_ms,ao_mae,ao_rmse,shadow_agreement,bounce_mae,flip_mean`
@@ -238,12 +251,60 @@ fn errors(values: &[f32], truth: &[f32]) -> (f32, f32) {
 
 struct Row {
     scene: String,
-    method: &'static str,
+    method: String,
     setting: String,
     gpu_ms: f64,
     ao: (f32, f32),
     shadow: f32,
     bounce: f32,
+    flip: f32,
+}
+
+/// The radiance of the FLIP pictures, in units of a surface facing the light: an ambient light
+/// of a quarter of the sun times AO, the direct term, the bounce.
+fn shade(ao: f32, lit: f32, bounce: f32) -> f32 {
+    0.25 * ao + lit + bounce
+}
+
+/// Mean FLIP error of `test` against `reference`, both `w` × `w` radiances shaded by [`shade`],
+/// shown ×0.75 as sRGB grey.
+fn flip_mean(reference: &[f32], test: &[f32], w: u32) -> f32 {
+    let encode = |values: &[f32]| -> Vec<u8> {
+        values
+            .iter()
+            .flat_map(|&v| {
+                let v = (0.75 * v).clamp(0.0, 1.0);
+                let s = if v <= 0.0031308 {
+                    12.92 * v
+                } else {
+                    1.055 * v.powf(1.0 / 2.4) - 0.055
+                };
+                [(s * 255.0).round() as u8; 3]
+            })
+            .collect()
+    };
+    let error = nv_flip::flip(
+        nv_flip::FlipImageRgb8::with_data(w, w, &encode(reference)),
+        nv_flip::FlipImageRgb8::with_data(w, w, &encode(test)),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    );
+    nv_flip::FlipPool::from_image(&error).mean()
+}
+
+/// `f` over `items` on every core (the ground truth at every pixel is the slow part).
+fn par_map<T: Send>(items: &[(u32, u32)], f: impl Fn(&(u32, u32)) -> T + Sync) -> Vec<T> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let chunk = items.len().div_ceil(threads).max(1);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = items
+            .chunks(chunk)
+            .map(|part| scope.spawn(|| part.iter().map(&f).collect::<Vec<T>>()))
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("a ground-truth thread panicked"))
+            .collect()
+    })
 }
 
 fn main() {
@@ -253,6 +314,8 @@ fn main() {
         false,
         96u32,
     );
+    let (mut only, mut from): (Option<String>, Vec<PathBuf>) = (None, vec![]);
+    let mut only_scales: Option<Vec<f32>> = None;
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
@@ -261,6 +324,16 @@ fn main() {
             "--chart" => chart = value().into(),
             "--quick" => quick = true,
             "--size" => size = value().parse().expect("--size N"),
+            "--maps" => only = Some(value()),
+            "--scales" => {
+                only_scales = Some(
+                    value()
+                        .split(',')
+                        .map(|k| k.parse().expect("--scales K,K,..."))
+                        .collect(),
+                )
+            }
+            "--from" => from.push(PathBuf::from(value())),
             "--help" | "-h" => {
                 println!("see the doc comment at the top of examples/accuracy.rs");
                 return;
@@ -268,169 +341,244 @@ fn main() {
             other => panic!("unknown argument {other}"),
         }
     }
-    let maps: Vec<(&str, HeightMap)> = if quick {
-        vec![
-            ("bricks", HeightMap::bricks(256, 4, 0.12)),
-            ("stone", HeightMap::noise(256, 16, 3, 7)),
-        ]
-    } else {
-        vec![
-            ("bricks", HeightMap::bricks(256, 4, 0.12)),
-            ("rivets", HeightMap::rivets(256, 4, 0.35)),
-            ("stone", HeightMap::noise(256, 16, 3, 7)),
-            ("sine", HeightMap::sine(256, 4)),
-        ]
-    };
-    let scales: &[f32] = if quick {
-        &[0.1]
-    } else {
-        &[0.05, 0.1, 0.2, 0.4]
-    };
-    let elevations: &[f32] = if quick { &[45.0] } else { &[20.0, 45.0, 70.0] };
-    let samples: Vec<(u32, u32)> = (8..size - 8)
-        .step_by(4)
-        .flat_map(|y| (8..size - 8).step_by(4).map(move |x| (x, y)))
-        .collect();
-    let index = |&(x, y): &(u32, u32)| (y * size + x) as usize;
-    // The radiance unit ρ E0 / π (exposure applied) of a surface facing the light, from a flat
-    // map under a light from the zenith.
-    let flat = HeightMap::from_fn(16, 16, |_, _| 0.5);
-    let (calibration, _) = render(
-        &flat,
-        0.1,
-        size,
-        Some(Mesostructure::default()),
-        false,
-        Some(90.0),
-    );
-    let calibration = calibration.frame.expect("the flat plane renders");
-    let unit = samples
-        .iter()
-        .map(|s| calibration.lit[index(s)][1])
-        .sum::<f32>()
-        / samples.len() as f32;
-    println!("radiance unit ρE0/π = {unit:.5}");
+    let mut rows = read_rows(&from, &mut size);
+    if from.is_empty() {
+        let mut maps: Vec<(&str, HeightMap)> = if quick {
+            vec![
+                ("bricks", HeightMap::bricks(256, 4, 0.12)),
+                ("stone", HeightMap::noise(256, 16, 3, 7)),
+            ]
+        } else {
+            vec![
+                ("bricks", HeightMap::bricks(256, 4, 0.12)),
+                ("rivets", HeightMap::rivets(256, 4, 0.35)),
+                ("stone", HeightMap::noise(256, 16, 3, 7)),
+                ("sine", HeightMap::sine(256, 4)),
+            ]
+        };
+        if let Some(only) = &only {
+            maps.retain(|(name, _)| only.split(',').any(|o| o == *name));
+        }
+        let scales: Vec<f32> = match only_scales {
+            Some(scales) => scales,
+            None if quick => vec![0.1],
+            None => vec![0.05, 0.1, 0.2, 0.4],
+        };
+        let elevations: &[f32] = if quick { &[45.0] } else { &[20.0, 45.0, 70.0] };
+        // Every 4th pixel, jittered inside its 4 × 4 cell so that all positions in a block of the
+        // reduced working resolutions are sampled alike.
+        let samples: Vec<(u32, u32)> = (0..(size - 16) / 4)
+            .flat_map(|j| {
+                (0..(size - 16) / 4)
+                    .map(move |i| (8 + 4 * i + (i + 2 * j) % 4, 8 + 4 * j + (3 * i + j) % 4))
+            })
+            .collect();
+        // The pictures FLIP compares: the central half of the view, every pixel (the ground truth
+        // at every pixel is the slow part of a run).
+        let inner = size / 2;
+        let interior: Vec<(u32, u32)> = (size / 4..size / 4 + inner)
+            .flat_map(|y| (size / 4..size / 4 + inner).map(move |x| (x, y)))
+            .collect();
+        let index = |&(x, y): &(u32, u32)| (y * size + x) as usize;
+        // The radiance unit ρ E0 / π (exposure applied) of a surface facing the light, from a flat
+        // map under a light from the zenith.
+        let flat = HeightMap::from_fn(16, 16, |_, _| 0.5);
+        let (calibration, _) = render(
+            &flat,
+            0.1,
+            size,
+            Some(Mesostructure::default()),
+            false,
+            Some(90.0),
+        );
+        let calibration = calibration.frame.expect("the flat plane renders");
+        let unit = samples
+            .iter()
+            .map(|s| calibration.lit[index(s)][1])
+            .sum::<f32>()
+            / samples.len() as f32;
+        println!("radiance unit ρE0/π = {unit:.5}");
 
-    let mut rows = vec![];
-    for (name, map) in &maps {
-        for &k in scales {
-            let field = HeightField::new(map.width, map.height, &map.values, 2.0, k);
-            let at = |s: &(u32, u32)| uv(s.0, s.1, size) * map.width as f32;
-            let ao_truth: Vec<f32> = samples
-                .iter()
-                .map(|s| field.ambient_occlusion(at(s), 8, 16))
-                .collect();
-            // SSAO on real geometry: its AO is the ratio of ambient-only pictures.
-            let (with, lit_with) = render(map, k, size, None, true, None);
-            let (_, lit_without) = render(map, k, size, None, false, None);
-            let ssao_ao: Vec<f32> = samples
-                .iter()
-                .map(|s| (lit_with[index(s)] / lit_without[index(s)].max(1e-6)).min(1.0))
-                .collect();
-            // The brute-force, fixed-radius horizon search (8 directions out to 32 px) at
-            // several sample counts: AO only, independent of the light.
-            let searches: Vec<(u32, f64, Vec<f32>)> = [4u32, 8, 16, 32]
-                .into_iter()
-                .filter_map(|steps| {
-                    let settings = Mesostructure {
-                        horizon_search_steps: steps,
-                        micro_shadows: false,
-                        bleeding: false,
-                        ..default()
-                    };
-                    let (r, _) = render(map, k, size, Some(settings), false, None);
-                    let frame = r.frame?;
-                    Some((
-                        steps,
-                        r.gpu_ms,
-                        samples.iter().map(|s| frame.occlusion[index(s)]).collect(),
-                    ))
-                })
-                .collect();
-            for &e in elevations {
-                let scene = format!("{name}/k{k}/light{e}");
-                println!("accuracy: {scene}");
-                let r = e.to_radians();
-                let light = Vec3::new(r.cos(), 0.0, -r.sin()); // the field's frame: z up
-                let visible: Vec<bool> = samples
+        for (name, map) in &maps {
+            for &k in &scales {
+                let field = HeightField::new(map.width, map.height, &map.values, 2.0, k);
+                let at = |s: &(u32, u32)| uv(s.0, s.1, size) * map.width as f32;
+                let ao_truth: Vec<f32> = samples
                     .iter()
-                    .map(|s| field.light_visible(at(s), light))
+                    .map(|s| field.ambient_occlusion(at(s), 8, 16))
                     .collect();
-                let facing: Vec<bool> = samples
-                    .iter()
-                    .map(|s| field.normal(at(s)).dot(-light) > 0.05)
-                    .collect();
-                let bounce_truth: Vec<f32> = samples
-                    .iter()
-                    .map(|s| field.one_bounce(at(s), light, 6, 16))
-                    .collect();
-                let agreement = |shadowed: &dyn Fn(usize) -> bool| {
-                    let (mut agree, mut n) = (0, 0);
-                    for (j, _) in samples.iter().enumerate() {
-                        if facing[j] {
-                            n += 1;
-                            agree += (shadowed(j) == !visible[j]) as u32;
-                        }
-                    }
-                    agree as f32 / n.max(1) as f32
+                let clock = std::time::Instant::now();
+                let ao_truth_full = par_map(&interior, |s| field.ambient_occlusion(at(s), 8, 16));
+                println!("  ground-truth AO: {:.1} s", clock.elapsed().as_secs_f32());
+                // SSAO on real geometry: its AO is the ratio of ambient-only pictures.
+                let (with, lit_with) = render(map, k, size, None, true, None);
+                let (_, lit_without) = render(map, k, size, None, false, None);
+                let ssao_ao_at = |s: &(u32, u32)| {
+                    (lit_with[index(s)] / lit_without[index(s)].max(1e-6)).min(1.0)
                 };
-                let none_bounce = errors(&vec![0.0; samples.len()], &bounce_truth).0;
-                rows.push(Row {
-                    scene: scene.clone(),
-                    method: "none",
-                    setting: "-".into(),
-                    gpu_ms: 0.0,
-                    ao: errors(&vec![1.0; samples.len()], &ao_truth),
-                    shadow: agreement(&|_| false),
-                    bounce: none_bounce,
-                });
-                rows.push(Row {
-                    scene: scene.clone(),
-                    method: "bevy-ssao",
-                    setting: "default".into(),
-                    gpu_ms: with.gpu_ms,
-                    ao: errors(&ssao_ao, &ao_truth),
-                    shadow: agreement(&|_| false),
-                    bounce: none_bounce,
-                });
-                for (steps, gpu_ms, ao) in &searches {
+                let ssao_ao: Vec<f32> = samples.iter().map(ssao_ao_at).collect();
+                let ssao_ao_full: Vec<f32> = interior.iter().map(ssao_ao_at).collect();
+                // The brute-force, fixed-radius horizon search (8 directions out to 32 px) at
+                // several sample counts: AO only, independent of the light.
+                let searches: Vec<(u32, f64, CapturedFrame)> = [4u32, 8, 16, 32]
+                    .into_iter()
+                    .filter_map(|steps| {
+                        let settings = Mesostructure {
+                            horizon_search_steps: steps,
+                            micro_shadows: false,
+                            bleeding: false,
+                            ..default()
+                        };
+                        let (r, _) = render(map, k, size, Some(settings), false, None);
+                        Some((steps, r.gpu_ms, r.frame?))
+                    })
+                    .collect();
+                for &e in elevations {
+                    let scene = format!("{name}/k{k}/light{e}");
+                    println!("accuracy: {scene}");
+                    let r = e.to_radians();
+                    let light = Vec3::new(r.cos(), 0.0, -r.sin()); // the field's frame: z up
+                    let visible: Vec<bool> = samples
+                        .iter()
+                        .map(|s| field.light_visible(at(s), light))
+                        .collect();
+                    let facing: Vec<bool> = samples
+                        .iter()
+                        .map(|s| field.normal(at(s)).dot(-light) > 0.05)
+                        .collect();
+                    let bounce_truth: Vec<f32> = samples
+                        .iter()
+                        .map(|s| field.one_bounce(at(s), light, 6, 16))
+                        .collect();
+                    // The reference picture, from the ground truth at every interior pixel.
+                    let clock = std::time::Instant::now();
+                    let reference: Vec<f32> = par_map(&interior, |s| {
+                        let lit = field.light_visible(at(s), light) as u32 as f32
+                            * field.normal(at(s)).dot(-light).max(0.0);
+                        (lit, field.one_bounce(at(s), light, 6, 16))
+                    })
+                    .iter()
+                    .zip(&ao_truth_full)
+                    .map(|(&(lit, bounce), &ao)| shade(ao, lit, bounce))
+                    .collect();
+                    println!(
+                        "  ground-truth light and bounce: {:.1} s",
+                        clock.elapsed().as_secs_f32()
+                    );
+                    let flip_of = |test: &[f32]| flip_mean(&reference, test, inner);
+                    // Lambert factor of the flat plane, and of the plugin's shading normal (world
+                    // space: the light travels along (cos e, −sin e, 0)).
+                    let to_light = Vec3::new(-r.cos(), r.sin(), 0.0);
+                    let flat_lit = to_light.y.max(0.0);
+                    let normal_lit = |frame: &CapturedFrame, s: &(u32, u32)| {
+                        let n = frame.facing_normals()[index(s)];
+                        n.dot(to_light).max(0.0)
+                    };
+                    let agreement = |shadowed: &dyn Fn(usize) -> bool| {
+                        let (mut agree, mut n) = (0, 0);
+                        for (j, _) in samples.iter().enumerate() {
+                            if facing[j] {
+                                n += 1;
+                                agree += (shadowed(j) == !visible[j]) as u32;
+                            }
+                        }
+                        agree as f32 / n.max(1) as f32
+                    };
+                    let none_bounce = errors(&vec![0.0; samples.len()], &bounce_truth).0;
                     rows.push(Row {
                         scene: scene.clone(),
-                        method: "horizon-search",
-                        setting: format!("steps={steps}"),
-                        gpu_ms: *gpu_ms,
-                        ao: errors(ao, &ao_truth),
+                        method: "none".into(),
+                        setting: "-".into(),
+                        gpu_ms: 0.0,
+                        ao: errors(&vec![1.0; samples.len()], &ao_truth),
                         shadow: agreement(&|_| false),
                         bounce: none_bounce,
+                        flip: flip_of(&vec![shade(1.0, flat_lit, 0.0); interior.len()]),
                     });
-                }
-                for dirs in [4u32, 8, 16] {
-                    let settings = Mesostructure {
-                        apex_directions: dirs,
-                        ..default()
-                    };
-                    // AO under ambient light alone is not needed: the capture carries it.
-                    let (lit, _) = render(map, k, size, Some(settings), false, Some(e));
-                    let Some(frame) = lit.frame else { continue };
-                    let ao: Vec<f32> = samples.iter().map(|s| frame.occlusion[index(s)]).collect();
-                    let bounce: Vec<f32> = samples
+                    // SSAO runs on the real geometry: its normal is the true one.
+                    let ssao_picture: Vec<f32> = interior
                         .iter()
-                        .map(|s| frame.bleeding.get(index(s)).map_or(0.0, |b| b[1] / unit))
+                        .zip(&ssao_ao_full)
+                        .map(|(s, &ao)| shade(ao, field.normal(at(s)).dot(-light).max(0.0), 0.0))
                         .collect();
                     rows.push(Row {
                         scene: scene.clone(),
-                        method: "mesostructure",
-                        setting: format!("apex_directions={dirs}"),
-                        gpu_ms: lit.gpu_ms,
-                        ao: errors(&ao, &ao_truth),
-                        shadow: agreement(&|j| {
-                            frame
-                                .micro_shadow
-                                .get(index(&samples[j]))
-                                .is_some_and(|&v| v < 0.5)
-                        }),
-                        bounce: errors(&bounce, &bounce_truth).0,
+                        method: "bevy-ssao".into(),
+                        setting: "default".into(),
+                        gpu_ms: with.gpu_ms,
+                        ao: errors(&ssao_ao, &ao_truth),
+                        shadow: agreement(&|_| false),
+                        bounce: none_bounce,
+                        flip: flip_of(&ssao_picture),
                     });
+                    for (steps, gpu_ms, frame) in &searches {
+                        let ao: Vec<f32> =
+                            samples.iter().map(|s| frame.occlusion[index(s)]).collect();
+                        let picture: Vec<f32> = interior
+                            .iter()
+                            .map(|s| shade(frame.occlusion[index(s)], normal_lit(frame, s), 0.0))
+                            .collect();
+                        rows.push(Row {
+                            scene: scene.clone(),
+                            method: "horizon-search".into(),
+                            setting: format!("steps={steps}"),
+                            gpu_ms: *gpu_ms,
+                            ao: errors(&ao, &ao_truth),
+                            shadow: agreement(&|_| false),
+                            bounce: none_bounce,
+                            flip: flip_of(&picture),
+                        });
+                    }
+                    let variants = MesostructureQuality::ALL.map(|q| {
+                        (
+                            q.name().to_string(),
+                            Mesostructure::default().with_quality(q),
+                        )
+                    });
+                    let quarter = (
+                        "high@quarter".to_string(),
+                        Mesostructure {
+                            working_resolution: WorkingResolution::Quarter,
+                            ..default()
+                        },
+                    );
+                    for (setting, settings) in variants.into_iter().chain([quarter]) {
+                        // AO under ambient light alone is not needed: the capture carries it.
+                        let (lit, _) = render(map, k, size, Some(settings), false, Some(e));
+                        let Some(frame) = lit.frame else { continue };
+                        let ao: Vec<f32> =
+                            samples.iter().map(|s| frame.occlusion[index(s)]).collect();
+                        let bounce_at = |s: &(u32, u32)| {
+                            frame.bleeding.get(index(s)).map_or(0.0, |b| b[1] / unit)
+                        };
+                        let bounce: Vec<f32> = samples.iter().map(bounce_at).collect();
+                        let picture: Vec<f32> = interior
+                            .iter()
+                            .map(|s| {
+                                let v = frame.micro_shadow.get(index(s)).copied().unwrap_or(1.0);
+                                shade(
+                                    frame.occlusion[index(s)],
+                                    v * normal_lit(&frame, s),
+                                    bounce_at(s),
+                                )
+                            })
+                            .collect();
+                        rows.push(Row {
+                            scene: scene.clone(),
+                            method: "mesostructure".into(),
+                            setting,
+                            gpu_ms: lit.gpu_ms,
+                            ao: errors(&ao, &ao_truth),
+                            shadow: agreement(&|j| {
+                                frame
+                                    .micro_shadow
+                                    .get(index(&samples[j]))
+                                    .is_some_and(|&v| v < 0.5)
+                            }),
+                            bounce: errors(&bounce, &bounce_truth).0,
+                            flip: flip_of(&picture),
+                        });
+                    }
                 }
             }
         }
@@ -442,8 +590,8 @@ fn main() {
     for r in &rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{size},{size},{:.4},{:.4},{:.4},{:.4},{:.4},",
-            r.scene, r.method, r.setting, r.gpu_ms, r.ao.0, r.ao.1, r.shadow, r.bounce
+            "{},{},{},{size},{size},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}",
+            r.scene, r.method, r.setting, r.gpu_ms, r.ao.0, r.ao.1, r.shadow, r.bounce, r.flip
         );
     }
     for path in [&out, &chart] {
@@ -457,7 +605,39 @@ fn main() {
     println!("wrote {}", chart.display());
 }
 
-/// Mean over the scenes of each (method, setting): GPU time against AO MAE.
+/// The rows of earlier runs' CSVs (`--from`), and their picture size.
+fn read_rows(files: &[PathBuf], size: &mut u32) -> Vec<Row> {
+    let mut rows = vec![];
+    for file in files {
+        let text = std::fs::read_to_string(file)
+            .unwrap_or_else(|e| panic!("cannot read {}: {e}", file.display()));
+        for line in text.lines().skip(1).filter(|l| !l.is_empty()) {
+            let f: Vec<&str> = line.split(',').collect();
+            assert_eq!(
+                f.len(),
+                11,
+                "{}: not an accuracy row: {line}",
+                file.display()
+            );
+            let num = |i: usize| -> f32 { f[i].parse().unwrap_or(f32::NAN) };
+            *size = f[3].parse().expect("a width");
+            rows.push(Row {
+                scene: f[0].into(),
+                method: f[1].into(),
+                setting: f[2].into(),
+                gpu_ms: num(5) as f64,
+                ao: (num(6), num(7)),
+                shadow: num(8),
+                bounce: num(9),
+                flip: num(10),
+            });
+        }
+    }
+    rows
+}
+
+/// Mean over the scenes of each (method, setting): GPU time against AO MAE (left) and against
+/// the mean FLIP of the shaded picture (right).
 fn draw_chart(rows: &[Row], path: &PathBuf) {
     use plotters::prelude::*;
     plotters::style::register_font(
@@ -467,84 +647,99 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
     )
     .map_err(|_| ())
     .expect("the font registers");
-    let mut series: Vec<(&str, Vec<(f64, f64)>)> = vec![];
-    for method in ["none", "bevy-ssao", "horizon-search", "mesostructure"] {
-        let mut settings: Vec<&String> = rows
-            .iter()
-            .filter(|r| r.method == method)
-            .map(|r| &r.setting)
-            .collect();
-        settings.dedup();
-        settings.sort();
-        settings.dedup();
-        let mut points = vec![];
-        for s in settings {
-            let of: Vec<&Row> = rows
+    let series_of = |metric: &dyn Fn(&Row) -> f64| {
+        let mut series: Vec<(&str, Vec<(f64, f64)>)> = vec![];
+        for method in ["none", "bevy-ssao", "horizon-search", "mesostructure"] {
+            let mut settings: Vec<&String> = rows
                 .iter()
-                .filter(|r| r.method == method && &r.setting == s)
+                .filter(|r| r.method == method)
+                .map(|r| &r.setting)
                 .collect();
-            let n = of.len() as f64;
-            points.push((
-                of.iter().map(|r| r.gpu_ms).sum::<f64>() / n,
-                of.iter().map(|r| r.ao.0 as f64).sum::<f64>() / n,
-            ));
+            settings.sort();
+            settings.dedup();
+            let mut points = vec![];
+            for s in settings {
+                let of: Vec<&Row> = rows
+                    .iter()
+                    .filter(|r| r.method == method && &r.setting == s)
+                    .collect();
+                let n = of.len() as f64;
+                points.push((
+                    of.iter().map(|r| r.gpu_ms).sum::<f64>() / n,
+                    of.iter().map(|r| metric(r)).sum::<f64>() / n,
+                ));
+            }
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            series.push((method, points));
         }
-        points.sort_by(|a, b| a.0.total_cmp(&b.0));
-        series.push((method, points));
-    }
-    let max_x = series
-        .iter()
-        .flat_map(|(_, p)| p.iter().map(|q| q.0))
-        .fold(1e-3, f64::max)
-        * 1.1;
-    let max_y = series
-        .iter()
-        .flat_map(|(_, p)| p.iter().map(|q| q.1))
-        .fold(1e-3, f64::max)
-        * 1.1;
-    let (w, h) = (800u32, 500u32);
+        series
+    };
+    let (w, h) = (1400u32, 520u32);
     let mut buffer = vec![0u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
         root.fill(&WHITE).expect("draw");
-        let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "Ambient occlusion: GPU time against error (mean over scenes)",
-                ("sans-serif", 20),
-            )
-            .margin(15)
-            .x_label_area_size(45)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..max_x, 0.0..max_y)
-            .expect("draw");
-        chart
-            .configure_mesh()
-            .x_desc("GPU time of the added passes, ms")
-            .y_desc("AO mean absolute error")
-            .label_style(("sans-serif", 14))
-            .draw()
-            .expect("draw");
-        for (i, (method, points)) in series.iter().enumerate() {
-            let color = [BLACK, BLUE, GREEN, RED][i % 4].to_rgba();
+        let panels = root.split_evenly((1, 2));
+        let metrics: [(&str, &str, &dyn Fn(&Row) -> f64); 2] = [
+            (
+                "Ambient occlusion: GPU time against error",
+                "AO mean absolute error",
+                &|r: &Row| r.ao.0 as f64,
+            ),
+            (
+                "Shaded picture: GPU time against FLIP",
+                "mean FLIP error",
+                &|r: &Row| r.flip as f64,
+            ),
+        ];
+        for (panel, (caption, y_desc, metric)) in panels.iter().zip(metrics) {
+            let series = series_of(metric);
+            let max_x = series
+                .iter()
+                .flat_map(|(_, p)| p.iter().map(|q| q.0))
+                .fold(1e-3, f64::max)
+                * 1.1;
+            let max_y = series
+                .iter()
+                .flat_map(|(_, p)| p.iter().map(|q| q.1))
+                .fold(1e-3, f64::max)
+                * 1.1;
+            let mut chart = ChartBuilder::on(panel)
+                .caption(caption, ("sans-serif", 20))
+                .margin(15)
+                .x_label_area_size(45)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..max_x, 0.0..max_y)
+                .expect("draw");
             chart
-                .draw_series(LineSeries::new(
-                    points.iter().copied(),
-                    color.stroke_width(2),
-                ))
-                .expect("draw")
-                .label(*method)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+                .configure_mesh()
+                .x_desc("GPU time of the added passes, ms (mean over scenes)")
+                .y_desc(y_desc)
+                .label_style(("sans-serif", 14))
+                .draw()
+                .expect("draw");
+            for (i, (method, points)) in series.iter().enumerate() {
+                let color = [BLACK, BLUE, GREEN, RED][i % 4].to_rgba();
+                chart
+                    .draw_series(LineSeries::new(
+                        points.iter().copied(),
+                        color.stroke_width(2),
+                    ))
+                    .expect("draw")
+                    .label(*method)
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+                chart
+                    .draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                    .expect("draw");
+            }
             chart
-                .draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 14))
+                .draw()
                 .expect("draw");
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()
-            .expect("draw");
         root.present().expect("draw");
     }
     image::RgbImage::from_raw(w, h, buffer)

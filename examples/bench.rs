@@ -1,21 +1,27 @@
 //! GPU time per pass, from timestamp queries, for the paper's two experiments (its Tables 1 and
-//! 2), with Bevy's SSAO and contact shadows measured on the same scenes as peers.
+//! 2) and for each quality preset at 1920×1080, with Bevy's SSAO and contact shadows measured on
+//! the same scenes as peers.
 //!
 //! ```text
 //! cargo run --example bench -- [--out FILE.csv] [--frames N] [--warm-up N]
-//!     [--table 1|2|both] [--quick]
+//!     [--table 1|2|presets|all] [--quality low|medium|high|ultra] [--quick]
 //! ```
 //!
 //! Table 1: resolutions 256², 512², 1024² and 1920×1080 over a torus (2,880 triangles, the
 //! paper's), a sphere of ~40 thousand and one of ~1 million triangles (its teapot and Happy
-//! Buddha), bricks at scale 0.2. Table 2: scales 0.05–1 on the torus at 1024². Every run renders
-//! headless with the default `Mesostructure` and Bevy's SSAO on the camera; a second run with
+//! Buddha), bricks at scale 0.2. Table 2: scales 0.05–1 on the torus at 1024². Presets: each
+//! `MesostructureQuality` at 1920×1080 on the 40-thousand-triangle sphere and on a plane that
+//! fills the view (`fullscreen`: every pixel a mesostructure pixel); the scene column reads
+//! `scene@preset` where the preset is not the default `high`. Every run renders headless with
+//! `Mesostructure` (default, or `--quality`) and Bevy's SSAO on the camera; a second run with
 //! Bevy's contact shadows on adds the row `contact_shadows` (its cost, the difference in the
-//! lighting pass, which evaluates them for these pixels). For each pass: median and 95th
-//! percentile over N frames after the warm-up, and the sums `mesostructure/total` and
+//! lighting pass, which evaluates them for these pixels). Bevy's own `early deferred prepass`
+//! (the G-buffer pass over the same mesh) and `tonemapping` (a fullscreen fragment pass) are
+//! recorded as yardsticks of what the GPU does with raster work. For each pass: median and
+//! 95th percentile over N frames after the warm-up, and the sums `mesostructure/total` and
 //! `mesostructure/total_without_lighting` (the lighting pass replaces Bevy's own deferred
-//! lighting for these pixels, so it is not all added cost). `--quick` keeps 256² and 512² and three scales
-//! (for the software driver, whose figures are relative only).
+//! lighting for these pixels, so it is not all added cost). `--quick` keeps 256² and 512², three
+//! scales and the presets at 256² (for the software driver, whose figures are relative only).
 //!
 //! Writes `FILE.csv` (default `out/bench.csv`) with the columns
 //! `scene,triangles,width,height,scale,pass,gpu_ms_median,gpu_ms_p95,frames,adapter` and prints
@@ -50,11 +56,27 @@ const PASSES: [&str; 7] = [
     "bleeding_composite",
 ];
 
+/// Bevy's own passes on the same frames, as yardsticks of what this GPU does with a mesh pass
+/// (the deferred G-buffer prepass), a fullscreen fragment pass (tonemapping) and a compute pass
+/// (SSAO, listed on its own as a peer).
+const YARDSTICKS: [&str; 2] = ["early deferred prepass", "tonemapping"];
+
 #[derive(Clone, Copy)]
 struct Config {
     scene: &'static str,
     size: UVec2,
     scale: f32,
+    quality: MesostructureQuality,
+}
+
+impl Config {
+    /// The scene column: the mesh, and the preset where it is not the default.
+    fn label(&self) -> String {
+        match self.quality {
+            MesostructureQuality::High => self.scene.to_string(),
+            q => format!("{}@{}", self.scene, q.name()),
+        }
+    }
 }
 
 struct Row {
@@ -75,6 +97,7 @@ fn mesh(scene: &str) -> Mesh {
             .build(),
         "sphere-40k" => Sphere::new(0.8).mesh().uv(200, 100),
         "sphere-1M" => Sphere::new(0.8).mesh().uv(1000, 500),
+        "fullscreen" => Plane3d::default().mesh().size(6.0, 6.0).build(),
         other => panic!("unknown scene {other}"),
     }
 }
@@ -109,7 +132,7 @@ fn measure(
         Camera3d::default(),
         RenderTarget::Image(target.into()),
         Msaa::Off,
-        Mesostructure::default(),
+        Mesostructure::default().with_quality(config.quality),
         ScreenSpaceAmbientOcclusion::default(),
         Transform::from_xyz(0.0, 1.2, 2.2).looking_at(Vec3::ZERO, Vec3::Y),
     ));
@@ -146,7 +169,15 @@ fn measure(
             scale: config.scale,
             uv_transform: bevy::math::Affine2::from_scale(Vec2::new(6.0, 3.0)),
         },
-        Transform::from_rotation(Quat::from_rotation_x(0.5)),
+        if config.scene == "fullscreen" {
+            // Facing the camera and filling its view: every pixel a mesostructure pixel.
+            Transform::from_rotation(Quat::from_rotation_arc(
+                Vec3::Y,
+                Vec3::new(0.0, 1.2, 2.2).normalize(),
+            ))
+        } else {
+            Transform::from_rotation(Quat::from_rotation_x(0.5))
+        },
     ));
     for _ in 0..warm_up + frames {
         app.update();
@@ -161,6 +192,7 @@ fn measure(
         .map(|p| format!("mesostructure/{p}"))
         .collect();
     spans.push("ssao".into());
+    spans.extend(YARDSTICKS.iter().map(|s| s.to_string()));
     let series = spans
         .into_iter()
         .filter_map(|span| {
@@ -182,7 +214,8 @@ fn percentile(values: &[f64], p: f64) -> f64 {
 fn main() {
     let mut out = PathBuf::from("out/bench.csv");
     let (mut frames, mut warm_up, mut table, mut quick) =
-        (60usize, 20usize, "both".to_string(), false);
+        (60usize, 20usize, "all".to_string(), false);
+    let mut quality = MesostructureQuality::High;
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
@@ -192,6 +225,11 @@ fn main() {
             "--warm-up" => warm_up = value().parse().expect("--warm-up N"),
             "--table" => table = value(),
             "--quick" => quick = true,
+            "--quality" => {
+                let name = value();
+                quality = MesostructureQuality::from_name(&name)
+                    .unwrap_or_else(|| panic!("--quality low|medium|high|ultra, not {name}"));
+            }
             "--help" | "-h" => {
                 println!("see the doc comment at the top of examples/bench.rs");
                 return;
@@ -212,18 +250,19 @@ fn main() {
         ]
     };
     let mut configs = vec![];
-    if table == "1" || table == "both" {
+    if table == "1" || matches!(table.as_str(), "all" | "both") {
         for scene in ["torus", "sphere-40k", "sphere-1M"] {
             for &size in &sizes {
                 configs.push(Config {
                     scene,
                     size,
                     scale: 0.2,
+                    quality,
                 });
             }
         }
     }
-    if table == "2" || table == "both" {
+    if table == "2" || matches!(table.as_str(), "all" | "both") {
         let scales: &[f32] = if quick {
             &[0.05, 0.2, 1.0]
         } else {
@@ -239,7 +278,27 @@ fn main() {
                 scene: "torus",
                 size,
                 scale,
+                quality,
             });
+        }
+    }
+    if table == "presets" || matches!(table.as_str(), "all" | "both") {
+        // The performance goal's setting: 1920×1080, each preset, on the sphere and on a plane
+        // that fills the view (the most mesostructure pixels a frame can have).
+        let size = if quick {
+            UVec2::splat(256)
+        } else {
+            UVec2::new(1920, 1080)
+        };
+        for scene in ["sphere-40k", "fullscreen"] {
+            for quality in MesostructureQuality::ALL {
+                configs.push(Config {
+                    scene,
+                    size,
+                    scale: 0.2,
+                    quality,
+                });
+            }
         }
     }
 
@@ -248,7 +307,10 @@ fn main() {
     for config in configs {
         println!(
             "bench: {} at {}×{}, scale {} ...",
-            config.scene, config.size.x, config.size.y, config.scale
+            config.label(),
+            config.size.x,
+            config.size.y,
+            config.scale
         );
         let (series, triangles, name) = measure(config, false, frames, warm_up);
         adapter = name;
@@ -324,7 +386,7 @@ fn main() {
         let _ = writeln!(
             csv,
             "{},{},{},{},{},{},{:.4},{:.4},{},\"{}\"",
-            c.scene,
+            c.label(),
             r.triangles,
             c.size.x,
             c.size.y,
@@ -338,7 +400,14 @@ fn main() {
         let _ = writeln!(
             table,
             "| {} | {} | {}×{} | {} | {} | {:.3} | {:.3} |",
-            c.scene, r.triangles, c.size.x, c.size.y, c.scale, r.pass, r.median, r.p95
+            c.label(),
+            r.triangles,
+            c.size.x,
+            c.size.y,
+            c.scale,
+            r.pass,
+            r.median,
+            r.p95
         );
     }
     if let Some(dir) = out.parent() {
