@@ -204,3 +204,116 @@ fn skinned_morphed_and_cpu_deformed_meshes_line_up_with_the_prepass() {
         .collect();
     assert_eq!(ids.len(), 3, "one object id per mesh: {ids:?}");
 }
+
+/// A grid of `n × n` quads, `size` wide, bent by a travelling wave of `phase`: each vertex
+/// moves in x, y and z, so the height map slides, stretches and tilts under the pixels.
+fn bent_grid(mesh: &mut Mesh, n: u32, size: f32, phase: f32) {
+    let (base, _, _) = grid(n, size);
+    if let Some(VertexAttributeValues::Float32x3(p)) = mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+    {
+        for (q, b) in p.iter_mut().zip(base) {
+            q[0] = b[0] * (1.0 + 0.15 * (phase + b[1] * 3.0).sin());
+            q[1] = b[1] + 0.05 * (phase + b[0] * 4.0).sin();
+            q[2] = 0.2 * (phase + b[0] * 3.0).sin();
+        }
+    }
+    mesh.compute_smooth_normals();
+}
+
+/// Pops: between two frames of a slowly deforming mesh, pixels whose surface barely changed
+/// (height-map value within 0.01) but whose occlusion or micro-shadow jumps. Counted at every
+/// pixel of both frames, with a low light so that the micro-shadows are many.
+#[test]
+fn a_deforming_mesh_shows_no_pops_between_frames() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let (n, size) = (24, 2.0);
+    let mut app = app();
+    let target = target(&mut app, W, H);
+    let camera = camera(
+        &mut app,
+        &target,
+        Transform::from_xyz(0.0, 0.0, 2.6).looking_at(Vec3::ZERO, Vec3::Y),
+        Mesostructure::default(),
+    );
+    sun(&mut app, Vec3::new(1.0, -0.35, -0.6), 3000.0);
+    let map = image(&mut app, HeightMap::bricks(256, 4, 0.12).to_image());
+    let material = MeshMaterial3d(
+        app.world_mut()
+            .resource_mut::<Assets<StandardMaterial>>()
+            .add(StandardMaterial {
+                perceptual_roughness: 1.0,
+                ..default()
+            }),
+    );
+    let mut grid = grid_mesh(n, size, RenderAssetUsages::default());
+    bent_grid(&mut grid, n, size, 0.0);
+    let deformed = mesh(&mut app, grid);
+    app.world_mut().spawn((
+        deformed.clone(),
+        material,
+        MesostructureMaterial {
+            height_map: map,
+            scale: 0.08,
+            ..default()
+        },
+    ));
+    let mut frames = vec![capture(&mut app, camera, 20)];
+    // 0.03 rad a frame: the wave crosses the grid in ~200 frames, a few pixels a frame.
+    for step in 1..=6 {
+        let mut meshes = app.world_mut().resource_mut::<Assets<Mesh>>();
+        bent_grid(
+            &mut meshes.get_mut(&deformed.0).unwrap(),
+            n,
+            size,
+            0.03 * step as f32,
+        );
+        frames.push(capture(&mut app, camera, 20));
+    }
+    let (mut steady, mut ao_pops, mut shadow_pops, mut moved) = (0u32, 0u32, 0u32, 0u32);
+    let mut ao_change = 0.0f32;
+    for pair in frames.windows(2) {
+        let (a, b) = (&pair[0], &pair[1]);
+        for i in 0..(W * H) as usize {
+            if a.mhm[i][2] == 0.0 || b.mhm[i][2] == 0.0 {
+                continue;
+            }
+            moved += (a.mhm[i][3] != b.mhm[i][3]) as u32;
+            if (a.mhm[i][3] - b.mhm[i][3]).abs() > 0.01 {
+                continue;
+            }
+            steady += 1;
+            let d = (a.occlusion[i] - b.occlusion[i]).abs();
+            ao_change += d;
+            ao_pops += (d > 0.2) as u32;
+            let shadow = |f: &bevy_mesostructure::CapturedFrame| {
+                f.micro_shadow.get(i).copied().unwrap_or(1.0)
+            };
+            let s = (shadow(a) - shadow(b)).abs();
+            shadow_pops += (s > 0.5) as u32;
+        }
+    }
+    let mean = ao_change / steady.max(1) as f32;
+    let (ao_share, shadow_share) = (
+        ao_pops as f32 / steady.max(1) as f32,
+        shadow_pops as f32 / steady.max(1) as f32,
+    );
+    eprintln!(
+        "deforming mesh, 6 frame pairs: {steady} steady pixel pairs ({moved} moved at all); AO \
+         jumps > 0.2: {ao_pops} ({:.3} %), mean AO change {mean:.4}; micro-shadow jumps > 0.5: \
+         {shadow_pops} ({:.3} %)",
+        100.0 * ao_share,
+        100.0 * shadow_share
+    );
+    assert!(
+        steady > 20_000,
+        "the grid covers the view: {steady} steady pairs"
+    );
+    assert!(moved > 1000, "the deformation moves the surface: {moved}");
+    assert!(ao_share <= 0.005, "AO pops on {ao_pops} of {steady} pixels");
+    assert!(
+        shadow_share <= 0.005,
+        "micro-shadow pops on {shadow_pops} of {steady} pixels"
+    );
+}
