@@ -28,9 +28,12 @@ struct HeightOutput {
 }
 
 fn height_texel(p: vec2<i32>, level: i32, size: vec2<i32>) -> f32 {
-    // Repeat addressing: height maps tile.
-    let wrapped = ((p % size) + size) % size;
-    return textureLoad(height_mips, wrapped, level).r;
+    // Repeat addressing: height maps tile. The UVs come in wrapped to [0, 1), so a tap is at
+    // most two texels outside the level; one select per side instead of integer remainders
+    // (two divisions per tap, 24 taps a pixel, were much of this pass's cost).
+    var wrapped = select(p, p + size, p < vec2(0));
+    wrapped = select(wrapped, wrapped - size, wrapped >= size);
+    return textureLoad(height_mips, clamp(wrapped, vec2(0), size - 1), level).r;
 }
 
 // Bilinear filtering by hand: the mip chain is R32Float, which need not be filterable.
@@ -65,7 +68,9 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     let lod = clamp(0.5 * log2(max(rho2, 1e-12)), 0.0, last);
     let l0 = floor(lod);
     let l1 = min(l0 + 1.0, last);
-    let dis = mix(height_bilinear(uv, i32(l0)), height_bilinear(uv, i32(l1)), lod - l0);
+    // The taps wrap by one period at most (see `height_texel`).
+    let tap_uv = fract(uv);
+    let dis = mix(height_bilinear(tap_uv, i32(l0)), height_bilinear(tap_uv, i32(l1)), lod - l0);
 
     // Blinn bump mapping (seed 003): P' = P + F n with F = k · dis; N' = Pu × Pv + Fu (n × Pv)
     // − Fv (n × Pu), oriented like n. Pu and Pv, the surface's derivatives along the texture
@@ -83,10 +88,10 @@ fn fragment(in: VertexOutput) -> HeightOutput {
         let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
         let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
         let texel = exp2(l0) / size0;
-        let fu = material.scale * (height_bilinear(uv + vec2(texel.x, 0.0), i32(l0))
-            - height_bilinear(uv - vec2(texel.x, 0.0), i32(l0))) / (2.0 * texel.x);
-        let fv = material.scale * (height_bilinear(uv + vec2(0.0, texel.y), i32(l0))
-            - height_bilinear(uv - vec2(0.0, texel.y), i32(l0))) / (2.0 * texel.y);
+        let fu = material.scale * (height_bilinear(tap_uv + vec2(texel.x, 0.0), i32(l0))
+            - height_bilinear(tap_uv - vec2(texel.x, 0.0), i32(l0))) / (2.0 * texel.x);
+        let fv = material.scale * (height_bilinear(tap_uv + vec2(0.0, texel.y), i32(l0))
+            - height_bilinear(tap_uv - vec2(0.0, texel.y), i32(l0))) / (2.0 * texel.y);
         let base = cross(pu, pv);
         let orientation = select(-1.0, 1.0, dot(base, n) >= 0.0);
         let bumped = orientation * (base + fu * cross(n, pv) - fv * cross(n, pu));

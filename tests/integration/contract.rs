@@ -666,3 +666,58 @@ fn reduced_working_resolution_shares_the_block_apex_set() {
         );
     }
 }
+
+/// Height maps tile: UVs shifted by whole periods (negative, and beyond 1) give the same
+/// screen-space height map, and a map tiled across the plane repeats on screen.
+#[test]
+fn height_maps_tile_outside_the_unit_square() {
+    if !gpu_or_skip() {
+        return;
+    }
+    const N: u32 = 96;
+    let map = HeightMap::rivets(128, 3, 0.35);
+    let render = |uv_transform: bevy::math::Affine2| {
+        let mut app = app();
+        let target = target(&mut app, N, N);
+        let camera = camera(&mut app, &target, top_down(), Mesostructure::default());
+        let height_map = image(&mut app, map.to_image());
+        let material = unlit(&mut app, Color::WHITE);
+        let plane = mesostructure_plane(&mut app, material, height_map, 0.1);
+        app.world_mut()
+            .get_mut::<MesostructureMaterial>(plane)
+            .unwrap()
+            .uv_transform = uv_transform;
+        capture(&mut app, camera, 20)
+    };
+    let dis = |f: &CapturedFrame| f.mhm.iter().map(|t| t[3]).collect::<Vec<f32>>();
+    let base = dis(&render(bevy::math::Affine2::IDENTITY));
+    for shift in [Vec2::new(1.0, 0.0), Vec2::new(-2.0, 3.0)] {
+        let shifted = dis(&render(bevy::math::Affine2::from_translation(shift)));
+        let worst = base
+            .iter()
+            .zip(&shifted)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(
+            worst < 1e-4,
+            "UVs shifted by {shift}: worst difference {worst}"
+        );
+    }
+    // Tiled so that one period is exactly 32 px on screen: columns 32 px apart agree.
+    let period = 32u32;
+    let visible = 2.0 * TOP_DOWN_HEIGHT * std::f32::consts::FRAC_PI_8.tan();
+    let scale = 2.0 / (period as f32 / N as f32 * visible);
+    let tiled = dis(&render(bevy::math::Affine2::from_scale(Vec2::splat(scale))));
+    let (mut close, mut n) = (0, 0);
+    for y in 8..N - 8 {
+        for x in 8..N - 8 - period {
+            n += 1;
+            close += ((tiled[(y * N + x) as usize] - tiled[(y * N + x + period) as usize]).abs()
+                < 0.02) as u32;
+        }
+    }
+    assert!(
+        close as f32 >= 0.98 * n as f32,
+        "a tiled map repeats every {period} px on {close} of {n} pixels"
+    );
+}
