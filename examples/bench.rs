@@ -206,6 +206,9 @@ fn measure(
 }
 
 fn percentile(values: &[f64], p: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
     let mut v = values.to_vec();
     v.sort_by(f64::total_cmp);
     v[((v.len() - 1) as f64 * p).round() as usize]
@@ -316,16 +319,25 @@ fn main() {
         adapter = name;
         // All passes, and all but the lighting pass (which replaces Bevy's own deferred lighting
         // for these pixels rather than adding to it).
-        let mut total = vec![0.0; frames];
-        let mut added = vec![0.0; frames];
+        // Over the newest frames that every pass reported (the timestamps of a frame can be
+        // dropped when the GPU falls behind; summing ragged series would count zeros).
+        let reported = series
+            .iter()
+            .filter(|(span, _)| span.starts_with("mesostructure/"))
+            .map(|(_, values)| values.len())
+            .min()
+            .unwrap_or(0);
+        let mut total = vec![0.0; reported];
+        let mut added = vec![0.0; reported];
         let mut lighting_without = None;
         for (span, values) in &series {
             if span.starts_with("mesostructure/") {
-                for (t, v) in total.iter_mut().zip(values) {
+                let newest = &values[values.len() - reported..];
+                for (t, v) in total.iter_mut().zip(newest) {
                     *t += v;
                 }
                 if span != "mesostructure/lighting" {
-                    for (t, v) in added.iter_mut().zip(values) {
+                    for (t, v) in added.iter_mut().zip(newest) {
                         *t += v;
                     }
                 }
@@ -348,7 +360,7 @@ fn main() {
             pass: "mesostructure/total".into(),
             median: percentile(&total, 0.5),
             p95: percentile(&total, 0.95),
-            frames,
+            frames: reported,
         });
         rows.push(Row {
             config,
@@ -356,7 +368,7 @@ fn main() {
             pass: "mesostructure/total_without_lighting".into(),
             median: percentile(&added, 0.5),
             p95: percentile(&added, 0.95),
-            frames,
+            frames: reported,
         });
         // Contact shadows: the same scene with them on; their cost is the lighting pass's growth.
         let (with, _, _) = measure(config, true, frames, warm_up);
