@@ -52,6 +52,46 @@ fn height_bilinear(uv: vec2<f32>, level: i32) -> f32 {
     return mix(mix(h00, h10, f.x), mix(h01, h11, f.x), f.y);
 }
 
+// The bilinear height at `uv` on `level` and the differences of the bilinear heights one texel
+// to either side along x and along y (same weights, shifted texels): the value and the central
+// differences of the Blinn bump from 12 texel loads instead of 20.
+struct HeightTaps {
+    center: f32,
+    // B(uv + x̂) − B(uv − x̂) and B(uv + ŷ) − B(uv − ŷ), one texel of the level each way
+    across: vec2<f32>,
+    // Texels of the level per UV unit.
+    size: vec2<f32>,
+}
+
+fn height_taps(uv: vec2<f32>, level: i32) -> HeightTaps {
+    let size = max(vec2<i32>(textureDimensions(height_mips)) >> vec2<u32>(u32(level)), vec2(1));
+    let p = uv * vec2<f32>(size) - 0.5;
+    let base = floor(p);
+    let f = p - base;
+    let i = vec2<i32>(base);
+    // Rows i.y and i.y + 1, columns i.x − 1 … i.x + 2.
+    let a0 = height_texel(i + vec2(-1, 0), level, size);
+    let b0 = height_texel(i, level, size);
+    let c0 = height_texel(i + vec2(1, 0), level, size);
+    let d0 = height_texel(i + vec2(2, 0), level, size);
+    let a1 = height_texel(i + vec2(-1, 1), level, size);
+    let b1 = height_texel(i + vec2(0, 1), level, size);
+    let c1 = height_texel(i + vec2(1, 1), level, size);
+    let d1 = height_texel(i + vec2(2, 1), level, size);
+    // Columns i.x and i.x + 1, rows i.y − 1 and i.y + 2.
+    let bm = height_texel(i + vec2(0, -1), level, size);
+    let cm = height_texel(i + vec2(1, -1), level, size);
+    let bp = height_texel(i + vec2(0, 2), level, size);
+    let cp = height_texel(i + vec2(1, 2), level, size);
+    let row0 = mix(b0, c0, f.x);
+    let row1 = mix(b1, c1, f.x);
+    let right = mix(mix(c0, d0, f.x), mix(c1, d1, f.x), f.y);
+    let left = mix(mix(a0, b0, f.x), mix(a1, b1, f.x), f.y);
+    let below = mix(row1, mix(bp, cp, f.x), f.y);
+    let above = mix(mix(bm, cm, f.x), row0, f.y);
+    return HeightTaps(mix(row0, row1, f.y), vec2(right - left, below - above), vec2<f32>(size));
+}
+
 @fragment
 fn fragment(in: VertexOutput) -> HeightOutput {
 #ifdef VERTEX_UVS_A
@@ -68,9 +108,16 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     let lod = clamp(0.5 * log2(max(rho2, 1e-12)), 0.0, last);
     let l0 = floor(lod);
     let l1 = min(l0 + 1.0, last);
-    // The taps wrap by one period at most (see `height_texel`).
+    // The taps wrap by one period at most (see `height_texel`). With bump mapping the finer
+    // level also gives the central differences.
     let tap_uv = fract(uv);
-    let dis = mix(height_bilinear(tap_uv, i32(l0)), height_bilinear(tap_uv, i32(l1)), lod - l0);
+    var taps: HeightTaps;
+    if material.bump > 0.0 {
+        taps = height_taps(tap_uv, i32(l0));
+    } else {
+        taps.center = height_bilinear(tap_uv, i32(l0));
+    }
+    let dis = mix(taps.center, height_bilinear(tap_uv, i32(l1)), lod - l0);
 
     // Blinn bump mapping (seed 003): P' = P + F n with F = k · dis; N' = Pu × Pv + Fu (n × Pv)
     // − Fv (n × Pu), oriented like n. Pu and Pv, the surface's derivatives along the texture
@@ -87,11 +134,9 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     if material.bump > 0.0 && abs(det) > 1e-12 {
         let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
         let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
-        let texel = exp2(l0) / size0;
-        let fu = material.scale * (height_bilinear(tap_uv + vec2(texel.x, 0.0), i32(l0))
-            - height_bilinear(tap_uv - vec2(texel.x, 0.0), i32(l0))) / (2.0 * texel.x);
-        let fv = material.scale * (height_bilinear(tap_uv + vec2(0.0, texel.y), i32(l0))
-            - height_bilinear(tap_uv - vec2(0.0, texel.y), i32(l0))) / (2.0 * texel.y);
+        // Central differences over two texels of level l0, per UV unit.
+        let fu = material.scale * taps.across.x * taps.size.x * 0.5;
+        let fv = material.scale * taps.across.y * taps.size.y * 0.5;
         let base = cross(pu, pv);
         let orientation = select(-1.0, 1.0, dot(base, n) >= 0.0);
         let bumped = orientation * (base + fu * cross(n, pv) - fv * cross(n, pu));
