@@ -124,11 +124,24 @@ fn panel(world: &mut World) {
                         .default_open(true)
                         .show(ui, |ui| {
                             let mut settings = world.get::<Mesostructure>(camera).unwrap().clone();
-                            if bevy_inspector_egui::bevy_inspector::ui_for_value(
+                            // The presets set the cost/accuracy fields together.
+                            let mut changed = false;
+                            ui.horizontal(|ui| {
+                                ui.label("quality preset:");
+                                for q in MesostructureQuality::ALL {
+                                    let current = settings.clone().with_quality(q) == settings;
+                                    if ui.selectable_label(current, q.name()).clicked() {
+                                        settings = settings.clone().with_quality(q);
+                                        changed = true;
+                                    }
+                                }
+                            });
+                            changed |= bevy_inspector_egui::bevy_inspector::ui_for_value(
                                 &mut settings,
                                 ui,
                                 world,
-                            ) {
+                            );
+                            if changed {
                                 world.entity_mut(camera).insert(settings);
                             }
                         });
