@@ -57,6 +57,12 @@
 //! one warning, and the mesh or camera renders as it would without the plugin.
 //!
 //! ## Settings
+//! [`Mesostructure::with_quality`] sets the fields that trade cost for accuracy together
+//! ([`MesostructureQuality`]: `Low`, `Medium`, `High` = default, `Ultra`); among them
+//! [`WorkingResolution`], which searches the apex sets — the largest pass — once per pixel or
+//! once per 2×2 or 4×4 block. `docs/accuracy.md` and `docs/bench.md` give each preset's error
+//! and GPU time.
+//!
 //! Every field of [`Mesostructure`] and [`MesostructureMaterial`] is documented with its unit and
 //! range ([`Mesostructure::RANGES`]); each effect switches off by itself and then costs nothing
 //! (with every term off and no bump mapping, no pass runs at all). The weights λa, λs, λd of the
