@@ -148,8 +148,27 @@ fn render(
             .add(map.displaced_plane(k, 256));
         world.spawn((Mesh3d(grid), MeshMaterial3d(material)));
     }
-    for _ in 0..12 {
+    // Until every pipeline has compiled (on a busy machine that can take more than a few
+    // frames; a pass whose pipeline is not ready does not run, and its image is not this
+    // frame's).
+    for frame in 0.. {
         app.update();
+        let cache = app
+            .get_sub_app(bevy::render::RenderApp)
+            .expect("the render app")
+            .world()
+            .resource::<bevy::render::render_resource::PipelineCache>();
+        let pending = cache.pipelines().any(|p| {
+            !matches!(
+                p.state,
+                bevy::render::render_resource::CachedPipelineState::Ok(_)
+                    | bevy::render::render_resource::CachedPipelineState::Err(_)
+            )
+        });
+        if frame >= 12 && !pending {
+            break;
+        }
+        assert!(frame < 600, "pipelines still compiling after 600 frames");
     }
     let captures = app.world().resource::<MesostructureCaptures>().clone();
     let mut frame = None;

@@ -164,6 +164,11 @@ pub fn lighting_pass(
     lighting: Res<LightingPipeline>,
     uniforms: Res<super::MesostructureUniforms>,
     pipeline_cache: Res<PipelineCache>,
+    occlusion_inputs: (
+        Res<super::gradient::GradientPipeline>,
+        Res<super::apex::ApexPipeline>,
+        Res<super::occlusion::OcclusionPipeline>,
+    ),
     mut ctx: RenderContext,
 ) {
     let (extracted_view, settings, mesh_view, target, id_depth, pipeline_id, textures, offset) =
@@ -177,7 +182,15 @@ pub fn lighting_pass(
     // The images are only current when their passes ran this frame; otherwise "open" and
     // "no mesostructure here".
     let current = view_has_mesostructure(&phases, extracted_view) && settings.0.needs_height_map();
-    let occlusion = if settings.0.occlusion && current {
+    // The occlusion image is this frame's only once its pass and the passes it reads have
+    // compiled (in the background, over the first frames); until then "open", never the
+    // zero-initialised image (a dark flash at start-up).
+    let compiled = |id| pipeline_cache.get_compute_pipeline(id).is_some();
+    let (gradient, apex, occlusion_pipeline) = &occlusion_inputs;
+    let occlusion_ran = compiled(occlusion_pipeline.pipeline)
+        && compiled(gradient.pipeline)
+        && (settings.0.horizon_search_steps > 0 || compiled(apex.pipeline));
+    let occlusion = if settings.0.occlusion && current && occlusion_ran {
         &textures.occlusion.default_view
     } else {
         &lighting.open
