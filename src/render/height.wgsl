@@ -36,15 +36,28 @@ fn height_texel(p: vec2<i32>, level: i32, size: vec2<i32>) -> f32 {
     return textureLoad(height_mips, clamp(wrapped, vec2(0), size - 1), level).r;
 }
 
-// Bilinear filtering by hand: the mip chain is R32Float, which need not be filterable.
-fn height_bilinear(uv: vec2<f32>, level: i32) -> f32 {
+// The texel below-left of `uv` on `level`, the bilinear weights, and the level's size.
+struct Footprint {
+    i: vec2<i32>,
+    f: vec2<f32>,
+    size: vec2<i32>,
+}
+
+fn footprint(uv: vec2<f32>, level: i32) -> Footprint {
     // Level sizes from level 0: a per-pixel (non-uniform) level in textureDimensions reads the
     // wrong level on some drivers (seen on lavapipe), which then loads out of bounds.
     let size = max(vec2<i32>(textureDimensions(height_mips)) >> vec2<u32>(u32(level)), vec2(1));
     let p = uv * vec2<f32>(size) - 0.5;
     let base = floor(p);
-    let f = p - base;
-    let i = vec2<i32>(base);
+    return Footprint(vec2<i32>(base), p - base, size);
+}
+
+// Bilinear filtering by hand: the mip chain is R32Float, which need not be filterable.
+fn height_bilinear(uv: vec2<f32>, level: i32) -> f32 {
+    let fp = footprint(uv, level);
+    let i = fp.i;
+    let f = fp.f;
+    let size = fp.size;
     let h00 = height_texel(i, level, size);
     let h10 = height_texel(i + vec2(1, 0), level, size);
     let h01 = height_texel(i + vec2(0, 1), level, size);
@@ -64,11 +77,10 @@ struct HeightTaps {
 }
 
 fn height_taps(uv: vec2<f32>, level: i32) -> HeightTaps {
-    let size = max(vec2<i32>(textureDimensions(height_mips)) >> vec2<u32>(u32(level)), vec2(1));
-    let p = uv * vec2<f32>(size) - 0.5;
-    let base = floor(p);
-    let f = p - base;
-    let i = vec2<i32>(base);
+    let fp = footprint(uv, level);
+    let i = fp.i;
+    let f = fp.f;
+    let size = fp.size;
     // Rows i.y and i.y + 1, columns i.x − 1 … i.x + 2.
     let a0 = height_texel(i + vec2(-1, 0), level, size);
     let b0 = height_texel(i, level, size);
