@@ -489,10 +489,9 @@ fn main() {
                     // space: the light travels along (cos e, −sin e, 0)).
                     let to_light = Vec3::new(-r.cos(), r.sin(), 0.0);
                     let flat_lit = to_light.y.max(0.0);
-                    let normal_lit = |frame: &CapturedFrame, s: &(u32, u32)| {
-                        let n = frame.facing_normals()[index(s)];
-                        n.dot(to_light).max(0.0)
-                    };
+                    // `normals`: a frame's `facing_normals()`, built once per picture.
+                    let normal_lit =
+                        |normals: &[Vec3], s: &(u32, u32)| normals[index(s)].dot(to_light).max(0.0);
                     let agreement = |shadowed: &dyn Fn(usize) -> bool| {
                         let (mut agree, mut n) = (0, 0);
                         for (j, _) in samples.iter().enumerate() {
@@ -533,9 +532,10 @@ fn main() {
                     for (steps, gpu_ms, frame) in &searches {
                         let ao: Vec<f32> =
                             samples.iter().map(|s| frame.occlusion[index(s)]).collect();
+                        let normals = frame.facing_normals();
                         let picture: Vec<f32> = interior
                             .iter()
-                            .map(|s| shade(frame.occlusion[index(s)], normal_lit(frame, s), 0.0))
+                            .map(|s| shade(frame.occlusion[index(s)], normal_lit(&normals, s), 0.0))
                             .collect();
                         rows.push(Row {
                             scene: scene.clone(),
@@ -571,13 +571,14 @@ fn main() {
                             frame.bleeding.get(index(s)).map_or(0.0, |b| b[1] / unit)
                         };
                         let bounce: Vec<f32> = samples.iter().map(bounce_at).collect();
+                        let normals = frame.facing_normals();
                         let picture: Vec<f32> = interior
                             .iter()
                             .map(|s| {
                                 let v = frame.micro_shadow.get(index(s)).copied().unwrap_or(1.0);
                                 shade(
                                     frame.occlusion[index(s)],
-                                    v * normal_lit(&frame, s),
+                                    v * normal_lit(&normals, s),
                                     bounce_at(s),
                                 )
                             })
