@@ -5,8 +5,11 @@
 
 #![allow(dead_code)] // Each example uses its own part of it.
 
+pub mod headless;
 pub mod meshes;
 pub mod panel;
+
+pub use headless::headless_plugins;
 
 use std::path::PathBuf;
 
@@ -18,7 +21,6 @@ use bevy::{
     render::{
         RenderPlugin,
         diagnostic::RenderDiagnosticsPlugin,
-        pipelined_rendering::PipelinedRenderingPlugin,
         render_resource::{TextureFormat, TextureUsages},
         view::screenshot::{Screenshot, save_to_disk},
     },
@@ -204,24 +206,6 @@ pub fn app(args: &ExampleArgs, title: &str, shots: Vec<Shot>) -> App {
         .add_systems(Update, advance_clock)
         .add_systems(Last, run_script);
     app
-}
-
-/// Bevy's plugins for a run without a window: no event loop (there may be no display to
-/// connect to), frames driven one by one by the caller, pipelines compiled before the first
-/// frame that needs them.
-pub fn headless_plugins() -> bevy::app::PluginGroupBuilder {
-    DefaultPlugins
-        .set(WindowPlugin {
-            primary_window: None,
-            exit_condition: ExitCondition::DontExit,
-            ..default()
-        })
-        .set(RenderPlugin {
-            synchronous_pipeline_compilation: true,
-            ..default()
-        })
-        .disable::<bevy::winit::WinitPlugin>()
-        .disable::<PipelinedRenderingPlugin>()
 }
 
 /// Runs the app: the window's event loop, or frame by frame until the script is done.

@@ -8,14 +8,15 @@ use bevy::{
     image::Image,
     prelude::*,
     render::{
-        RenderApp, RenderPlugin,
-        pipelined_rendering::PipelinedRenderingPlugin,
+        RenderApp,
         render_resource::{TextureFormat, TextureUsages},
         view::screenshot::{Screenshot, ScreenshotCaptured},
     },
-    window::ExitCondition,
 };
 use bevy_mesostructure::{CapturedFrame, MesostructureCapture, MesostructureCaptures, prelude::*};
+
+#[path = "../../examples/common/headless.rs"]
+mod headless;
 
 /// Whether the GPU tests can run. Without a Vulkan driver they are skipped with a message,
 /// except under CI (`CI=true`), where they must fail instead.
@@ -51,19 +52,8 @@ pub fn bare_app() -> App {
 
 fn build_app(plugin: bool, more: impl FnOnce(&mut App)) -> App {
     let mut app = App::new();
-    let plugins = DefaultPlugins
-        .set(WindowPlugin {
-            primary_window: None,
-            exit_condition: ExitCondition::DontExit,
-            ..default()
-        })
-        .set(RenderPlugin {
-            synchronous_pipeline_compilation: true,
-            ..default()
-        })
-        .disable::<PipelinedRenderingPlugin>()
-        // Headless: no event loop (the examples' window support is compiled in).
-        .disable::<bevy::winit::WinitPlugin>();
+    // The examples' headless plugin set: no event loop (their window support is compiled in).
+    let plugins = headless::headless_plugins();
     if std::env::var_os("MESOSTRUCTURE_TEST_LOG").is_some() {
         app.add_plugins(plugins);
     } else {
