@@ -10,7 +10,7 @@
 #import bevy_mesostructure::common::{
     MesostructureUniform, FLAG_VALID, APEX_DIRECT_PRESENT, APEX_TRUNCATED, APEX_BOUNDARY_SHIFT,
     APEX_MIN_RISE, APEX_ORIGIN_SHIFT, neighbour_offset, on_screen, is_connected, pack_offset,
-    sample_direction,
+    sample_direction, apex_base,
 }
 
 @group(0) @binding(0) var mhm: texture_2d<f32>;
@@ -173,7 +173,7 @@ fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
     if !on_screen(corner, size) {
         return;
     }
-    let base = (id.y * ((u32(size.x) + b - 1u) / b) + id.x) * settings.apex_stride;
+    let base = apex_base(settings, corner, size);
     // The block's origin: its first mesostructure pixel in row order.
     var p = vec2(-1);
     for (var i = 0u; i < b * b; i++) {
