@@ -47,6 +47,8 @@ mod common;
 
 use std::{fmt::Write as _, path::PathBuf};
 
+use clap::Parser;
+
 use bevy::{
     camera::{Hdr, RenderTarget},
     core_pipeline::tonemapping::Tonemapping,
@@ -326,40 +328,72 @@ fn par_map<T: Send>(items: &[(u32, u32)], f: impl Fn(&(u32, u32)) -> T + Sync) -
     })
 }
 
+/// Error against the ground truth for each method at each cost (the speed/accuracy chart), on
+/// the synthetic top-down suite or on the unseen-content suite.
+#[derive(Parser)]
+#[command(about, long_about = None)]
+struct Args {
+    /// The CSV to write (default: out/accuracy.csv, or out/accuracy-unseen.csv for
+    /// `--suite unseen`).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// The chart to write (synthetic suite).
+    #[arg(long, default_value = "out/accuracy.png")]
+    chart: PathBuf,
+    /// Bricks and stone at 0.1 under the 45° light only.
+    #[arg(long)]
+    quick: bool,
+    /// Picture size in pixels (square; default 96, or 128 for `--suite unseen`).
+    #[arg(long)]
+    size: Option<u32>,
+    /// Keep these height maps (comma-separated: bricks,rivets,stone,sine).
+    #[arg(long)]
+    maps: Option<String>,
+    /// Keep these scales (comma-separated).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    scales: Option<Vec<f32>>,
+    /// Render nothing: merge earlier runs' CSVs into one CSV and chart.
+    #[arg(long)]
+    from: Vec<PathBuf>,
+    /// Which scenes: the synthetic top-down plane suite, or photo-derived maps on curved cores
+    /// in game-like views (`unseen`).
+    #[arg(long, value_enum, default_value_t = Suite::Synthetic)]
+    suite: Suite,
+    /// `--suite unseen`: keep the scenes whose name contains one of these (comma-separated).
+    #[arg(long)]
+    scenes: Option<String>,
+    /// `--suite unseen`: the plugin's settings to score (comma-separated): a preset (low,
+    /// medium, high, ultra), `search=N` (the brute-force horizon search with N samples),
+    /// `radius=PX` (high with that `max_sample_radius`), `directions=N`, `no-coarse`,
+    /// `screen-space` (high without the texture-space occlusion of minified maps)
+    #[arg(long, default_value = "high", value_delimiter = ',')]
+    variants: Vec<String>,
+    /// `--suite unseen`: score every N-th pixel in x and y.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..))]
+    step: u32,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Suite {
+    Synthetic,
+    Unseen,
+}
+
 fn main() {
-    let (mut out, mut chart, mut quick, mut size) = (
-        PathBuf::from("out/accuracy.csv"),
-        PathBuf::from("out/accuracy.png"),
-        false,
-        96u32,
-    );
-    let (mut only, mut from): (Option<String>, Vec<PathBuf>) = (None, vec![]);
-    let mut only_scales: Option<Vec<f32>> = None;
-    let mut it = std::env::args().skip(1);
-    while let Some(flag) = it.next() {
-        let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
-        match flag.as_str() {
-            "--out" => out = value().into(),
-            "--chart" => chart = value().into(),
-            "--quick" => quick = true,
-            "--size" => size = value().parse().expect("--size N"),
-            "--maps" => only = Some(value()),
-            "--scales" => {
-                only_scales = Some(
-                    value()
-                        .split(',')
-                        .map(|k| k.parse().expect("--scales K,K,..."))
-                        .collect(),
-                )
-            }
-            "--from" => from.push(PathBuf::from(value())),
-            "--help" | "-h" => {
-                println!("see the doc comment at the top of examples/accuracy.rs");
-                return;
-            }
-            other => panic!("unknown argument {other}"),
-        }
+    let args = Args::parse();
+    if args.suite == Suite::Unseen {
+        run_unseen(&args);
+        return;
     }
+    let out = args.out.clone().unwrap_or_else(|| "out/accuracy.csv".into());
+    let chart = args.chart.clone();
+    let (quick, mut size, only, from, only_scales) = (
+        args.quick,
+        args.size.unwrap_or(96),
+        args.maps.clone(),
+        args.from.clone(),
+        args.scales.clone(),
+    );
     let mut rows = read_rows(&from, &mut size);
     if from.is_empty() {
         let mut maps: Vec<(&str, HeightMap)> = if quick {
@@ -766,4 +800,141 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
         .expect("w × h pixels")
         .save(path)
         .expect("cannot write the chart");
+}
+
+/// The settings a `--variants` name stands for.
+fn variant_settings(name: &str) -> Option<Mesostructure> {
+    if let Some(q) = MesostructureQuality::from_name(name) {
+        return Some(Mesostructure::default().with_quality(q));
+    }
+    let (key, value) = name.split_once('=').unwrap_or((name, ""));
+    let n = value.parse::<u32>().ok();
+    Some(match key {
+        "search" => Mesostructure {
+            horizon_search_steps: n?,
+            ..default()
+        },
+        "radius" => Mesostructure {
+            max_sample_radius: n?,
+            ..default()
+        },
+        "directions" => Mesostructure {
+            apex_directions: n?,
+            ..default()
+        },
+        "steps" => Mesostructure {
+            max_ascent_steps: n?,
+            ..default()
+        },
+        "no-coarse" => Mesostructure {
+            coarse_occlusion: false,
+            ..default()
+        },
+        "screen-space" => Mesostructure {
+            texture_space_occlusion: false,
+            ..default()
+        },
+        _ => return None,
+    })
+}
+
+/// The unseen-content suite (`--suite unseen`): per scene, the plugin at its defaults and no
+/// effect against the ray-cast truth of the displaced mesh; a CSV and a Markdown table.
+fn run_unseen(args: &Args) {
+    use common::unseen;
+    let out = args.out.clone().unwrap_or_else(|| "out/accuracy-unseen.csv".into());
+    let size = args.size.unwrap_or(128);
+    let mut scenes = unseen::scenes();
+    if let Some(keep) = &args.scenes {
+        scenes.retain(|s| keep.split(',').any(|k| s.name.contains(k)));
+    }
+    if scenes.is_empty() {
+        eprintln!("accuracy: no scene matches --scenes {}", args.scenes.as_deref().unwrap_or(""));
+        std::process::exit(2);
+    }
+    let unit = unseen::radiance_unit(common::headless_plugins(), size);
+    println!("radiance unit ρE0/π = {unit:.5}");
+    let mut csv = String::from(
+        "scene,core,map,view,light,method,setting,width,height,texels_per_px,pixels,facing,gpu_ms,\
+         ao_mae,ao_bias,shadow_recall,shadow_precision,bounce_rel_mae,bounce_ratio\n",
+    );
+    let mut table = String::from(
+        "| scene | texels/px | AO MAE (none) | AO MAE | AO bias | shadow recall | shadow precision | bounce rel. MAE | bounce ratio |\n|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for scene in &scenes {
+        println!("accuracy: {}", scene.name);
+        for variant in &args.variants {
+        let Some(settings) = variant_settings(variant) else {
+            eprintln!("accuracy: unknown variant {variant:?}");
+            std::process::exit(2);
+        };
+        let Some(r) = unseen::run_scene(
+            common::headless_plugins,
+            scene,
+            settings,
+            size,
+            args.step,
+            unit,
+            16,
+        ) else {
+            eprintln!("  {}: nothing rendered, skipped", scene.name);
+            continue;
+        };
+        println!(
+            "  truth {:.1} s; AO MAE {:.4} (none {:.4}), bias {:+.4}; shadows recall {:.3} precision {:.3}; \
+             bounce rel. MAE {:.3} ratio {:.3}",
+            r.truth_seconds,
+            r.plugin.ao_mae,
+            r.none.ao_mae,
+            r.plugin.ao_bias,
+            r.plugin.shadow_recall,
+            r.plugin.shadow_precision,
+            r.plugin.bounce_rel_mae,
+            r.plugin.bounce_ratio
+        );
+        for (method, setting, s, ms) in [
+            ("none", "-", &r.none, 0.0),
+            ("mesostructure", variant.as_str(), &r.plugin, r.gpu_ms),
+        ] {
+            let _ = writeln!(
+                csv,
+                "{},{},{},{},{},{method},{setting},{size},{size},{:.2},{},{},{ms:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}",
+                scene.name,
+                scene.core.name(),
+                scene.map,
+                scene.view,
+                scene.light_elevation,
+                s.texels_per_pixel,
+                s.pixels,
+                s.facing,
+                s.ao_mae,
+                s.ao_bias,
+                s.shadow_recall,
+                s.shadow_precision,
+                s.bounce_rel_mae,
+                s.bounce_ratio
+            );
+        }
+        let p = &r.plugin;
+        let _ = writeln!(
+            table,
+            "| {} {variant} | {:.2} | {:.3} | {:.3} | {:+.3} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            scene.name,
+            p.texels_per_pixel,
+            r.none.ao_mae,
+            p.ao_mae,
+            p.ao_bias,
+            p.shadow_recall,
+            p.shadow_precision,
+            p.bounce_rel_mae,
+            p.bounce_ratio
+        );
+        }
+    }
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir).expect("cannot create the output folder");
+    }
+    std::fs::write(&out, csv).expect("cannot write the CSV");
+    println!("{table}");
+    println!("wrote {}", out.display());
 }

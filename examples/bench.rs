@@ -214,32 +214,45 @@ fn percentile(values: &[f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
+/// GPU time per pass for the paper's Tables 1 and 2 and the quality presets.
+#[derive(clap::Parser)]
+#[command(about, long_about = None)]
+struct Cli {
+    /// The CSV to write
+    #[arg(long, default_value = "out/bench.csv")]
+    out: PathBuf,
+    /// Frames measured per scene (1–100: the diagnostics keep 120 values)
+    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u16).range(1..=100))]
+    frames: u16,
+    /// Frames rendered before measuring
+    #[arg(long, default_value_t = 20)]
+    warm_up: usize,
+    /// Which table
+    #[arg(long, default_value = "all", value_parser = ["1", "2", "presets", "all"])]
+    table: String,
+    /// The preset of every run but the presets table
+    #[arg(long, default_value = "high", value_parser = parse_quality)]
+    quality: MesostructureQuality,
+    /// Small sizes only (for the software driver)
+    #[arg(long)]
+    quick: bool,
+}
+
+fn parse_quality(s: &str) -> Result<MesostructureQuality, String> {
+    MesostructureQuality::from_name(s).ok_or_else(|| format!("expected low, medium, high or ultra, got {s:?}"))
+}
+
 fn main() {
-    let mut out = PathBuf::from("out/bench.csv");
-    let (mut frames, mut warm_up, mut table, mut quick) =
-        (60usize, 20usize, "all".to_string(), false);
-    let mut quality = MesostructureQuality::High;
-    let mut it = std::env::args().skip(1);
-    while let Some(flag) = it.next() {
-        let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
-        match flag.as_str() {
-            "--out" => out = value().into(),
-            "--frames" => frames = value().parse().expect("--frames N"),
-            "--warm-up" => warm_up = value().parse().expect("--warm-up N"),
-            "--table" => table = value(),
-            "--quick" => quick = true,
-            "--quality" => {
-                let name = value();
-                quality = MesostructureQuality::from_name(&name)
-                    .unwrap_or_else(|| panic!("--quality low|medium|high|ultra, not {name}"));
-            }
-            "--help" | "-h" => {
-                println!("see the doc comment at the top of examples/bench.rs");
-                return;
-            }
-            other => panic!("unknown argument {other}"),
-        }
-    }
+    use clap::Parser;
+    let cli = Cli::parse();
+    let (out, mut frames, warm_up, table, quick, quality) = (
+        cli.out,
+        cli.frames as usize,
+        cli.warm_up,
+        cli.table,
+        cli.quick,
+        cli.quality,
+    );
     // The diagnostics keep 120 values.
     frames = frames.clamp(1, 100);
     let sizes: Vec<UVec2> = if quick {

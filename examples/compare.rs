@@ -59,21 +59,18 @@ struct Variants {
     mesostructure: MesostructureMaterial,
 }
 
+/// The bricks plane five ways: plain, Bevy's SSAO, Bevy's parallax mapping, this plugin, and
+/// this plugin with SSAO.
+#[derive(clap::Parser)]
+#[command(about, long_about = None)]
+struct Cli {
+    #[command(flatten)]
+    common: common::CommonArgs,
+}
+
 fn main() {
-    let mut args = common::ExampleArgs::new("compare");
-    let mut it = std::env::args().skip(1);
-    while let Some(flag) = it.next() {
-        let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
-        if !args.take(&flag, &mut value) {
-            match flag.as_str() {
-                "--help" | "-h" => {
-                    println!("see the doc comment at the top of examples/compare.rs");
-                    std::process::exit(0);
-                }
-                other => panic!("unknown argument {other}"),
-            }
-        }
-    }
+    use clap::Parser;
+    let args = common::ExampleArgs::from_cli("compare", Cli::parse().common);
     let shots = Mode::ALL
         .into_iter()
         .map(|mode| common::Shot {

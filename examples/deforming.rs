@@ -34,6 +34,34 @@ use bevy_mesostructure::prelude::*;
 /// The effects `--off` can switch off.
 const EFFECTS: [&str; 4] = ["occlusion", "micro-shadows", "bleeding", "bump-mapping"];
 
+/// A sphere morphing into a cube with a height map, a circling light and a ground; a window
+/// with the tuning panel, or headless PNGs of the picture and each debug view.
+#[derive(clap::Parser)]
+#[command(about, long_about = None)]
+struct Cli {
+    #[command(flatten)]
+    common: common::CommonArgs,
+    /// The object
+    #[arg(long, default_value = "morph", value_parser = ["morph", "sphere", "cube", "plane"])]
+    shape: String,
+    /// A built-in height map (bricks, rivets, weave, sine, stone, cone)
+    #[arg(long, default_value = "bricks", value_parser = HeightMap::NAMES)]
+    height_map: String,
+    /// Height of white in the height map, world units (> 0)
+    #[arg(long, default_value_t = 0.08, value_parser = common::parse_positive)]
+    scale: f32,
+    /// Effects to switch off (comma-separated; the file names get `_no-<effect>`)
+    #[arg(long, value_delimiter = ',', value_parser = EFFECTS)]
+    off: Vec<String>,
+    /// How high the circling light stands (lower casts longer micro-shadows)
+    #[arg(long, default_value_t = 4.0, allow_negative_numbers = true)]
+    light_height: f32,
+    /// Debug view to write: none, height, gradient, apex-distance, apex-count, boundary,
+    /// occlusion, micro-shadow, bleeding, or all
+    #[arg(long, default_value = "all", value_parser = common::parse_views)]
+    view: common::ViewList,
+}
+
 struct Args {
     common: common::ExampleArgs,
     off: Vec<String>,
@@ -45,59 +73,17 @@ struct Args {
 }
 
 fn parse_args() -> Args {
-    let mut args = Args {
-        common: common::ExampleArgs::new("deforming"),
-        off: vec![],
-        light_height: 4.0,
-        shape: "morph".into(),
-        height_map: "bricks".into(),
-        scale: 0.08,
-        views: MesostructureDebugView::ALL.to_vec(),
-    };
-    let mut it = std::env::args().skip(1);
-    while let Some(flag) = it.next() {
-        let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
-        if args.common.take(&flag, &mut value) {
-            continue;
-        }
-        match flag.as_str() {
-            "--shape" => args.shape = value(),
-            "--height-map" => args.height_map = value(),
-            "--scale" => args.scale = value().parse().expect("--scale K"),
-            "--occlusion" => {
-                if value() == "off" {
-                    args.off.push("occlusion".into());
-                }
-            }
-            "--off" => {
-                for effect in value().split(',').filter(|e| !e.is_empty()) {
-                    assert!(
-                        EFFECTS.contains(&effect),
-                        "unknown effect {effect}; one of {EFFECTS:?}"
-                    );
-                    args.off.push(effect.into());
-                }
-            }
-            "--light-height" => args.light_height = value().parse().expect("--light-height H"),
-            "--view" => {
-                let v = value();
-                args.views = if v == "all" {
-                    MesostructureDebugView::ALL.to_vec()
-                } else {
-                    vec![
-                        MesostructureDebugView::from_name(&v)
-                            .unwrap_or_else(|| panic!("unknown view {v}")),
-                    ]
-                };
-            }
-            "--help" | "-h" => {
-                println!("see the doc comment at the top of examples/deforming.rs");
-                std::process::exit(0);
-            }
-            other => panic!("unknown argument {other}"),
-        }
+    use clap::Parser;
+    let cli = Cli::parse();
+    Args {
+        common: common::ExampleArgs::from_cli("deforming", cli.common),
+        off: cli.off,
+        light_height: cli.light_height,
+        shape: cli.shape,
+        height_map: cli.height_map,
+        scale: cli.scale,
+        views: cli.view.0,
     }
-    args
 }
 
 fn main() {

@@ -27,35 +27,27 @@ const COLUMNS: [(&str, f32); 4] = [
     ("stone", 0.8),
 ];
 
+/// A torus, the teapot and the bunny with four height maps each.
+#[derive(clap::Parser)]
+#[command(about, long_about = None)]
+struct Cli {
+    #[command(flatten)]
+    common: common::CommonArgs,
+    /// Debug view to write: none, height, gradient, apex-distance, apex-count, boundary,
+    /// occlusion, micro-shadow, bleeding, or all
+    #[arg(long, default_value = "none", value_parser = common::parse_views)]
+    view: common::ViewList,
+}
+
 fn main() {
-    let mut args = common::ExampleArgs::new("gallery");
-    args.size = UVec2::new(960, 640);
-    let mut views = vec![MesostructureDebugView::None];
-    let mut it = std::env::args().skip(1);
-    while let Some(flag) = it.next() {
-        let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
-        if args.take(&flag, &mut value) {
-            continue;
-        }
-        match flag.as_str() {
-            "--view" => {
-                let v = value();
-                views = if v == "all" {
-                    MesostructureDebugView::ALL.to_vec()
-                } else {
-                    vec![
-                        MesostructureDebugView::from_name(&v)
-                            .unwrap_or_else(|| panic!("unknown view {v}")),
-                    ]
-                };
-            }
-            "--help" | "-h" => {
-                println!("see the doc comment at the top of examples/gallery.rs");
-                std::process::exit(0);
-            }
-            other => panic!("unknown argument {other}"),
-        }
+    use clap::Parser;
+    let cli = Cli::parse();
+    let sized = cli.common.size.is_some();
+    let mut args = common::ExampleArgs::from_cli("gallery", cli.common);
+    if !sized {
+        args.size = UVec2::new(960, 640);
     }
+    let views = cli.view.0;
     let shots = views
         .into_iter()
         .map(|v| common::view_shot("gallery", v))

@@ -9,11 +9,18 @@
 use bevy_mesostructure::height_maps::HeightMap;
 use image::{DynamicImage, ImageBuffer, Luma, Rgb};
 
+/// Writes the built-in height maps as PNGs, and the stone map in every file format the tests load.
+#[derive(clap::Parser)]
+#[command(about, long_about = None)]
+struct Cli {
+    /// Side of the square maps, texels
+    #[arg(default_value_t = 512, value_parser = clap::value_parser!(u32).range(8..=8192))]
+    size: u32,
+}
+
 fn main() {
-    let size: u32 = std::env::args()
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(512);
+    use clap::Parser;
+    let size = Cli::parse().size;
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/height_maps");
     std::fs::create_dir_all(dir.join("formats")).expect("cannot create assets/height_maps");
     for name in HeightMap::NAMES {

@@ -91,23 +91,16 @@ pub fn height_values(image: &Image) -> Result<(Vec<f32>, Vec<String>), String> {
 /// pass can choose the level that matches the pixel footprint (minification must not alias).
 pub fn height_map_mip_chain(image: &Image) -> Result<(Image, Vec<String>), String> {
     let (values, notes) = height_values(image)?;
-    let (w, h) = (image.width(), image.height());
+    Ok((mip_chain(values, image.width(), image.height()), notes))
+}
+
+/// The `R32Float` mip chain of level-0 heights `w × h`.
+pub fn mip_chain(values: Vec<f32>, w: u32, h: u32) -> Image {
     let levels = 32 - w.max(h).leading_zeros();
     let mut data: Vec<u8> = bytemuck::cast_slice(&values).to_vec();
     let (mut level, mut lw, mut lh) = (values, w, h);
     for _ in 1..levels {
-        let (nw, nh) = ((lw / 2).max(1), (lh / 2).max(1));
-        let mut next = Vec::with_capacity((nw * nh) as usize);
-        for y in 0..nh {
-            for x in 0..nw {
-                let at = |dx: u32, dy: u32| {
-                    let sx = (2 * x + dx).min(lw - 1);
-                    let sy = (2 * y + dy).min(lh - 1);
-                    level[(sy * lw + sx) as usize]
-                };
-                next.push(0.25 * (at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1)));
-            }
-        }
+        let (next, nw, nh) = halve(&level, lw, lh);
         data.extend_from_slice(bytemuck::cast_slice(&next));
         (level, lw, lh) = (next, nw, nh);
     }
@@ -123,7 +116,160 @@ pub fn height_map_mip_chain(image: &Image) -> Result<(Image, Vec<String>), Strin
     );
     out.texture_descriptor.mip_level_count = levels;
     out.data = Some(data);
-    Ok((out, notes))
+    out
+}
+
+/// Azimuths of the texture-space horizon map: `i · 45°`, `i = 0..8`, in texel space (u, v).
+pub const HORIZON_AZIMUTHS: usize = 8;
+/// How far each horizon is searched, in texels of the horizon map's level.
+pub const HORIZON_RADIUS: u32 = 32;
+/// The horizon map is built at the finest level of the mip chain at most this many texels wide
+/// (and high): it serves minified surfaces, where finer detail is below a pixel anyway.
+pub const HORIZON_MAX_SIZE: u32 = 512;
+
+/// The unit texel-space direction of horizon azimuth `i`.
+pub fn horizon_direction(i: usize) -> [f32; 2] {
+    let a = i as f32 * std::f32::consts::TAU / HORIZON_AZIMUTHS as f32;
+    [a.cos(), a.sin()]
+}
+
+/// A texture-space horizon map of a height map (built once per map at load; in texture space,
+/// so it stays valid on deforming meshes): per texel, for each azimuth the highest slope
+/// `max_d (h(p + d) − h(p)) / |d|` towards it (heights in `[0, 1]` per UV unit of distance,
+/// negative where the surface only falls away), and the height gradient `(∂h/∂u, ∂h/∂v)` per UV
+/// unit. On a surface of scale `k` whose UV unit spans `L` world units along an azimuth, the
+/// horizon elevation there is `atan(k · slope / L)`: one map serves every scale and every
+/// mesh.
+#[derive(Clone, Debug)]
+pub struct HorizonMap {
+    /// Texels across.
+    pub width: u32,
+    /// Texels down.
+    pub height: u32,
+    /// Per texel, row-major: the slope towards each azimuth.
+    pub slopes: Vec<[f32; HORIZON_AZIMUTHS]>,
+    /// Per texel: `(∂h/∂u, ∂h/∂v)`.
+    pub gradient: Vec<[f32; 2]>,
+}
+
+impl HorizonMap {
+    /// Builds the map from level-0 heights (`w × h`, row-major), box-filtered down to at most
+    /// [`HORIZON_MAX_SIZE`] texels a side first.
+    pub fn new(values: &[f32], w: u32, h: u32) -> Self {
+        let (mut level, mut lw, mut lh) = (values.to_vec(), w, h);
+        while lw.max(lh) > HORIZON_MAX_SIZE {
+            (level, lw, lh) = halve(&level, lw, lh);
+        }
+        let at = |x: i64, y: i64| {
+            level[(y.rem_euclid(lh as i64) * lw as i64 + x.rem_euclid(lw as i64)) as usize]
+        };
+        let bilinear = |x: f32, y: f32| {
+            let (x0, y0) = (x.floor(), y.floor());
+            let (fx, fy) = (x - x0, y - y0);
+            let (x0, y0) = (x0 as i64, y0 as i64);
+            let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
+            let bottom = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
+            top * (1.0 - fy) + bottom * fy
+        };
+        let radius = HORIZON_RADIUS.min(lw.max(lh) / 2).max(1);
+        let texel = |x: u32, y: u32| {
+            let (fx, fy) = (x as f32, y as f32);
+            let h0 = at(x as i64, y as i64);
+            let mut slopes = [0.0; HORIZON_AZIMUTHS];
+            for (i, slope) in slopes.iter_mut().enumerate() {
+                let [dx, dy] = horizon_direction(i);
+                // UV length of one texel step along this azimuth.
+                let step = ((dx / lw as f32).powi(2) + (dy / lh as f32).powi(2)).sqrt();
+                let mut best = f32::MIN;
+                for d in 1..=radius {
+                    let d = d as f32;
+                    best = best.max((bilinear(fx + d * dx, fy + d * dy) - h0) / (d * step));
+                }
+                *slope = best;
+            }
+            let gradient = [
+                (at(x as i64 + 1, y as i64) - at(x as i64 - 1, y as i64)) * 0.5 * lw as f32,
+                (at(x as i64, y as i64 + 1) - at(x as i64, y as i64 - 1)) * 0.5 * lh as f32,
+            ];
+            (slopes, gradient)
+        };
+        // Rows on every core: a 512² map is ~70 M height samples.
+        let rows: Vec<u32> = (0..lh).collect();
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let chunk = rows.len().div_ceil(threads).max(1);
+        let texels: Vec<([f32; HORIZON_AZIMUTHS], [f32; 2])> = std::thread::scope(|scope| {
+            let handles: Vec<_> = rows
+                .chunks(chunk)
+                .map(|part| {
+                    scope.spawn(|| {
+                        part.iter()
+                            .flat_map(|&y| (0..lw).map(move |x| (x, y)))
+                            .map(|(x, y)| texel(x, y))
+                            .collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().expect("a horizon-map thread panicked"))
+                .collect()
+        });
+        Self {
+            width: lw,
+            height: lh,
+            slopes: texels.iter().map(|t| t.0).collect(),
+            gradient: texels.iter().map(|t| t.1).collect(),
+        }
+    }
+
+    /// The map as an `Rgba16Float` image three blocks wide: slopes of azimuths 0–3, slopes of
+    /// azimuths 4–7, then the gradient (in `xy`).
+    pub fn to_image(&self) -> Image {
+        let (w, h) = (self.width, self.height);
+        let mut data = Vec::with_capacity((w * 3 * h * 8) as usize);
+        let mut push = |v: f32| data.extend(half::f16::from_f32(v).to_le_bytes());
+        for y in 0..h {
+            for block in 0..3 {
+                for x in 0..w {
+                    let i = (y * w + x) as usize;
+                    let v = match block {
+                        0 => [self.slopes[i][0], self.slopes[i][1], self.slopes[i][2], self.slopes[i][3]],
+                        1 => [self.slopes[i][4], self.slopes[i][5], self.slopes[i][6], self.slopes[i][7]],
+                        _ => [self.gradient[i][0], self.gradient[i][1], 0.0, 0.0],
+                    };
+                    v.into_iter().for_each(&mut push);
+                }
+            }
+        }
+        Image::new(
+            Extent3d {
+                width: w * 3,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+            TextureDimension::D2,
+            data,
+            TextureFormat::Rgba16Float,
+            RenderAssetUsages::RENDER_WORLD,
+        )
+    }
+}
+
+/// One box-filtered level down.
+fn halve(level: &[f32], lw: u32, lh: u32) -> (Vec<f32>, u32, u32) {
+    let (nw, nh) = ((lw / 2).max(1), (lh / 2).max(1));
+    let mut next = Vec::with_capacity((nw * nh) as usize);
+    for y in 0..nh {
+        for x in 0..nw {
+            let at = |dx: u32, dy: u32| {
+                let sx = (2 * x + dx).min(lw - 1);
+                let sy = (2 * y + dy).min(lh - 1);
+                level[(sy * lw + sx) as usize]
+            };
+            next.push(0.25 * (at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1)));
+        }
+    }
+    (next, nw, nh)
 }
 
 /// IEEE 754 binary16 → f32.

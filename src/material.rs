@@ -9,7 +9,10 @@ use bevy::{
     render::extract_component::ExtractComponent,
 };
 
-use crate::{height_map_import::height_map_mip_chain, warn_once::WarnedOnce};
+use crate::{
+    height_map_import::{HorizonMap, height_values, mip_chain},
+    warn_once::WarnedOnce,
+};
 
 /// Marks a mesh as a mesostructure surface: the low-polygon core mesh plus a height field bound
 /// to it by its UVs (paper eq. 7: `P = P0 + n0 · dis · k`).
@@ -50,6 +53,8 @@ impl Default for MesostructureMaterial {
 pub struct PreparedMesostructure {
     /// The height map converted to an `R32Float` mip chain.
     pub height_mips: AssetId<Image>,
+    /// Its texture-space horizon map ([`crate::height_map_import::HorizonMap`]).
+    pub horizons: AssetId<Image>,
     /// `k`, world units.
     pub scale: f32,
     /// UV transform.
@@ -61,7 +66,14 @@ pub struct PreparedMesostructure {
 
 /// Converted height maps, by source image.
 #[derive(Resource, Default)]
-pub struct HeightMapMips(HashMap<AssetId<Image>, Option<Handle<Image>>>);
+pub struct HeightMapMips(HashMap<AssetId<Image>, Option<DerivedHeightMap>>);
+
+/// What the plugin derives from a height map once: its mip chain and its horizon map.
+#[derive(Clone, Debug)]
+pub struct DerivedHeightMap {
+    mips: Handle<Image>,
+    horizons: Handle<Image>,
+}
 
 /// Validates each [`MesostructureMaterial`], converts its height map once, and keeps
 /// [`PreparedMesostructure`] in step.
@@ -89,7 +101,8 @@ pub fn prepare_mesostructure_materials(
     for event in image_events.read() {
         if let AssetEvent::Modified { id } | AssetEvent::Removed { id } = event {
             if let Some(Some(derived)) = mips.0.remove(id) {
-                images.remove(&derived);
+                images.remove(&derived.mips);
+                images.remove(&derived.horizons);
             }
         }
     }
@@ -180,14 +193,19 @@ fn prepare_one(
             }
             return None;
         };
-        let derived = match height_map_mip_chain(source) {
-            Ok((image, notes)) => {
+        let derived = match height_values(source) {
+            Ok((values, notes)) => {
                 for note in notes {
                     warned.warn(format!("note {id} {note}"), || {
                         format!("height map {id}: {note}")
                     });
                 }
-                Some(images.add(image))
+                let (w, h) = (source.width(), source.height());
+                let horizons = HorizonMap::new(&values, w, h).to_image();
+                Some(DerivedHeightMap {
+                    mips: images.add(mip_chain(values, w, h)),
+                    horizons: images.add(horizons),
+                })
             }
             Err(err) => {
                 warned.warn(format!("convert {id}"), || {
@@ -203,7 +221,8 @@ fn prepare_one(
     }
     let derived = mips.0.get(&id)?.as_ref()?;
     Some(PreparedMesostructure {
-        height_mips: derived.id(),
+        height_mips: derived.mips.id(),
+        horizons: derived.horizons.id(),
         scale: material.scale,
         uv_transform: material.uv_transform,
         bump: true,

@@ -8,6 +8,7 @@
 pub mod headless;
 pub mod meshes;
 pub mod panel;
+pub mod unseen;
 
 pub use headless::headless_plugins;
 
@@ -28,7 +29,69 @@ use bevy::{
 };
 use bevy_mesostructure::prelude::*;
 
-/// The options every example takes.
+/// The options every example takes, as parsed (`#[command(flatten)]` in each example's
+/// arguments).
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct CommonArgs {
+    /// Frames to render before the screenshots; in a window, take them and exit after
+    #[arg(long)]
+    pub frames: Option<u32>,
+    /// Folder for the screenshots [default: out/<example>]
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Picture size, N or WxH [default: 512x384 headless, 1280x720 in a window]
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<UVec2>,
+    /// Render without a window even where there is a display
+    #[arg(long)]
+    pub headless: bool,
+}
+
+/// `N` or `WxH`, each at least 1.
+pub fn parse_size(s: &str) -> Result<UVec2, String> {
+    let (w, h) = s.split_once('x').unwrap_or((s, s));
+    let n = |t: &str| match t.trim().parse::<u32>() {
+        Ok(v) if v > 0 => Ok(v),
+        _ => Err(format!("expected N or WxH with positive whole numbers, got {s:?}")),
+    };
+    Ok(UVec2::new(n(w)?, n(h)?))
+}
+
+/// `x,y,z` (negative numbers allowed: pass them as `--eye=-1,2,3` or `--eye -1,2,3`).
+pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    let v: Result<Vec<f32>, _> = s.split(',').map(|x| x.trim().parse::<f32>()).collect();
+    match v {
+        Ok(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok(Vec3::new(v[0], v[1], v[2])),
+        _ => Err(format!("expected three finite numbers x,y,z, got {s:?}")),
+    }
+}
+
+/// A finite number above 0.
+pub fn parse_positive(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("expected a finite number above 0, got {s:?}")),
+    }
+}
+
+/// The debug views to write (`--view NAME` or `--view all`).
+#[derive(Clone, Debug)]
+pub struct ViewList(pub Vec<MesostructureDebugView>);
+
+/// A debug view's name, or `all`.
+pub fn parse_views(s: &str) -> Result<ViewList, String> {
+    if s == "all" {
+        return Ok(ViewList(MesostructureDebugView::ALL.to_vec()));
+    }
+    MesostructureDebugView::from_name(s)
+        .map(|v| ViewList(vec![v]))
+        .ok_or_else(|| {
+            let names: Vec<&str> = MesostructureDebugView::ALL.iter().map(|v| v.name()).collect();
+            format!("unknown view {s:?}; one of {}, all", names.join(", "))
+        })
+}
+
+/// The options every example takes, resolved.
 pub struct ExampleArgs {
     /// Frames to render before the screenshots; `None` in a window = run until closed.
     pub frames: Option<u32>,
@@ -45,33 +108,18 @@ pub struct ExampleArgs {
 impl ExampleArgs {
     /// The defaults: 512×384 into `out/<name>/`.
     pub fn new(name: &str) -> Self {
-        Self {
-            frames: None,
-            out: PathBuf::from("out").join(name),
-            size: UVec2::new(512, 384),
-            sized: false,
-            headless: false,
-        }
+        Self::from_cli(name, CommonArgs::default())
     }
 
-    /// Takes `flag` (and its value) if it is one of the common flags.
-    pub fn take(&mut self, flag: &str, value: &mut dyn FnMut() -> String) -> bool {
-        match flag {
-            "--frames" => self.frames = Some(value().parse().expect("--frames N")),
-            "--out" => self.out = value().into(),
-            "--headless" => self.headless = true,
-            "--size" => {
-                let v = value();
-                let (w, h) = v.split_once('x').unwrap_or((&v, &v));
-                self.size = UVec2::new(
-                    w.parse().expect("--size N or WxH"),
-                    h.parse().expect("--size N or WxH"),
-                );
-                self.sized = true;
-            }
-            _ => return false,
+    /// The parsed options of example `name`, defaults filled in.
+    pub fn from_cli(name: &str, cli: CommonArgs) -> Self {
+        Self {
+            frames: cli.frames,
+            out: cli.out.unwrap_or_else(|| PathBuf::from("out").join(name)),
+            size: cli.size.unwrap_or(UVec2::new(512, 384)),
+            sized: cli.size.is_some(),
+            headless: cli.headless,
         }
-        true
     }
 
     /// Whether this run opens a window.

@@ -19,6 +19,7 @@ mod gradient;
 pub mod ground_truth;
 mod lighting;
 mod occlusion;
+pub mod texture_space;
 
 pub use apex::*;
 pub use gradient::*;

@@ -119,7 +119,7 @@ impl CachedRenderPipelinePhaseItem for HeightPhaseItem {
 pub struct HeightPassPipeline {
     mesh_pipeline: MeshPipeline,
     fragment_shader: Handle<Shader>,
-    /// Group 3: the height-map mip chain and the per-mesh uniform.
+    /// Group 3: the height-map mip chain, the per-mesh uniform and the horizon map.
     pub material_layout: BindGroupLayoutDescriptor,
 }
 
@@ -151,6 +151,7 @@ pub fn init_height_pass_pipeline(
             (
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 uniform_buffer::<HeightMaterialUniform>(true),
+                texture_2d(TextureSampleType::Float { filterable: false }),
             ),
         ),
     );
@@ -318,7 +319,10 @@ pub fn prepare_height_material_bind_groups(
     groups.uniforms.clear();
     let mut entries = Vec::new();
     for (main_entity, prepared) in &materials {
-        let Some(image) = images.get(prepared.height_mips) else {
+        let (Some(image), Some(horizons)) = (
+            images.get(prepared.height_mips),
+            images.get(prepared.horizons),
+        ) else {
             continue;
         };
         let t = prepared.uv_transform;
@@ -334,7 +338,12 @@ pub fn prepare_height_material_bind_groups(
             object_id: object_id(*main_entity),
             bump: prepared.bump as u32 as f32,
         });
-        entries.push((*main_entity, image.texture_view.clone(), offset));
+        entries.push((
+            *main_entity,
+            image.texture_view.clone(),
+            horizons.texture_view.clone(),
+            offset,
+        ));
     }
     if entries.is_empty() {
         return;
@@ -344,11 +353,11 @@ pub fn prepare_height_material_bind_groups(
         return;
     };
     let layout = pipeline_cache.get_bind_group_layout(&pipeline.material_layout);
-    for (main_entity, view, offset) in entries {
+    for (main_entity, view, horizons, offset) in entries {
         let group = device.create_bind_group(
             "mesostructure_height_material_bind_group",
             &layout,
-            &BindGroupEntries::sequential((&view, binding.clone())),
+            &BindGroupEntries::sequential((&view, binding.clone(), &horizons)),
         );
         groups.groups.insert(main_entity, (group, offset));
     }

@@ -17,13 +17,21 @@ struct HeightMaterial {
 
 @group(3) @binding(0) var height_mips: texture_2d<f32>;
 @group(3) @binding(1) var<uniform> material: HeightMaterial;
+// Texture-space horizon map (`HorizonMap` in height_map_import.rs), three blocks wide: the
+// highest slope towards azimuths 0–3 and 4–7 (i · 45° in texel space; height per UV unit of
+// distance), then the height gradient per UV unit.
+@group(3) @binding(2) var horizons: texture_2d<f32>;
+
+const PI: f32 = 3.141592653589793;
+const HORIZON_AZIMUTHS: u32 = 8u;
 
 struct HeightOutput {
     // (dis · k in world units, NDC depth, object id, dis)
     @location(0) mhm: vec4<f32>,
-    // (n0 in world space, 1)
+    // (n0 in world space, weight of the texture-space occlusion)
     @location(1) core_normal: vec4<f32>,
-    // (N' by Blinn bump mapping in world space, 1), or 0 where the material has a normal map
+    // (N' by Blinn bump mapping in world space, or 0 where the material has a normal map;
+    // texture-space occlusion)
     @location(2) bump_normal: vec4<f32>,
 }
 
@@ -104,6 +112,94 @@ fn height_taps(uv: vec2<f32>, level: i32) -> HeightTaps {
     return HeightTaps(mix(row0, row1, f.y), vec2(right - left, below - above), vec2<f32>(size));
 }
 
+// ∫ cos(φ − γ) sin φ dφ (antiderivative): the cosine-weighted solid angle of a slice through
+// the core normal, φ measured from it, γ the angle of the true normal projected into the slice.
+fn slice_antiderivative(phi: f32, gamma: f32) -> f32 {
+    return -0.25 * cos(2.0 * phi - gamma) + 0.5 * phi * sin(gamma);
+}
+
+// Cosine-weighted ambient occlusion of the true surface at texel `texel` of the horizon map,
+// about its true normal, from the horizons of the 8 azimuths (4 slices through the core
+// normal n): per slice, the directions above both horizons and in the normal's hemisphere,
+// integrated in closed form (the slice form of Jimenez et al. 2016, here about n). `pu`, `pv`:
+// world vectors per UV unit; `k`: the material's scale.
+fn texel_occlusion(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>, k: f32) -> f32 {
+    let first = textureLoad(horizons, texel, 0);
+    let second = textureLoad(horizons, texel + vec2(block, 0), 0);
+    let gradient = textureLoad(horizons, texel + vec2(2 * block, 0), 0).xy;
+    // The true normal by Blinn's formula with the map's own gradient (as the bump normal).
+    let base = cross(pu, pv);
+    let orientation = select(-1.0, 1.0, dot(base, n) >= 0.0);
+    let true_normal = normalize(orientation
+        * (base + k * gradient.x * cross(n, pv) - k * gradient.y * cross(n, pu)));
+    let ahead = array<f32, 4>(first.x, first.y, first.z, first.w);
+    let behind = array<f32, 4>(second.x, second.y, second.z, second.w);
+    var sum = 0.0;
+    for (var i = 0u; i < HORIZON_AZIMUTHS / 2u; i++) {
+        let a = f32(i) * 2.0 * PI / f32(HORIZON_AZIMUTHS);
+        let along = pu * cos(a) + pv * sin(a);
+        let reach = length(along);
+        let t = along - n * dot(along, n);
+        if reach <= 0.0 || dot(t, t) <= 0.0 {
+            sum += 1.0;
+            continue;
+        }
+        let tangent = normalize(t);
+        // Horizon elevations from the core plane on both sides of the slice.
+        let up = atan(k * ahead[i] / reach);
+        let down = atan(k * behind[i] / reach);
+        let projected = vec2(dot(true_normal, tangent), dot(true_normal, n));
+        let gamma = atan2(projected.x, projected.y);
+        let hi = max(min(0.5 * PI - up, gamma + 0.5 * PI), 0.0);
+        let lo = min(max(-(0.5 * PI - down), gamma - 0.5 * PI), 0.0);
+        let f0 = slice_antiderivative(0.0, gamma);
+        sum += length(projected)
+            * (slice_antiderivative(hi, gamma) - f0 + slice_antiderivative(lo, gamma) - f0);
+    }
+    return clamp(sum / f32(HORIZON_AZIMUTHS / 2u), 0.0, 1.0);
+}
+
+// The texel of the horizon map `i` texels from `base`, wrapped (height maps tile).
+fn horizon_texel(base: vec2<i32>, i: vec2<i32>, level: vec2<i32>) -> vec2<i32> {
+    return ((base + i) % level + level) % level;
+}
+
+// The fine occlusion a pixel shows, from the texture-space horizon map. Magnified (less than a
+// texel per pixel): `texel_occlusion` interpolated bilinearly between the four texels around
+// `uv`, so that texels do not show as blocks. Minified: the mean of the fine occlusion over
+// the pixel's footprint, not the occlusion of the filtered heights that the screen-space
+// passes see (which flattens the relief): 2 × 2 taps spread over the footprint (UV
+// derivatives `duv1`, `duv2`). Between 0.75 and 1.5 texels per pixel, a blend of the two.
+fn footprint_occlusion(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_pixel: f32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>) -> f32 {
+    let size = vec2<i32>(textureDimensions(horizons));
+    let block = size.x / 3;
+    let level = vec2<i32>(block, size.y);
+    // Texels per pixel of the horizon map's level (it may be coarser than level 0).
+    let horizon_texels = texels_per_pixel * f32(block) / f32(textureDimensions(height_mips, 0).x);
+    let minified = smoothstep(0.75, 1.5, horizon_texels);
+    var magnified_ao = 0.0;
+    if minified < 1.0 {
+        let p = fract(uv) * vec2<f32>(level) - 0.5;
+        let base = vec2<i32>(floor(p));
+        let f = p - floor(p);
+        let a00 = texel_occlusion(horizon_texel(base, vec2(0, 0), level), block, n, pu, pv, material.scale);
+        let a10 = texel_occlusion(horizon_texel(base, vec2(1, 0), level), block, n, pu, pv, material.scale);
+        let a01 = texel_occlusion(horizon_texel(base, vec2(0, 1), level), block, n, pu, pv, material.scale);
+        let a11 = texel_occlusion(horizon_texel(base, vec2(1, 1), level), block, n, pu, pv, material.scale);
+        magnified_ao = mix(mix(a00, a10, f.x), mix(a01, a11, f.x), f.y);
+    }
+    var minified_ao = 0.0;
+    if minified > 0.0 {
+        for (var tap = 0; tap < 4; tap++) {
+            let offset = vec2<f32>(f32(tap & 1), f32(tap >> 1u)) * 0.5 - 0.25;
+            let tap_uv = fract(uv + offset.x * duv1 + offset.y * duv2);
+            let texel = horizon_texel(vec2<i32>(tap_uv * vec2<f32>(level)), vec2(0), level);
+            minified_ao += 0.25 * texel_occlusion(texel, block, n, pu, pv, material.scale);
+        }
+    }
+    return mix(magnified_ao, minified_ao, minified);
+}
+
 @fragment
 fn fragment(in: VertexOutput) -> HeightOutput {
 #ifdef VERTEX_UVS_A
@@ -140,9 +236,20 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     let duv1 = dpdx(uv);
     let duv2 = dpdy(uv);
     var bump = vec3<f32>(0.0);
+    var texture_occlusion = 1.0;
+    // 1 where the texture-space occlusion was computed (the occlusion pass then uses it).
+    var texture_weight = 0.0;
 #ifdef VERTEX_NORMALS
     let n = normalize(in.world_normal);
     let det = duv1.x * duv2.y - duv1.y * duv2.x;
+    // Texels of level 0 per pixel along the footprint's longer axis.
+    let texels_per_pixel = sqrt(rho2);
+    if abs(det) > 1e-12 {
+        let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
+        let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
+        texture_weight = 1.0;
+        texture_occlusion = footprint_occlusion(uv, duv1, duv2, texels_per_pixel, n, pu, pv);
+    }
     if material.bump > 0.0 && abs(det) > 1e-12 {
         let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
         let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
@@ -160,12 +267,12 @@ fn fragment(in: VertexOutput) -> HeightOutput {
 #endif
 
     var out: HeightOutput;
-    out.bump_normal = vec4<f32>(bump, 1.0);
+    out.bump_normal = vec4<f32>(bump, texture_occlusion);
     out.mhm = vec4<f32>(dis * material.scale, in.position.z, material.object_id, dis);
 #ifdef VERTEX_NORMALS
-    out.core_normal = vec4<f32>(normalize(in.world_normal), 1.0);
+    out.core_normal = vec4<f32>(normalize(in.world_normal), texture_weight);
 #else
-    out.core_normal = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    out.core_normal = vec4<f32>(0.0, 0.0, 0.0, 0.0);
 #endif
     return out;
 }

@@ -576,6 +576,7 @@ fn prepare_view_bind_groups(
                 view_binding.clone(),
                 &t.mhgm.default_view,
                 depth,
+                &t.bump_normal.default_view,
             )),
         );
         let debug_view = device.create_bind_group(

@@ -21,7 +21,8 @@ use crate::settings::{ExtractedMesostructure, MesostructureUniform};
 /// Pipeline and layout of the occlusion pass.
 #[derive(Resource)]
 pub struct OcclusionPipeline {
-    /// MHM, core normals, apex sets, occlusion (storage), settings, view, MHGM, prepass depth.
+    /// MHM, core normals, apex sets, occlusion (storage), settings, view, MHGM, prepass depth,
+    /// bump normals (whose `w` carries the height pass's texture-space occlusion).
     pub layout: BindGroupLayoutDescriptor,
     /// The compute pipeline.
     pub pipeline: CachedComputePipelineId,
@@ -46,6 +47,7 @@ pub fn init_occlusion_pipeline(
                 uniform_buffer::<ViewUniform>(true),
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 texture_depth_2d(),
+                texture_2d(TextureSampleType::Float { filterable: false }),
             ),
         ),
     );

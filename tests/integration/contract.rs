@@ -19,6 +19,10 @@ const SIZE: u32 = 128;
 /// ≥ 99 % of direct apexes within 1 pixel and ≥ 97 % of apex counts equal (a different
 /// rounding of a sample point may change which ascent a direction starts).
 fn compare_with_oracle(frame: &CapturedFrame, settings: &Mesostructure) -> (usize, usize) {
+    assert!(
+        !settings.texture_space_occlusion,
+        "the oracle mirrors the screen-space occlusion"
+    );
     let mhm = frame.screen_height_map();
     let gpu = frame.gradient_map();
     let cpu = gradient_map(&mhm, settings.depth_continuity());
@@ -78,7 +82,8 @@ fn compare_with_oracle(frame: &CapturedFrame, settings: &Mesostructure) -> (usiz
         count_equal * 100 >= valid * 97,
         "apex counts agree on only {count_equal} of {valid} pixels"
     );
-    // Occlusion of the GPU's own apex sets, recomputed on the CPU: ≥ 99.5 % within 2e-3
+    // Occlusion of the GPU's own apex sets (the screen-space occlusion: callers turn the
+    // texture-space one off), recomputed on the CPU: ≥ 99.5 % within 2e-3
     // (the GPU's atan2, sqrt and matrix products differ from the CPU's in the last bits).
     let normals = frame.normals();
     let mut close = 0;
@@ -111,7 +116,11 @@ fn plane_with_rivets_matches_the_oracle_and_the_height_map() {
     }
     let mut app = app();
     let target = target(&mut app, SIZE, SIZE);
-    let settings = Mesostructure::default();
+    // The screen-space occlusion of the apex sets is what the oracle mirrors.
+    let settings = Mesostructure {
+        texture_space_occlusion: false,
+        ..default()
+    };
     let camera = camera(&mut app, &target, top_down(), settings.clone());
     let map = HeightMap::rivets(256, 4, 0.35);
     let height_map = image(&mut app, map.to_image());
@@ -218,7 +227,10 @@ fn sphere_with_bricks_matches_the_oracle_with_silhouettes() {
     }
     let mut app = app();
     let target = target(&mut app, SIZE, SIZE);
-    let settings = Mesostructure::default();
+    let settings = Mesostructure {
+        texture_space_occlusion: false,
+        ..default()
+    };
     let camera = camera(
         &mut app,
         &target,
@@ -720,4 +732,54 @@ fn height_maps_tile_outside_the_unit_square() {
         close as f32 >= 0.98 * n as f32,
         "a tiled map repeats every {period} px on {close} of {n} pixels"
     );
+}
+
+/// The texture-space occlusion (the height pass's horizon-map AO, `texture_space_occlusion`)
+/// against its CPU mirror `reference::texture_space` at each pixel's UV: a 64² noise map on the
+/// plane seen straight down, magnified (0.41 texels per pixel), coarse AO off so that the
+/// captured occlusion is the texture-space term alone. Tolerance 5e-3 on ≥ 99 % of pixels (the
+/// GPU reads the horizon map's slopes as half floats).
+#[test]
+fn texture_space_occlusion_matches_its_cpu_mirror() {
+    if !gpu_or_skip() {
+        return;
+    }
+    use bevy_mesostructure::{height_map_import::HorizonMap, reference::texture_space};
+    let mut app = app();
+    let target = target(&mut app, SIZE, SIZE);
+    let settings = Mesostructure {
+        coarse_occlusion: false,
+        micro_shadows: false,
+        bleeding: false,
+        ..default()
+    };
+    let camera = camera(&mut app, &target, top_down(), settings);
+    let map = HeightMap::noise(64, 4, 3, 11);
+    let k = 0.15;
+    let height_map = image(&mut app, map.to_image());
+    let material = unlit(&mut app, Color::WHITE);
+    mesostructure_plane(&mut app, material, height_map, k);
+    let frame = capture(&mut app, camera, 20);
+    let horizons = HorizonMap::new(&map.values, map.width, map.height);
+    // Plane3d 2 × 2: P = (2u − 1, 0, 2v − 1), normal +Y.
+    let (n, pu, pv) = (Vec3::Y, Vec3::X * 2.0, Vec3::Z * 2.0);
+    let (mut close, mut count, mut worst) = (0, 0, 0.0f32);
+    for y in 4..SIZE - 4 {
+        for x in 4..SIZE - 4 {
+            let cpu = texture_space::magnified_occlusion(
+                &horizons,
+                top_down_uv(x, y, SIZE),
+                n,
+                pu,
+                pv,
+                k,
+            );
+            let gpu = frame.occlusion[(y * SIZE + x) as usize];
+            worst = worst.max((gpu - cpu).abs());
+            close += ((gpu - cpu).abs() <= 5e-3) as usize;
+            count += 1;
+        }
+    }
+    eprintln!("texture-space occlusion: {close} of {count} pixels within 5e-3 of the CPU mirror (worst {worst:.4})");
+    assert!(close * 100 >= count * 99, "only {close} of {count} within 5e-3");
 }

@@ -16,7 +16,7 @@ use bevy::{
 use bevy_mesostructure::{CapturedFrame, MesostructureCapture, MesostructureCaptures, prelude::*};
 
 #[path = "../../examples/common/headless.rs"]
-mod headless;
+pub mod headless;
 
 /// Whether the GPU tests can run. Without a Vulkan driver they are skipped with a message,
 /// except under CI (`CI=true`), where they must fail instead.

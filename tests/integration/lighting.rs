@@ -195,9 +195,10 @@ fn occlusion_darkens_ambient_light_in_the_grooves_only() {
     }
     eprintln!("{n} occluded pixels: lit/open within {worst:.3} of multibounce(AO)");
     assert!(n > 50, "there are occluded pixels ({n})");
+    // Measured 0.023 (README); held to 0.03, the 8-bit rounding of the two pictures.
     assert!(
-        worst < 0.06,
-        "ambient light scales by multibounce(AO) within {worst}"
+        worst < 0.03,
+        "ambient light scales by multibounce(AO) within {worst}, measured 0.023"
     );
     assert!(unchanged <= 1, "open pixels are unchanged: {unchanged}/255");
 }

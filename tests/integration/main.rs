@@ -12,3 +12,4 @@ mod harness;
 mod lighting;
 mod micro_shadows;
 mod stability;
+mod unseen;

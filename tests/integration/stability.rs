@@ -182,9 +182,11 @@ fn scale_and_distance_sweeps_stay_finite_and_fade_smoothly() {
         );
         previous = mean;
     }
-    // Distance: top-down from 2 to 64 units; the bricks shrink below a pixel and the occlusion
-    // fades towards 1 (the filtered, flat-looking map), without spikes on the way.
-    let mut previous = 0.0f32;
+    // Distance: top-down from 2 to 64 units; the bricks shrink below a pixel. The occlusion of
+    // the minified map is the mean of its fine occlusion over each pixel (texture-space), so the
+    // mean over the plane stays what it is up close — measured within 0.046 up to 16 units,
+    // held to 0.06 (docs/stability.md) — without spikes on the way.
+    let mut near = None;
     for height in [2.0f32, 4.0, 8.0, 16.0, 32.0, 64.0] {
         let eye = Transform::from_xyz(0.0, height, 0.0).looking_at(Vec3::ZERO, Vec3::NEG_Z);
         let (_, _, _, frame) = render(&map, 0.1, eye, low_light());
@@ -192,20 +194,20 @@ fn scale_and_distance_sweeps_stay_finite_and_fade_smoothly() {
         let s = sparkle(&frame);
         eprintln!("distance {height}: mean AO {mean:.4}, sparkle {s:.4}");
         assert!(all_finite(&frame), "distance {height}: a NaN or infinity");
-        assert!(
-            mean >= previous - 0.02,
-            "distance {height}: AO fell from {previous} to {mean}"
-        );
+        let near = *near.get_or_insert(mean);
+        // Past 16 units the plane is a few pixels across (2.4 at 64): only finite and
+        // spike-free there.
+        if height <= 16.0 {
+            assert!(
+                (mean - near).abs() <= 0.06,
+                "distance {height}: mean AO {mean}, up close {near}"
+            );
+        }
         assert!(
             s < 0.005,
             "distance {height}: {s} of the pixels are isolated spikes"
         );
-        previous = mean;
     }
-    assert!(
-        previous > 0.97,
-        "far away the occlusion has faded: {previous}"
-    );
 }
 
 #[test]
@@ -408,8 +410,23 @@ fn an_orbiting_camera_sees_steady_occlusion_compared_with_ssao() {
         );
         report.push(relative);
     }
-    // A threshold that holds on every run: relative to its own contrast, the occlusion computed
-    // from object-space heights changes along the orbit no more than SSAO's on real geometry.
+    // The floor that reprojection alone sets (docs/stability.md: 0.974 measured): a steady
+    // pattern changes by about its own neighbour contrast, within 0.05 of the measured value.
+    assert!(
+        (report[2] - 0.974).abs() <= 0.05,
+        "steady pattern's relative change {} is not the measured floor 0.974 ± 0.05",
+        report[2]
+    );
+    // The plugin stays at that floor (measured 0.897 against 0.974): no flicker beyond what
+    // reprojection changes.
+    assert!(
+        report[0] <= report[2] * 1.05,
+        "relative change: mesostructure {} above the steady floor {}",
+        report[0],
+        report[2]
+    );
+    // And, relative to its own contrast, the occlusion computed from object-space heights
+    // changes along the orbit no more than SSAO's on real geometry.
     assert!(
         report[0] <= report[1] * 1.1,
         "relative change: mesostructure {} vs SSAO {} (steady pattern {})",

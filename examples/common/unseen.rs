@@ -1,0 +1,821 @@
+//! The unseen-content accuracy suite: height maps derived from photographs, curved cores, and
+//! the views games show (close-up, oblique, grazing, top-down, far), scored per pixel at the
+//! pixel's own UV against a CPU ray caster on the *displaced* mesh.
+//!
+//! Shared by the `accuracy` example (`--suite unseen`) and the integration tests
+//! (`tests/integration/unseen.rs` includes this file by path).
+//!
+//! Ground truth: the rendered core mesh (Bevy's plane, UV sphere or torus) is subdivided until
+//! each small triangle spans at most one height-map texel, each vertex lifted along the
+//! interpolated vertex normal by `k · dis(uv)` (bilinear, wrapped: the plugin's eq. 7 surface),
+//! and put in a BVH (`obvhs`). Per scored pixel: the camera ray hits the core mesh at `uv`;
+//! the true surface point is the displaced mesh's point above it (a ray down the core
+//! normal). There:
+//! - AO: cosine-weighted about the true (facet) normal, 16 × 16 stratified rays, infinite
+//!   radius — every part of the object occludes, the core's own shape included.
+//! - light visibility: one ray towards the light from the point.
+//! - one bounce, relative to the irradiance E0 of a surface facing the light, every surface
+//!   white: the mean over the AO rays of `max(0, N_S · l) · V(S)` at each hit point S.
+//!
+//! Scores per scene: AO MAE and bias (mean of method − truth); micro-shadow recall and
+//! precision on light-facing pixels whose *core* is not shadowed by the core itself (those are
+//! Bevy's shadow maps' job, not the micro-shadows'); bounce relative MAE (Σ|b − t| / Σt) and
+//! mean ratio (Σb / Σt).
+
+#![allow(dead_code)]
+
+use std::path::Path;
+
+use bevy::{
+    camera::{Hdr, RenderTarget},
+    core_pipeline::tonemapping::Tonemapping,
+    diagnostic::{DiagnosticPath, DiagnosticsStore},
+    math::Affine2,
+    mesh::{Indices, VertexAttributeValues},
+    prelude::*,
+    render::{
+        diagnostic::RenderDiagnosticsPlugin,
+        render_resource::{CachedPipelineState, PipelineCache, TextureFormat, TextureUsages},
+    },
+};
+use bevy_mesostructure::{CapturedFrame, MesostructureCapture, MesostructureCaptures, prelude::*};
+use obvhs::{
+    BvhBuildParams,
+    cwbvh::{CwBvh, builder::build_cwbvh_from_tris},
+    ray::{Ray, RayHit},
+    triangle::Triangle,
+};
+use obvhs_glam::Vec3A;
+
+/// The core mesh under the height map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Core {
+    /// Bevy's `Plane3d`, 2 × 2 in XZ, normal +Y, UV (0, 0) at (−1, 0, −1).
+    Plane,
+    /// Bevy's UV sphere, radius 1, 64 × 32 segments: poles on ±Z (v = 0 at +Z), u = azimuth
+    /// from +X towards +Y over 2π.
+    Sphere,
+    /// Bevy's `Torus::new(0.5, 1.0)`: major radius 0.75, minor 0.25, around +Y; u around the
+    /// ring from +X towards +Z, v around the tube from the outer equator towards +Y.
+    Torus,
+}
+
+impl Core {
+    /// The name in scene names and CSVs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Core::Plane => "plane",
+            Core::Sphere => "sphere",
+            Core::Torus => "torus",
+        }
+    }
+
+    /// The mesh the plugin renders.
+    pub fn mesh(self) -> Mesh {
+        match self {
+            Core::Plane => Plane3d::default().mesh().size(2.0, 2.0).build(),
+            Core::Sphere => Sphere::new(1.0).mesh().uv(64, 32),
+            Core::Torus => Torus::new(0.5, 1.0)
+                .mesh()
+                .major_resolution(64)
+                .minor_resolution(32)
+                .build(),
+        }
+    }
+}
+
+/// One scene of the suite.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// `core/map/view/light`.
+    pub name: String,
+    pub core: Core,
+    /// A file under `assets/height_maps/photo/` without `.png`, or a built-in generator.
+    pub map: &'static str,
+    /// Height of white, world units.
+    pub scale: f32,
+    /// Repeats of the height map over the core's UV square.
+    pub tiles: Vec2,
+    pub eye: Vec3,
+    pub target: Vec3,
+    /// What kind of view (close-up, oblique, grazing, top-down, far).
+    pub view: &'static str,
+    /// Light elevation above the core's tangent plane at the target, degrees.
+    pub light_elevation: f32,
+    /// Light azimuth about the target's normal, degrees from the camera's heading (0 = the
+    /// light behind the camera, 90 = from the right).
+    pub light_azimuth: f32,
+}
+
+/// The suite: every core, view kind and light elevation the issue names, with the four
+/// photo-derived maps (and one generator), 12 scenes.
+pub fn scenes() -> Vec<Scene> {
+    let s = |core: Core,
+             map: &'static str,
+             scale: f32,
+             tiles: f32,
+             view: &'static str,
+             eye: [f32; 3],
+             target: [f32; 3],
+             light_elevation: f32,
+             light_azimuth: f32| {
+        let tiles = match core {
+            Core::Plane => Vec2::splat(tiles),
+            Core::Sphere => Vec2::new(2.0 * tiles, tiles),
+            Core::Torus => Vec2::new(4.0 * tiles, tiles),
+        };
+        Scene {
+            name: format!("{}/{map}/{view}/light{light_elevation}", core.name()),
+            core,
+            map,
+            scale,
+            tiles,
+            eye: Vec3::from(eye),
+            target: Vec3::from(target),
+            view,
+            light_elevation,
+            light_azimuth,
+        }
+    };
+    use Core::*;
+    vec![
+        s(Plane, "pebbles", 0.05, 2.0, "top-down", [0.1, 0.6, 0.12], [0.1, 0.0, 0.1], 35.0, 100.0),
+        s(Plane, "cracked", 0.05, 2.0, "oblique", [0.0, 1.6, 2.4], [0.0, 0.0, 0.0], 15.0, 80.0),
+        s(Plane, "bark", 0.04, 2.0, "grazing", [0.0, 0.25, 1.2], [0.0, 0.0, 0.0], 60.0, 120.0),
+        s(Plane, "rock", 0.06, 2.0, "close-up", [0.2, 0.2, 0.32], [0.2, 0.0, 0.1], 35.0, 90.0),
+        s(Plane, "pebbles", 0.05, 1.0, "far", [0.0, 3.0, 2.0], [0.0, 0.0, 0.0], 15.0, 100.0),
+        s(Plane, "stone", 0.05, 2.0, "oblique", [0.3, 1.0, 1.6], [0.0, 0.0, 0.0], 35.0, 60.0),
+        s(Sphere, "cracked", 0.06, 2.0, "oblique", [2.2, 1.5, 2.0], [0.0, 0.0, 0.0], 35.0, 90.0),
+        s(Sphere, "rock", 0.06, 2.0, "close-up", [0.05, 1.3, 0.18], [0.0, 1.0, 0.0], 60.0, 90.0),
+        s(Sphere, "pebbles", 0.06, 2.0, "far", [0.0, 2.2, 1.65], [0.0, 0.0, 0.0], 35.0, 110.0),
+        s(Torus, "bark", 0.04, 1.0, "oblique", [0.0, 1.5, 1.9], [0.0, 0.0, 0.0], 35.0, 90.0),
+        s(Torus, "pebbles", 0.04, 1.0, "top-down", [0.75, 0.9, 0.02], [0.75, 0.0, 0.0], 60.0, 100.0),
+        s(Torus, "cracked", 0.04, 1.0, "grazing", [-1.2, 0.5, 0.75], [0.0, 0.25, 0.75], 15.0, 90.0),
+    ]
+}
+
+/// The height map of a scene: a photo-derived PNG under `assets/height_maps/photo/`, box-filtered
+/// to 256² (the size the ground-truth mesh is built at), or a generator at 256².
+pub fn height_map(name: &str) -> HeightMap {
+    if let Some(map) = HeightMap::by_name(name, 256) {
+        return map;
+    }
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("assets/height_maps/photo")
+        .join(format!("{name}.png"));
+    let grey = image::open(&path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()))
+        .to_luma16();
+    let (w, h) = grey.dimensions();
+    let f = (w / 256).max(1);
+    HeightMap::from_fn(w / f, h / f, |u, v| {
+        let (x0, y0) = ((u * (w / f) as f32) as u32 * f, (v * (h / f) as f32) as u32 * f);
+        let mut sum = 0.0;
+        for y in y0..y0 + f {
+            for x in x0..x0 + f {
+                sum += grey.get_pixel(x, y)[0] as f32 / 65535.0;
+            }
+        }
+        sum / (f * f) as f32
+    })
+}
+
+/// Bilinear, wrapped sample of `map` at `uv` (texel centres at (i + ½) / n, as the GPU samples).
+pub fn sample(map: &HeightMap, uv: Vec2) -> f32 {
+    let (w, h) = (map.width as i64, map.height as i64);
+    let p = uv * Vec2::new(w as f32, h as f32) - 0.5;
+    let (x0, y0) = (p.x.floor(), p.y.floor());
+    let (fx, fy) = (p.x - x0, p.y - y0);
+    let at = |x: i64, y: i64| map.values[(y.rem_euclid(h) * w + x.rem_euclid(w)) as usize];
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
+    let bottom = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
+    top * (1.0 - fy) + bottom * fy
+}
+
+fn a(v: Vec3) -> Vec3A {
+    Vec3A::new(v.x, v.y, v.z)
+}
+
+/// A ray direction with no zero component: the BVH's traversal misses everything along an
+/// exact axis whose other components are ±0 (seen with (−0, −1, −0)).
+fn direction(d: Vec3) -> Vec3A {
+    let nudge = |c: f32| if c.abs() < 1e-9 { 1e-9 } else { c };
+    Vec3A::new(nudge(d.x), nudge(d.y), nudge(d.z))
+}
+
+fn b(v: Vec3A) -> Vec3 {
+    Vec3::new(v.x, v.y, v.z)
+}
+
+/// A triangle mesh in a BVH.
+struct Traced {
+    bvh: CwBvh,
+    triangles: Vec<Triangle>,
+}
+
+impl Traced {
+    fn new(triangles: Vec<Triangle>) -> Self {
+        let mut time = std::time::Duration::ZERO;
+        let bvh = build_cwbvh_from_tris(&triangles, BvhBuildParams::fast_build(), &mut time);
+        Self { bvh, triangles }
+    }
+
+    /// The nearest hit: (triangle index, distance).
+    fn hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<(usize, f32)> {
+        let ray = Ray::new(a(origin), direction(dir), 0.0, t_max);
+        let mut hit = RayHit::none();
+        self.bvh
+            .ray_traverse(ray, &mut hit, |r, id| {
+                self.triangles[self.bvh.primitive_indices[id] as usize].intersect(r)
+            })
+            .then(|| (self.bvh.primitive_indices[hit.primitive_id as usize] as usize, hit.t))
+    }
+
+    /// Whether anything lies along the ray.
+    fn blocked(&self, origin: Vec3, dir: Vec3) -> bool {
+        let ray = Ray::new(a(origin), direction(dir), 0.0, f32::INFINITY);
+        !self.bvh.ray_traverse_miss(ray, |r, id| {
+            self.triangles[self.bvh.primitive_indices[id] as usize].intersect(r)
+        })
+    }
+
+    fn normal(&self, triangle: usize) -> Vec3 {
+        b(self.triangles[triangle].compute_normal())
+    }
+}
+
+/// A vertex of the core mesh, as the plugin sees it.
+#[derive(Clone, Copy)]
+struct Vertex {
+    position: Vec3,
+    normal: Vec3,
+    uv: Vec2,
+}
+
+impl Vertex {
+    fn blend(v: [Vertex; 3], w: [f32; 3]) -> Vertex {
+        Vertex {
+            position: v[0].position * w[0] + v[1].position * w[1] + v[2].position * w[2],
+            normal: (v[0].normal * w[0] + v[1].normal * w[1] + v[2].normal * w[2]).normalize(),
+            uv: v[0].uv * w[0] + v[1].uv * w[1] + v[2].uv * w[2],
+        }
+    }
+}
+
+fn core_triangles(mesh: &Mesh) -> Vec<[Vertex; 3]> {
+    let Some(VertexAttributeValues::Float32x3(p)) = mesh.attribute(Mesh::ATTRIBUTE_POSITION) else {
+        panic!("core mesh without positions")
+    };
+    let Some(VertexAttributeValues::Float32x3(n)) = mesh.attribute(Mesh::ATTRIBUTE_NORMAL) else {
+        panic!("core mesh without normals")
+    };
+    let Some(VertexAttributeValues::Float32x2(t)) = mesh.attribute(Mesh::ATTRIBUTE_UV_0) else {
+        panic!("core mesh without UVs")
+    };
+    let vertex = |i: usize| Vertex {
+        position: Vec3::from(p[i]),
+        normal: Vec3::from(n[i]),
+        uv: Vec2::from(t[i]),
+    };
+    let indices: Vec<usize> = match mesh.indices() {
+        Some(Indices::U16(i)) => i.iter().map(|&i| i as usize).collect(),
+        Some(Indices::U32(i)) => i.iter().map(|&i| i as usize).collect(),
+        None => (0..p.len()).collect(),
+    };
+    indices
+        .chunks_exact(3)
+        .map(|c| [vertex(c[0]), vertex(c[1]), vertex(c[2])])
+        .collect()
+}
+
+/// A rendered mesh on the CPU: the point, interpolated normal and UV a camera ray meets (the
+/// `render` example's `uv` view, and each scored pixel's UV here).
+pub struct CoreMesh {
+    vertices: Vec<[Vertex; 3]>,
+    traced: Traced,
+}
+
+impl CoreMesh {
+    /// `mesh` needs positions, normals and UVs.
+    pub fn new(mesh: &Mesh) -> Self {
+        let vertices = core_triangles(mesh);
+        let traced = Traced::new(
+            vertices
+                .iter()
+                .map(|t| Triangle {
+                    v0: a(t[0].position),
+                    v1: a(t[1].position),
+                    v2: a(t[2].position),
+                })
+                .collect(),
+        );
+        Self { vertices, traced }
+    }
+
+    fn vertex_hit(&self, origin: Vec3, direction: Vec3) -> Option<Vertex> {
+        let (id, t) = self.traced.hit(origin, direction, f32::INFINITY)?;
+        let tri = self.vertices[id];
+        let p = origin + direction * t;
+        // Barycentric weights of p in the triangle.
+        let (e1, e2, d) = (
+            tri[1].position - tri[0].position,
+            tri[2].position - tri[0].position,
+            p - tri[0].position,
+        );
+        let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let (d31, d32) = (d.dot(e1), d.dot(e2));
+        let den = d11 * d22 - d12 * d12;
+        let w1 = (d22 * d31 - d12 * d32) / den;
+        let w2 = (d11 * d32 - d12 * d31) / den;
+        Some(Vertex::blend(tri, [1.0 - w1 - w2, w1, w2]))
+    }
+
+    /// Where the ray first meets the mesh: position, interpolated normal, UV.
+    pub fn hit(&self, origin: Vec3, direction: Vec3) -> Option<(Vec3, Vec3, Vec2)> {
+        self.vertex_hit(origin, direction)
+            .map(|v| (v.position, v.normal, v.uv))
+    }
+}
+
+/// The ground truth of one scene: the core mesh (to find each pixel's UV) and the displaced
+/// mesh (to ray-cast), both in BVHs.
+pub struct GroundTruth {
+    core: CoreMesh,
+    displaced: Traced,
+    map: HeightMap,
+    scale: f32,
+    tiles: Vec2,
+    /// Ray offset off a surface (world units): a tenth of a texel on the plane.
+    epsilon: f32,
+}
+
+/// What the ground truth says at one pixel.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Truth {
+    /// The pixel's UV on the core (before the tiling).
+    pub uv: Vec2,
+    pub ao: f32,
+    /// The light reaches the surface point.
+    pub lit: bool,
+    /// The true normal faces the light (N·l > 0.05).
+    pub facing: bool,
+    /// The core alone would shadow this point (Bevy's shadow maps' job).
+    pub core_shadowed: bool,
+    /// One-bounce irradiance relative to E0.
+    pub bounce: f32,
+}
+
+impl GroundTruth {
+    /// Builds both BVHs (a few seconds for the largest scenes).
+    pub fn new(core: Core, map: HeightMap, scale: f32, tiles: Vec2) -> Self {
+        let core = CoreMesh::new(&core.mesh());
+        let texel = Vec2::new(map.width as f32, map.height as f32) * tiles;
+        let mut displaced = vec![];
+        for tri in &core.vertices {
+            // Subdivide so that each small triangle spans at most one texel.
+            let extent = [(0, 1), (1, 2), (2, 0)]
+                .iter()
+                .map(|&(i, j)| ((tri[i].uv - tri[j].uv) * texel).abs().max_element())
+                .fold(1.0f32, f32::max);
+            let n = extent.ceil() as usize;
+            let lifted = |i: usize, j: usize| {
+                let (wi, wj) = (i as f32 / n as f32, j as f32 / n as f32);
+                let v = Vertex::blend(*tri, [1.0 - wi - wj, wi, wj]);
+                v.position + v.normal * scale * sample(&map, v.uv * tiles)
+            };
+            // Rows of vertices, (n + 1)(n + 2) / 2 of them, lifted once each.
+            let rows: Vec<Vec<Vec3>> = (0..=n)
+                .map(|j| (0..=n - j).map(|i| lifted(i, j)).collect())
+                .collect();
+            for j in 0..n {
+                for i in 0..n - j {
+                    displaced.push(Triangle {
+                        v0: a(rows[j][i]),
+                        v1: a(rows[j][i + 1]),
+                        v2: a(rows[j + 1][i]),
+                    });
+                    if i + 1 < n - j {
+                        displaced.push(Triangle {
+                            v0: a(rows[j][i + 1]),
+                            v1: a(rows[j + 1][i + 1]),
+                            v2: a(rows[j + 1][i]),
+                        });
+                    }
+                }
+            }
+        }
+        let epsilon = 0.1 * 2.0 / texel.max_element().max(1.0);
+        Self {
+            core,
+            displaced: Traced::new(displaced),
+            map,
+            scale,
+            tiles,
+            epsilon,
+        }
+    }
+
+    /// Triangles in the displaced mesh.
+    pub fn triangle_count(&self) -> usize {
+        self.displaced.triangles.len()
+    }
+
+    /// The core point seen along a camera ray: position, interpolated normal, UV.
+    fn core_hit(&self, origin: Vec3, direction: Vec3) -> Option<Vertex> {
+        self.core.vertex_hit(origin, direction)
+    }
+
+    /// The core normal where the ray from `eye` towards `target` meets the core.
+    pub fn normal_towards(&self, eye: Vec3, target: Vec3) -> Vec3 {
+        self.core_hit(eye, (target - eye).normalize())
+            .map_or(Vec3::Y, |v| v.normal)
+    }
+
+    /// The ground truth for the camera ray `origin + t · direction`; `None` where it misses the
+    /// core. `to_light`: unit vector towards the directional light.
+    pub fn at(&self, origin: Vec3, direction: Vec3, to_light: Vec3, rings: u32, sectors: u32) -> Option<Truth> {
+        let core = self.core_hit(origin, direction)?;
+        // The displaced point above the core point (along the displacement direction).
+        let above = core.position + core.normal * (self.scale * 1.5 + self.epsilon);
+        let (id, t) = self
+            .displaced
+            .hit(above, -core.normal, self.scale * 3.0 + 4.0 * self.epsilon)?;
+        let p = above - core.normal * t;
+        let mut n = self.displaced.normal(id);
+        if n.dot(core.normal) < 0.0 {
+            n = -n;
+        }
+        let origin = p + n * self.epsilon;
+        let lit = !self.displaced.blocked(origin, to_light);
+        let core_shadowed = self
+            .core
+            .traced
+            .blocked(core.position + core.normal * self.epsilon, to_light);
+        // Cosine-weighted stratified directions about n, rotated per pixel.
+        let (t1, t2) = n.any_orthonormal_pair();
+        let rotation = (core.uv.x * 12.9898 + core.uv.y * 78.233).sin().fract().abs();
+        let (mut open, mut bounce) = (0.0, 0.0);
+        for r in 0..rings {
+            for s in 0..sectors {
+                let u1 = (r as f32 + 0.5) / rings as f32;
+                let phi = std::f32::consts::TAU * ((s as f32 + 0.5) / sectors as f32 + rotation);
+                let (sin_t, cos_t) = (u1.sqrt(), (1.0 - u1).sqrt());
+                let d = (t1 * phi.cos() + t2 * phi.sin()) * sin_t + n * cos_t;
+                match self.displaced.hit(origin, d, f32::INFINITY) {
+                    None => open += 1.0,
+                    Some((hit, t)) => {
+                        let mut ns = self.displaced.normal(hit);
+                        if ns.dot(d) > 0.0 {
+                            ns = -ns;
+                        }
+                        let cos_l = ns.dot(to_light);
+                        if cos_l > 0.0 {
+                            let s = origin + d * t + ns * self.epsilon;
+                            if !self.displaced.blocked(s, to_light) {
+                                bounce += cos_l;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let count = (rings * sectors) as f32;
+        Some(Truth {
+            uv: core.uv,
+            ao: open / count,
+            lit,
+            facing: n.dot(to_light) > 0.05,
+            core_shadowed,
+            bounce: bounce / count,
+        })
+    }
+
+    /// Height-map texels per pixel around `(x, y)`: the UV step to the next pixel, in texels.
+    pub fn texels_per_pixel(&self, a: Vec2, b: Vec2) -> f32 {
+        ((a - b) * self.tiles * Vec2::new(self.map.width as f32, self.map.height as f32)).length()
+    }
+}
+
+/// Unit vector towards the light of `scene`, given the core normal at its target.
+pub fn to_light(scene: &Scene, normal: Vec3) -> Vec3 {
+    let heading = scene.target - scene.eye;
+    let mut t1 = (heading - normal * heading.dot(normal)).normalize_or_zero();
+    if t1 == Vec3::ZERO {
+        t1 = normal.any_orthonormal_vector();
+    }
+    // The light comes from behind the camera at azimuth 0: the direction towards it is −t1.
+    let t2 = normal.cross(t1);
+    let (e, az) = (scene.light_elevation.to_radians(), scene.light_azimuth.to_radians());
+    (-(t1 * az.cos()) + t2 * az.sin()) * e.cos() + normal * e.sin()
+}
+
+/// The camera ray through the centre of pixel `(x, y)` of a captured frame (from its
+/// `world_from_clip`, so it is exactly the rendered one).
+pub fn camera_ray(frame: &CapturedFrame, x: u32, y: u32) -> (Vec3, Vec3) {
+    let near = frame.view.core_point(x, y, 1.0);
+    let far = frame.view.core_point(x, y, 0.01);
+    (near, (far - near).normalize())
+}
+
+/// Renders `scene` once with `settings` (`None`: the plugin's camera component left off — the
+/// picture without any mesostructure term) and returns the capture and the median GPU time
+/// of the plugin's passes but the lighting pass (which replaces Bevy's own).
+pub fn render(
+    plugins: bevy::app::PluginGroupBuilder,
+    scene: &Scene,
+    map: &HeightMap,
+    settings: Mesostructure,
+    size: u32,
+    to_light: Vec3,
+) -> Option<(CapturedFrame, f64)> {
+    let mut app = App::new();
+    app.add_plugins(plugins.disable::<bevy::log::LogPlugin>())
+        .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
+    app.finish();
+    app.cleanup();
+    let world = app.world_mut();
+    let mut image = Image::new_target_texture(size, size, TextureFormat::Rgba8UnormSrgb, None);
+    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+    let target = world.resource_mut::<Assets<Image>>().add(image);
+    let forward = (scene.target - scene.eye).normalize();
+    let up = if forward.cross(Vec3::Y).length() < 1e-3 { Vec3::NEG_Z } else { Vec3::Y };
+    let camera = world
+        .spawn((
+            Camera3d::default(),
+            RenderTarget::Image(target.into()),
+            Msaa::Off,
+            Hdr,
+            Tonemapping::None,
+            Transform::from_translation(scene.eye).looking_at(scene.target, up),
+            settings,
+            MesostructureCapture,
+        ))
+        .id();
+    world.insert_resource(bevy::light::GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    let light_up = if to_light.cross(Vec3::Y).length() < 1e-3 { Vec3::Z } else { Vec3::Y };
+    world.spawn((
+        DirectionalLight {
+            illuminance: 3000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::default().looking_to(-to_light, light_up),
+    ));
+    let material = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            perceptual_roughness: 1.0,
+            reflectance: 0.0,
+            ..default()
+        });
+    let mesh = world.resource_mut::<Assets<Mesh>>().add(scene.core.mesh());
+    let height_map = world.resource_mut::<Assets<Image>>().add(map.to_image());
+    world.spawn((
+        Mesh3d(mesh),
+        MeshMaterial3d(material),
+        MesostructureMaterial {
+            height_map,
+            scale: scene.scale,
+            uv_transform: Affine2::from_scale(scene.tiles),
+        },
+    ));
+    for frame in 0.. {
+        app.update();
+        let cache = app
+            .get_sub_app(bevy::render::RenderApp)
+            .expect("the render app")
+            .world()
+            .resource::<PipelineCache>();
+        let pending = cache.pipelines().any(|p| {
+            !matches!(p.state, CachedPipelineState::Ok(_) | CachedPipelineState::Err(_))
+        });
+        if frame >= 12 && !pending {
+            break;
+        }
+        if frame >= 600 {
+            return None;
+        }
+    }
+    let captures = app.world().resource::<MesostructureCaptures>().clone();
+    let mut captured = None;
+    for _ in 0..10 {
+        app.update();
+        if let Some(f) = captures.take(camera) {
+            captured = Some(f);
+            break;
+        }
+    }
+    let store = app.world().resource::<DiagnosticsStore>();
+    let median = |span: &str| {
+        let path = DiagnosticPath::new(format!("render/mesostructure/{span}/elapsed_gpu"));
+        let mut v: Vec<f64> = store
+            .get(&path)
+            .map(|d| d.values().copied().collect())
+            .unwrap_or_default();
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    let gpu_ms = ["height", "gradient", "apex", "occlusion", "bleeding", "bleeding_composite"]
+        .iter()
+        .map(|p| median(p))
+        .sum();
+    captured.map(|f| (f, gpu_ms))
+}
+
+/// The lit radiance of a white surface facing the light (ρE0/π, exposure applied), the unit of
+/// the captured bleeding: the plane with a flat map, lit from the zenith, seen from above.
+pub fn radiance_unit(plugins: bevy::app::PluginGroupBuilder, size: u32) -> f32 {
+    let scene = Scene {
+        name: "calibration".into(),
+        core: Core::Plane,
+        map: "flat",
+        scale: 0.05,
+        tiles: Vec2::ONE,
+        eye: Vec3::new(0.0, 2.0, 0.01),
+        target: Vec3::ZERO,
+        view: "top-down",
+        light_elevation: 90.0,
+        light_azimuth: 0.0,
+    };
+    let flat = HeightMap::from_fn(16, 16, |_, _| 0.5);
+    let (frame, _) = render(plugins, &scene, &flat, Mesostructure::default(), size, Vec3::Y)
+        .expect("the flat plane renders");
+    let (mut sum, mut n) = (0.0, 0);
+    for y in size / 4..3 * size / 4 {
+        for x in size / 4..3 * size / 4 {
+            sum += frame.lit[(y * size + x) as usize][1];
+            n += 1;
+        }
+    }
+    sum / n as f32
+}
+
+/// The scores of one method on one scene.
+#[derive(Clone, Debug, Default)]
+pub struct Scores {
+    pub ao_mae: f32,
+    pub ao_bias: f32,
+    pub shadow_recall: f32,
+    pub shadow_precision: f32,
+    pub bounce_rel_mae: f32,
+    pub bounce_ratio: f32,
+    /// Pixels scored, and of them light-facing ones with a core in the light.
+    pub pixels: usize,
+    pub facing: usize,
+    /// Median height-map texels per pixel.
+    pub texels_per_pixel: f32,
+}
+
+/// What a method says at one pixel.
+#[derive(Clone, Copy, Debug)]
+pub struct Estimate {
+    pub ao: f32,
+    pub shadowed: bool,
+    pub bounce: f32,
+}
+
+/// Scores `estimates` against `truths` (same pixels).
+pub fn score(truths: &[Truth], estimates: &[Estimate], texels_per_pixel: f32) -> Scores {
+    let n = truths.len().max(1) as f32;
+    let ao_mae = truths.iter().zip(estimates).map(|(t, e)| (e.ao - t.ao).abs()).sum::<f32>() / n;
+    let ao_bias = truths.iter().zip(estimates).map(|(t, e)| e.ao - t.ao).sum::<f32>() / n;
+    let (mut tp, mut fp, mut fne, mut facing) = (0.0f32, 0.0f32, 0.0f32, 0);
+    for (t, e) in truths.iter().zip(estimates) {
+        if !t.facing || t.core_shadowed {
+            continue;
+        }
+        facing += 1;
+        match (!t.lit, e.shadowed) {
+            (true, true) => tp += 1.0,
+            (false, true) => fp += 1.0,
+            (true, false) => fne += 1.0,
+            _ => {}
+        }
+    }
+    let truth_bounce: f32 = truths.iter().map(|t| t.bounce).sum();
+    let bounce_err: f32 = truths.iter().zip(estimates).map(|(t, e)| (e.bounce - t.bounce).abs()).sum();
+    let bounce_sum: f32 = estimates.iter().map(|e| e.bounce).sum();
+    Scores {
+        ao_mae,
+        ao_bias,
+        // Recall with no shadowed pixel in the truth is vacuous: 1.
+        shadow_recall: if tp + fne > 0.0 { tp / (tp + fne) } else { 1.0 },
+        shadow_precision: if tp + fp > 0.0 { tp / (tp + fp) } else { 1.0 },
+        bounce_rel_mae: bounce_err / truth_bounce.max(1e-6),
+        bounce_ratio: bounce_sum / truth_bounce.max(1e-6),
+        pixels: truths.len(),
+        facing,
+        texels_per_pixel,
+    }
+}
+
+/// `f` over `items` on every core.
+pub fn par_map<I: Sync, T: Send>(items: &[I], f: impl Fn(&I) -> T + Sync) -> Vec<T> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let chunk = items.len().div_ceil(threads).max(1);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = items
+            .chunks(chunk)
+            .map(|part| scope.spawn(|| part.iter().map(&f).collect::<Vec<T>>()))
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("a ground-truth thread panicked"))
+            .collect()
+    })
+}
+
+/// One scene end to end: the truth at every `step`-th pixel the core covers, the plugin's
+/// terms there (`settings`), and the scores of the plugin and of no effect.
+pub struct SceneResult {
+    pub plugin: Scores,
+    pub none: Scores,
+    pub gpu_ms: f64,
+    /// Seconds spent on the ground truth.
+    pub truth_seconds: f32,
+}
+
+/// Runs one scene: renders it, casts the truth at every `step`-th covered pixel.
+pub fn run_scene(
+    plugins: impl Fn() -> bevy::app::PluginGroupBuilder,
+    scene: &Scene,
+    settings: Mesostructure,
+    size: u32,
+    step: u32,
+    unit: f32,
+    rings: u32,
+) -> Option<SceneResult> {
+    let map = height_map(scene.map);
+    let truth = GroundTruth::new(scene.core, map.clone(), scene.scale, scene.tiles);
+    let normal = truth.normal_towards(scene.eye, scene.target);
+    let light = to_light(scene, normal);
+    let (frame, gpu_ms) = render(plugins(), scene, &map, settings, size, light)?;
+    let pixels: Vec<(u32, u32)> = (0..size / step)
+        .flat_map(|j| (0..size / step).map(move |i| (i * step + step / 2, j * step + step / 2)))
+        .filter(|&(x, y)| frame.mhm[(y * size + x) as usize][2] != 0.0)
+        .collect();
+    let clock = std::time::Instant::now();
+    let truths: Vec<Option<Truth>> = par_map(&pixels, |&(x, y)| {
+        let (o, d) = camera_ray(&frame, x, y);
+        truth.at(o, d, light, rings, rings)
+    });
+    let truth_seconds = clock.elapsed().as_secs_f32();
+    if std::env::var_os("UNSEEN_DEBUG").is_some() {
+        let (mut core_hits, mut truth_hits) = (0, 0);
+        for &(x, y) in &pixels {
+            let (o, d) = camera_ray(&frame, x, y);
+            core_hits += truth.core_hit(o, d).is_some() as u32;
+        }
+        truth_hits += truths.iter().filter(|t| t.is_some()).count();
+        let (o, d) = camera_ray(&frame, size / 2, size / 2);
+        let c = truth.core_hit(o, d).unwrap();
+        let above = c.position + c.normal * 0.2;
+        eprintln!(
+            "  debug: core {} n {}; down-hit {:?}; camera-ray hit {:?}; tri0 {:?}",
+            c.position,
+            c.normal,
+            truth.displaced.hit(above, -c.normal, f32::INFINITY),
+            truth.displaced.hit(o, d, f32::INFINITY),
+            truth.displaced.triangles[0]
+        );
+        eprintln!(
+            "  debug: {} covered pixels, {core_hits} core hits, {truth_hits} truths; centre ray {o} {d}; {} triangles",
+            pixels.len(),
+            truth.triangle_count()
+        );
+    }
+    let (mut kept, mut estimates, mut texels) = (vec![], vec![], vec![]);
+    for (&(x, y), t) in pixels.iter().zip(&truths) {
+        let Some(t) = t else { continue };
+        let i = (y * size + x) as usize;
+        kept.push(*t);
+        estimates.push(Estimate {
+            ao: frame.occlusion[i],
+            shadowed: frame.micro_shadow.get(i).is_some_and(|&v| v < 0.5),
+            bounce: frame.bleeding.get(i).map_or(0.0, |b| b[1] / unit),
+        });
+        // Texel footprint: the UV of the next pixel to the right.
+        if x + 1 < size {
+            let (o, d) = camera_ray(&frame, x + 1, y);
+            if let Some(next) = truth.core_hit(o, d) {
+                texels.push(truth.texels_per_pixel(t.uv, next.uv));
+            }
+        }
+    }
+    texels.sort_by(f32::total_cmp);
+    let tpp = texels.get(texels.len() / 2).copied().unwrap_or(0.0);
+    let none: Vec<Estimate> = kept
+        .iter()
+        .map(|_| Estimate { ao: 1.0, shadowed: false, bounce: 0.0 })
+        .collect();
+    Some(SceneResult {
+        plugin: score(&kept, &estimates, tpp),
+        none: score(&kept, &none, tpp),
+        gpu_ms,
+        truth_seconds,
+    })
+}
