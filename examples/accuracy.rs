@@ -5,7 +5,17 @@
 //! cargo run --example accuracy -- [--out FILE.csv] [--chart FILE.png] [--quick]
 //!     [--size N] [--maps bricks,rivets,stone,sine] [--scales 0.05,0.1,0.2,0.4]
 //! cargo run --example accuracy -- --from A.csv --from B.csv [--out FILE.csv] [--chart FILE.png]
+//! cargo run --example accuracy -- --suite unseen [--scenes NAME,..] [--variants high,..]
+//!     [--size N] [--step N] [--out FILE.csv]
 //! ```
+//!
+//! `--suite unseen` runs the unseen-content suite instead (`examples/common/unseen.rs`:
+//! photo-derived maps on the plane, UV sphere and torus in close-up, oblique, grazing,
+//! top-down and far views, scored at each pixel's UV against a ray caster on the displaced
+//! mesh) and writes the columns `scene,core,map,view,light,method,setting,width,height,
+//! texels_per_px,pixels,facing,gpu_ms,ao_mae,ao_bias,shadow_recall,shadow_precision,
+//! bounce_rel_mae,bounce_ratio` (default `out/accuracy-unseen.csv`) and a Markdown table.
+//! `--help` lists every option.
 //!
 //! `--maps` and `--scales` keep some of the scenes (to split a run: each scene renders ~20
 //! headless apps, and some drivers run out of devices after ~40 in one process); `--from` renders nothing and merges
@@ -331,7 +341,7 @@ fn par_map<T: Send>(items: &[(u32, u32)], f: impl Fn(&(u32, u32)) -> T + Sync) -
 /// Error against the ground truth for each method at each cost (the speed/accuracy chart), on
 /// the synthetic top-down suite or on the unseen-content suite.
 #[derive(Parser)]
-#[command(about, long_about = None)]
+#[command(long_about = None)]
 struct Args {
     /// The CSV to write (default: out/accuracy.csv, or out/accuracy-unseen.csv for
     /// `--suite unseen`).
@@ -364,7 +374,8 @@ struct Args {
     scenes: Option<String>,
     /// `--suite unseen`: the plugin's settings to score (comma-separated): a preset (low,
     /// medium, high, ultra), `search=N` (the brute-force horizon search with N samples),
-    /// `radius=PX` (high with that `max_sample_radius`), `directions=N`, `no-coarse`,
+    /// `radius=PX` (high with that `max_sample_radius`), `directions=N`, `steps=N`,
+    /// `softness=S` (micro-shadow edge), `samples=N` (bleeding samples), `no-coarse`,
     /// `screen-space` (high without the texture-space occlusion of minified maps)
     #[arg(long, default_value = "high", value_delimiter = ',')]
     variants: Vec<String>,
@@ -824,6 +835,14 @@ fn variant_settings(name: &str) -> Option<Mesostructure> {
         },
         "steps" => Mesostructure {
             max_ascent_steps: n?,
+            ..default()
+        },
+        "softness" => Mesostructure {
+            micro_shadow_softness: value.parse().ok()?,
+            ..default()
+        },
+        "samples" => Mesostructure {
+            bleeding_samples: n?,
             ..default()
         },
         "no-coarse" => Mesostructure {

@@ -216,7 +216,7 @@ fn percentile(values: &[f64], p: f64) -> f64 {
 
 /// GPU time per pass for the paper's Tables 1 and 2 and the quality presets.
 #[derive(clap::Parser)]
-#[command(about, long_about = None)]
+#[command(long_about = None)]
 struct Cli {
     /// The CSV to write
     #[arg(long, default_value = "out/bench.csv")]

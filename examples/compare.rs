@@ -62,7 +62,7 @@ struct Variants {
 /// The bricks plane five ways: plain, Bevy's SSAO, Bevy's parallax mapping, this plugin, and
 /// this plugin with SSAO.
 #[derive(clap::Parser)]
-#[command(about, long_about = None)]
+#[command(long_about = None)]
 struct Cli {
     #[command(flatten)]
     common: common::CommonArgs,

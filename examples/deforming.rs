@@ -37,7 +37,7 @@ const EFFECTS: [&str; 4] = ["occlusion", "micro-shadows", "bleeding", "bump-mapp
 /// A sphere morphing into a cube with a height map, a circling light and a ground; a window
 /// with the tuning panel, or headless PNGs of the picture and each debug view.
 #[derive(clap::Parser)]
-#[command(about, long_about = None)]
+#[command(long_about = None)]
 struct Cli {
     #[command(flatten)]
     common: common::CommonArgs,

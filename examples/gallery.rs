@@ -29,7 +29,7 @@ const COLUMNS: [(&str, f32); 4] = [
 
 /// A torus, the teapot and the bunny with four height maps each.
 #[derive(clap::Parser)]
-#[command(about, long_about = None)]
+#[command(long_about = None)]
 struct Cli {
     #[command(flatten)]
     common: common::CommonArgs,

@@ -11,7 +11,7 @@ use image::{DynamicImage, ImageBuffer, Luma, Rgb};
 
 /// Writes the built-in height maps as PNGs, and the stone map in every file format the tests load.
 #[derive(clap::Parser)]
-#[command(about, long_about = None)]
+#[command(long_about = None)]
 struct Cli {
     /// Side of the square maps, texels
     #[arg(default_value_t = 512, value_parser = clap::value_parser!(u32).range(8..=8192))]

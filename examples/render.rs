@@ -72,7 +72,7 @@ use bevy_mesostructure::{CapturedFrame, MesostructureCapture, MesostructureCaptu
 /// One frame of one scene, as PNG or 32-bit EXR (see the conventions at the top of
 /// examples/render.rs).
 #[derive(Parser)]
-#[command(about, long_about = None)]
+#[command(long_about = None)]
 struct Args {
     /// plane, sphere, torus, teapot, bunny, or the path of an OBJ file
     #[arg(long, default_value = "plane")]

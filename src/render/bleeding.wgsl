@@ -29,6 +29,9 @@
 @group(0) @binding(9) var mhgm: texture_2d<f32>;
 
 const PI: f32 = 3.141592653589793;
+// Largest factor the area-correct rescaling may apply (a gather that saw a sliver of the
+// surround is a poor mean).
+const MAX_BOUNCE_RESCALE: f32 = 4.0;
 
 fn surface_point(p: vec2<i32>) -> vec3<f32> {
     return surface::surface_point(mhm, core_normal, view.world_from_clip, view.viewport, p);
@@ -91,6 +94,9 @@ fn bleeding(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     var irradiance = vec3(0.0);
+    // Σ (sin² e_j − sin² e_{j−1}) / 2 over the visible samples: the cosine-weighted solid angle
+    // the gather covered, per unit of Δθ.
+    var covered = 0.0;
     let samples = max(settings.bleeding_samples, 1u);
     for (var sector = 0u; sector < SECTORS; sector++) {
         if sin_h[sector] <= 0.0 || all(albedo == vec3(0.0)) {
@@ -124,10 +130,23 @@ fn bleeding(@builtin(global_invocation_id) id: vec3<u32>) {
                 let radiance = textureLoad(lit, q, 0).rgb;
                 irradiance += radiance * (s * s - seen * seen) * 0.5;
             }
+            covered += (s * s - seen * seen) * 0.5;
             seen = s;
         }
     }
     irradiance *= TAU / f32(SECTORS);
+    // Area-correct bounce: the screen-space horizons see too little of the surface around P
+    // (the occlusion they give is too open, docs/accuracy.md), so the gather stands for the
+    // mean radiance of what P sees instead of the sky, and the texture-space occlusion says how
+    // much that is: irradiance = mean radiance · π (1 − AO) (cosine-weighted blocked solid
+    // angle), with the gather's own blocked fraction `covered · Δθ / π` in the denominator.
+    let weight = textureLoad(core_normal, p, 0).w;
+    let gathered = covered * TAU / f32(SECTORS) / PI;
+    if settings.texture_space_occlusion != 0u && weight > 0.0 && gathered > 1e-4 {
+        let blocked = 1.0 - textureLoad(bump_normal, p, 0).w;
+        let scale = clamp(blocked / gathered, 0.0, MAX_BOUNCE_RESCALE);
+        irradiance *= mix(1.0, scale, weight);
+    }
     let bleeding = settings.weights.z * albedo / PI * irradiance;
     textureStore(bleeding_out, p, vec4(bleeding, 1.0));
 }

@@ -160,7 +160,16 @@ fn occlusion_darkens_ambient_light_in_the_grooves_only() {
     }
     let mut app = app();
     let target = target(&mut app, SIZE, SIZE);
-    let camera = camera(&mut app, &target, top_down(), Mesostructure::default());
+    // Bleeding off: it adds light of its own to both pictures, which would blur the ratio.
+    let camera = camera(
+        &mut app,
+        &target,
+        top_down(),
+        Mesostructure {
+            bleeding: false,
+            ..default()
+        },
+    );
     let bricks = image(&mut app, HeightMap::bricks(256, 4, 0.15).to_image());
     // Ambient light only, dim enough that nothing clips; a dark albedo, so that multi-bounce
     // light does not hide the occlusion.
@@ -195,10 +204,10 @@ fn occlusion_darkens_ambient_light_in_the_grooves_only() {
     }
     eprintln!("{n} occluded pixels: lit/open within {worst:.3} of multibounce(AO)");
     assert!(n > 50, "there are occluded pixels ({n})");
-    // Measured 0.023 (README); held to 0.03, the 8-bit rounding of the two pictures.
+    // Measured 0.009 (README); held to 0.015, the 8-bit rounding of the two pictures.
     assert!(
-        worst < 0.03,
-        "ambient light scales by multibounce(AO) within {worst}, measured 0.023"
+        worst < 0.015,
+        "ambient light scales by multibounce(AO) within {worst}, measured 0.009"
     );
     assert!(unchanged <= 1, "open pixels are unchanged: {unchanged}/255");
 }
