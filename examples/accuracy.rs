@@ -850,7 +850,7 @@ fn variant_settings(name: &str) -> Option<Mesostructure> {
             ..default()
         },
         "screen-space" => Mesostructure {
-            texture_space_occlusion: false,
+            texture_space_horizons: false,
             ..default()
         },
         _ => return None,

@@ -75,12 +75,14 @@ pub struct Mesostructure {
     /// distances (paper §3.1): the occlusion of the core geometry around the bumps. Pixels
     /// without apexes get none, so a flat height map stays neutral.
     pub coarse_occlusion: bool,
-    /// Where the height map is minified (more than one texel per pixel, fully from two), use
-    /// the mean of the fine occlusion over each pixel's footprint, from a texture-space horizon
-    /// map built once per height map at load, instead of the occlusion of the filtered
-    /// heights that the screen-space passes see (which flattens the relief: docs/accuracy.md,
+    /// Use the texture-space horizon map (built once per height map at load; in texture space,
+    /// so it holds on deforming meshes) for the ambient occlusion — of the true surface about
+    /// its true normal, the mean over each pixel's footprint where the map is minified — for
+    /// the micro-shadows of the first directional light, and for the solid angle the bounce
+    /// gather stands for. Off: the paper's screen-space terms from the apex sets alone, which
+    /// the filtered heights of minified, oblique and grazing views flatten (docs/accuracy.md,
     /// "Unseen content").
-    pub texture_space_occlusion: bool,
+    pub texture_space_horizons: bool,
     /// Shadows of the bumps on the surface from directional, point and spot lights (paper
     /// §3.2), inside the regions Bevy's shadow maps light.
     pub micro_shadows: bool,
@@ -126,7 +128,7 @@ impl Default for Mesostructure {
             occlusion_form: OcclusionForm::CosineWeighted,
             horizon_search_steps: 0,
             coarse_occlusion: true,
-            texture_space_occlusion: true,
+            texture_space_horizons: true,
             micro_shadows: true,
             micro_shadow_softness: 0.05,
             bump_mapping: true,
@@ -453,8 +455,8 @@ pub struct MesostructureUniform {
     pub bleeding_samples: u32,
     /// Whether the coarse depth-buffer AO multiplies the occlusion (1) or not (0).
     pub coarse_occlusion: u32,
-    /// Whether the texture-space occlusion takes over where the map is minified (1) or not (0).
-    pub texture_space_occlusion: u32,
+    /// Whether the texture-space horizon map's terms are used (1) or not (0).
+    pub texture_space_horizons: u32,
     /// Side of the pixel block sharing one apex set (the working resolution).
     pub apex_block: u32,
     /// λa, λs, λd of eq. (2), and one spare float.
@@ -495,7 +497,7 @@ impl From<&Mesostructure> for MesostructureUniform {
             bleeding_enabled: crate::render::bleeding::bleeding_runs(s) as u32,
             bleeding_samples: s.bleeding_samples,
             coarse_occlusion: s.coarse_occlusion as u32,
-            texture_space_occlusion: s.texture_space_occlusion as u32,
+            texture_space_horizons: s.texture_space_horizons as u32,
             apex_block: s.working_resolution.block(),
             weights: Vec4::new(s.ambient_weight, s.direct_weight, s.bleeding_weight, 0.0),
             directions,

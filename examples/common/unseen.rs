@@ -338,6 +338,9 @@ impl CoreMesh {
     }
 }
 
+/// Displaced-mesh vertices per height-map texel along each axis.
+const SUBDIVISION: f32 = 2.0;
+
 /// The ground truth of one scene: the core mesh (to find each pixel's UV) and the displaced
 /// mesh (to ray-cast), both in BVHs.
 pub struct GroundTruth {
@@ -373,12 +376,14 @@ impl GroundTruth {
         let texel = Vec2::new(map.width as f32, map.height as f32) * tiles;
         let mut displaced = vec![];
         for tri in &core.vertices {
-            // Subdivide so that each small triangle spans at most one texel.
+            // Subdivide so that each small triangle spans at most half a texel: with vertices a
+            // texel apart the mesh would pass through texel corners, the box-filtered heights,
+            // and be smoother (lower horizons) than the bilinear surface the map stands for.
             let extent = [(0, 1), (1, 2), (2, 0)]
                 .iter()
                 .map(|&(i, j)| ((tri[i].uv - tri[j].uv) * texel).abs().max_element())
                 .fold(1.0f32, f32::max);
-            let n = extent.ceil() as usize;
+            let n = (SUBDIVISION * extent).ceil() as usize;
             let lifted = |i: usize, j: usize| {
                 let (wi, wj) = (i as f32 / n as f32, j as f32 / n as f32);
                 let v = Vertex::blend(*tri, [1.0 - wi - wj, wi, wj]);
@@ -405,7 +410,7 @@ impl GroundTruth {
                 }
             }
         }
-        let epsilon = 0.1 * 2.0 / texel.max_element().max(1.0);
+        let epsilon = 0.05 * 2.0 / texel.max_element().max(1.0);
         Self {
             core,
             displaced: Traced::new(displaced),

@@ -111,7 +111,7 @@ mod tests {
     /// measured 0.0039 and 0.0286 (`cargo test --lib texture_space -- --nocapture`), held to
     /// ±0.005.
     #[test]
-    fn texture_space_occlusion_is_close_to_the_ray_traced_truth() {
+    fn texture_space_horizons_is_close_to_the_ray_traced_truth() {
         for (name, map, k, measured) in [
             ("stone", HeightMap::noise(128, 8, 4, 3), 0.1, 0.0039),
             ("rivets", HeightMap::rivets(128, 4, 0.35), 0.2, 0.0286),

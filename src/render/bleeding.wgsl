@@ -140,12 +140,10 @@ fn bleeding(@builtin(global_invocation_id) id: vec3<u32>) {
     // mean radiance of what P sees instead of the sky, and the texture-space occlusion says how
     // much that is: irradiance = mean radiance · π (1 − AO) (cosine-weighted blocked solid
     // angle), with the gather's own blocked fraction `covered · Δθ / π` in the denominator.
-    let weight = textureLoad(core_normal, p, 0).w;
+    let texture_space = textureLoad(bump_normal, p, 0).w;
     let gathered = covered * TAU / f32(SECTORS) / PI;
-    if settings.texture_space_occlusion != 0u && weight > 0.0 && gathered > 1e-4 {
-        let blocked = 1.0 - textureLoad(bump_normal, p, 0).w;
-        let scale = clamp(blocked / gathered, 0.0, MAX_BOUNCE_RESCALE);
-        irradiance *= mix(1.0, scale, weight);
+    if settings.texture_space_horizons != 0u && texture_space >= 0.0 && gathered > 1e-4 {
+        irradiance *= clamp((1.0 - texture_space) / gathered, 0.0, MAX_BOUNCE_RESCALE);
     }
     let bleeding = settings.weights.z * albedo / PI * irradiance;
     textureStore(bleeding_out, p, vec4(bleeding, 1.0));

@@ -4,6 +4,7 @@
 // land exactly on their prepass depth.
 
 #import bevy_pbr::forward_io::VertexOutput
+#import bevy_pbr::mesh_view_bindings::lights
 
 struct HeightMaterial {
     // Columns of the 2×2 UV matrix: (x_axis.x, x_axis.y, y_axis.x, y_axis.y).
@@ -28,10 +29,10 @@ const HORIZON_AZIMUTHS: u32 = 8u;
 struct HeightOutput {
     // (dis · k in world units, NDC depth, object id, dis)
     @location(0) mhm: vec4<f32>,
-    // (n0 in world space, weight of the texture-space occlusion)
+    // (n0 in world space, texture-space visibility of the first directional light, or −1)
     @location(1) core_normal: vec4<f32>,
     // (N' by Blinn bump mapping in world space, or 0 where the material has a normal map;
-    // texture-space occlusion)
+    // texture-space occlusion, or −1)
     @location(2) bump_normal: vec4<f32>,
 }
 
@@ -159,45 +160,95 @@ fn texel_occlusion(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv
     return clamp(sum / f32(HORIZON_AZIMUTHS / 2u), 0.0, 1.0);
 }
 
+// Whether the light coming from `to_light` reaches the true surface at `texel` (1) or not (0):
+// its elevation above the core plane against the texel's horizon towards its azimuth (the two
+// nearest of the 8 azimuths interpolated) — horizon mapping (Max 1988) on the texture-space
+// horizon map. `pu`, `pv`: world vectors per UV unit; `k`: the material's scale.
+fn texel_light_visibility(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>, k: f32, to_light: vec3<f32>) -> f32 {
+    let sin_l = dot(to_light, n);
+    let tangential = to_light - n * sin_l;
+    let t2 = dot(tangential, tangential);
+    if sin_l <= 0.0 || t2 <= 1e-12 {
+        // Below the core plane: n·l's and Bevy's shadow maps' job; from the zenith: open.
+        return 1.0;
+    }
+    // The light's azimuth in UV space: tangential = pu a + pv b (least squares in the plane).
+    let g = mat2x2<f32>(dot(pu, pu), dot(pu, pv), dot(pu, pv), dot(pv, pv));
+    let det = g[0][0] * g[1][1] - g[0][1] * g[1][0];
+    if abs(det) <= 1e-20 {
+        return 1.0;
+    }
+    let r = vec2(dot(tangential, pu), dot(tangential, pv));
+    let ab = vec2(g[1][1] * r.x - g[0][1] * r.y, g[0][0] * r.y - g[1][0] * r.x) / det;
+    let uv_length = length(ab);
+    if uv_length <= 0.0 {
+        return 1.0;
+    }
+    let reach = length(pu * ab.x + pv * ab.y) / uv_length;
+    let position = atan2(ab.y, ab.x) / (2.0 * PI) * f32(HORIZON_AZIMUTHS);
+    let lower = floor(position);
+    let i0 = u32((i32(lower) % 8 + 8) % 8);
+    let i1 = (i0 + 1u) % HORIZON_AZIMUTHS;
+    let first = textureLoad(horizons, texel, 0);
+    let second = textureLoad(horizons, texel + vec2(block, 0), 0);
+    let slopes = array<f32, 8>(first.x, first.y, first.z, first.w, second.x, second.y, second.z, second.w);
+    let slope = mix(slopes[i0], slopes[i1], position - lower);
+    // tan of the horizon against tan of the light's elevation.
+    return select(0.0, 1.0, sin_l * reach >= k * slope * sqrt(t2));
+}
+
 // The texel of the horizon map `i` texels from `base`, wrapped (height maps tile).
 fn horizon_texel(base: vec2<i32>, i: vec2<i32>, level: vec2<i32>) -> vec2<i32> {
     return ((base + i) % level + level) % level;
 }
 
-// The fine occlusion a pixel shows, from the texture-space horizon map. Magnified (less than a
-// texel per pixel): `texel_occlusion` interpolated bilinearly between the four texels around
-// `uv`, so that texels do not show as blocks. Minified: the mean of the fine occlusion over
-// the pixel's footprint, not the occlusion of the filtered heights that the screen-space
-// passes see (which flattens the relief): 2 × 2 taps spread over the footprint (UV
-// derivatives `duv1`, `duv2`). Between 0.75 and 1.5 texels per pixel, a blend of the two.
-fn footprint_occlusion(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_pixel: f32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>) -> f32 {
+// The fine occlusion a pixel shows, from the texture-space horizon map, and the visibility of
+// `to_light` (the camera's first directional light; 1 with `has_light` false). Magnified (less
+// than a texel per pixel): the texels' values interpolated bilinearly between the four texels
+// around `uv`, so that texels do not show as blocks. Minified: the mean over the pixel's
+// footprint, not the occlusion of the filtered heights that the screen-space passes see
+// (which flattens the relief): 2 × 2 taps spread over the footprint (UV derivatives `duv1`,
+// `duv2`). Between 0.75 and 1.5 texels per pixel, a blend of the two.
+fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_pixel: f32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>, has_light: bool, to_light: vec3<f32>) -> vec2<f32> {
     let size = vec2<i32>(textureDimensions(horizons));
     let block = size.x / 3;
     let level = vec2<i32>(block, size.y);
+    let k = material.scale;
     // Texels per pixel of the horizon map's level (it may be coarser than level 0).
     let horizon_texels = texels_per_pixel * f32(block) / f32(textureDimensions(height_mips, 0).x);
     let minified = smoothstep(0.75, 1.5, horizon_texels);
-    var magnified_ao = 0.0;
+    var magnified_terms = vec2(0.0);
     if minified < 1.0 {
         let p = fract(uv) * vec2<f32>(level) - 0.5;
         let base = vec2<i32>(floor(p));
         let f = p - floor(p);
-        let a00 = texel_occlusion(horizon_texel(base, vec2(0, 0), level), block, n, pu, pv, material.scale);
-        let a10 = texel_occlusion(horizon_texel(base, vec2(1, 0), level), block, n, pu, pv, material.scale);
-        let a01 = texel_occlusion(horizon_texel(base, vec2(0, 1), level), block, n, pu, pv, material.scale);
-        let a11 = texel_occlusion(horizon_texel(base, vec2(1, 1), level), block, n, pu, pv, material.scale);
-        magnified_ao = mix(mix(a00, a10, f.x), mix(a01, a11, f.x), f.y);
+        var corners: array<vec2<f32>, 4>;
+        for (var corner = 0; corner < 4; corner++) {
+            let texel = horizon_texel(base, vec2<i32>(corner & 1, corner >> 1u), level);
+            var visible = 1.0;
+            if has_light {
+                visible = texel_light_visibility(texel, block, n, pu, pv, k, to_light);
+            }
+            corners[corner] = vec2(texel_occlusion(texel, block, n, pu, pv, k), visible);
+        }
+        // Nested mixes: four equal corners give exactly their value (an open, lit flat map
+        // stays exactly 1).
+        magnified_terms = mix(mix(corners[0], corners[1], f.x), mix(corners[2], corners[3], f.x), f.y);
     }
-    var minified_ao = 0.0;
+    var minified_terms = vec2(0.0);
     if minified > 0.0 {
         for (var tap = 0; tap < 4; tap++) {
             let offset = vec2<f32>(f32(tap & 1), f32(tap >> 1u)) * 0.5 - 0.25;
             let tap_uv = fract(uv + offset.x * duv1 + offset.y * duv2);
             let texel = horizon_texel(vec2<i32>(tap_uv * vec2<f32>(level)), vec2(0), level);
-            minified_ao += 0.25 * texel_occlusion(texel, block, n, pu, pv, material.scale);
+            var visible = 1.0;
+            if has_light {
+                visible = texel_light_visibility(texel, block, n, pu, pv, k, to_light);
+            }
+            minified_terms += 0.25 * vec2(texel_occlusion(texel, block, n, pu, pv, k), visible);
         }
     }
-    return mix(magnified_ao, minified_ao, minified);
+    return mix(magnified_terms, minified_terms, minified);
 }
 
 @fragment
@@ -236,9 +287,10 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     let duv1 = dpdx(uv);
     let duv2 = dpdy(uv);
     var bump = vec3<f32>(0.0);
-    var texture_occlusion = 1.0;
-    // 1 where the texture-space occlusion was computed (the occlusion pass then uses it).
-    var texture_weight = 0.0;
+    // The texture-space occlusion and first directional light's visibility; −1 where they
+    // could not be computed (no UV derivatives), which the later passes read as "none".
+    var texture_occlusion = -1.0;
+    var texture_visibility = -1.0;
 #ifdef VERTEX_NORMALS
     let n = normalize(in.world_normal);
     let det = duv1.x * duv2.y - duv1.y * duv2.x;
@@ -247,8 +299,11 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     if abs(det) > 1e-12 {
         let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
         let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
-        texture_weight = 1.0;
-        texture_occlusion = footprint_occlusion(uv, duv1, duv2, texels_per_pixel, n, pu, pv);
+        let has_light = lights.n_directional_lights > 0u;
+        let to_light = select(vec3(0.0, 0.0, 1.0), lights.directional_lights[0].direction_to_light, has_light);
+        let terms = footprint_terms(uv, duv1, duv2, texels_per_pixel, n, pu, pv, has_light, to_light);
+        texture_occlusion = terms.x;
+        texture_visibility = select(-1.0, terms.y, has_light);
     }
     if material.bump > 0.0 && abs(det) > 1e-12 {
         let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
@@ -270,9 +325,9 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     out.bump_normal = vec4<f32>(bump, texture_occlusion);
     out.mhm = vec4<f32>(dis * material.scale, in.position.z, material.object_id, dis);
 #ifdef VERTEX_NORMALS
-    out.core_normal = vec4<f32>(normalize(in.world_normal), texture_weight);
+    out.core_normal = vec4<f32>(normalize(in.world_normal), texture_visibility);
 #else
-    out.core_normal = vec4<f32>(0.0, 0.0, 0.0, 0.0);
+    out.core_normal = vec4<f32>(0.0, 0.0, 0.0, -1.0);
 #endif
     return out;
 }

@@ -198,8 +198,13 @@ fn direct_terms(in: PbrInput, p: vec2<i32>) -> DirectTerms {
         }
         add_light(&terms, lighting::spot_light(id, &input, true), shadow, visible);
     }
+    // The height pass's texture-space visibility of the first directional light (−1: none).
+    let texture_visible = textureLoad(core_normal, p, 0).w;
     for (var i = 0u; i < lights.n_directional_lights; i++) {
-        let visible = micro_shadow(h, lights.directional_lights[i].direction_to_light);
+        var visible = micro_shadow(h, lights.directional_lights[i].direction_to_light);
+        if micro && i == 0u && settings.texture_space_horizons != 0u && texture_visible >= 0.0 {
+            visible = texture_visible;
+        }
         if visible >= 1.0 && !every_light {
             continue;
         }

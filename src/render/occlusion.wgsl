@@ -20,7 +20,7 @@
 @group(0) @binding(5) var<uniform> view: View;
 @group(0) @binding(6) var mhgm: texture_2d<f32>;
 @group(0) @binding(7) var depth: texture_depth_2d;
-// w: the height pass's texture-space occlusion (its weight is core_normal's w).
+// w: the height pass's texture-space occlusion (−1 where it has none).
 @group(0) @binding(8) var bump_normal: texture_2d<f32>;
 
 const COARSE_DIRECTIONS: u32 = 8u;
@@ -163,9 +163,9 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     visibility /= f32(SECTORS);
     // Where the height map is minified the mean of the fine occlusion over the pixel's
     // footprint, from the texture-space horizon map, takes over (see height.wgsl).
-    if settings.texture_space_occlusion != 0u {
-        let weight = textureLoad(core_normal, p, 0).w;
-        visibility = mix(visibility, textureLoad(bump_normal, p, 0).w, weight);
+    let texture_space = textureLoad(bump_normal, p, 0).w;
+    if settings.texture_space_horizons != 0u && texture_space >= 0.0 {
+        visibility = texture_space;
     }
     // No apex, no scale for the coarse step: a flat height map stays neutral.
     if settings.coarse_occlusion != 0u && farthest > 0.0 {

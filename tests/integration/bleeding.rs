@@ -92,7 +92,7 @@ fn bleeding_matches_the_oracle() {
     // The oracle mirrors the gather itself: without the area-correct rescaling by the
     // texture-space occlusion.
     let settings = Mesostructure {
-        texture_space_occlusion: false,
+        texture_space_horizons: false,
         ..default()
     };
     let (_, _, _, frame) = bricks_scene(&map, 0.1, 30.0, None, settings);

@@ -83,7 +83,7 @@ fn v_groove_bottoms_match_the_closed_forms() {
             slope,
             60.0,
             Mesostructure {
-                texture_space_occlusion: false,
+                texture_space_horizons: false,
                 ..default()
             },
         );

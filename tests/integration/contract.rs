@@ -20,7 +20,7 @@ const SIZE: u32 = 128;
 /// rounding of a sample point may change which ascent a direction starts).
 fn compare_with_oracle(frame: &CapturedFrame, settings: &Mesostructure) -> (usize, usize) {
     assert!(
-        !settings.texture_space_occlusion,
+        !settings.texture_space_horizons,
         "the oracle mirrors the screen-space occlusion"
     );
     let mhm = frame.screen_height_map();
@@ -118,7 +118,7 @@ fn plane_with_rivets_matches_the_oracle_and_the_height_map() {
     let target = target(&mut app, SIZE, SIZE);
     // The screen-space occlusion of the apex sets is what the oracle mirrors.
     let settings = Mesostructure {
-        texture_space_occlusion: false,
+        texture_space_horizons: false,
         ..default()
     };
     let camera = camera(&mut app, &target, top_down(), settings.clone());
@@ -228,7 +228,7 @@ fn sphere_with_bricks_matches_the_oracle_with_silhouettes() {
     let mut app = app();
     let target = target(&mut app, SIZE, SIZE);
     let settings = Mesostructure {
-        texture_space_occlusion: false,
+        texture_space_horizons: false,
         ..default()
     };
     let camera = camera(
@@ -734,13 +734,13 @@ fn height_maps_tile_outside_the_unit_square() {
     );
 }
 
-/// The texture-space occlusion (the height pass's horizon-map AO, `texture_space_occlusion`)
+/// The texture-space occlusion (the height pass's horizon-map AO, `texture_space_horizons`)
 /// against its CPU mirror `reference::texture_space` at each pixel's UV: a 64² noise map on the
 /// plane seen straight down, magnified (0.41 texels per pixel), coarse AO off so that the
 /// captured occlusion is the texture-space term alone. Tolerance 5e-3 on ≥ 99 % of pixels (the
 /// GPU reads the horizon map's slopes as half floats).
 #[test]
-fn texture_space_occlusion_matches_its_cpu_mirror() {
+fn texture_space_horizons_matches_its_cpu_mirror() {
     if !gpu_or_skip() {
         return;
     }
