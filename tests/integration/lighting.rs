@@ -381,9 +381,10 @@ fn low_light_micro_shadows_agree_with_the_ground_truth() {
     // Light travelling towards +x, 20° above the horizon.
     let elevation = 20f32.to_radians();
     let direction = Vec3::new(elevation.cos(), -elevation.sin(), 0.0);
-    for (name, map) in [
-        ("bricks", HeightMap::bricks(256, 4, 0.15)),
-        ("stone", HeightMap::noise(256, 16, 3, 7)),
+    // Measured agreement on the software driver (docs/accuracy.md), held to ±0.01.
+    for (name, map, measured) in [
+        ("bricks", HeightMap::bricks(256, 4, 0.15), 0.998),
+        ("stone", HeightMap::noise(256, 16, 3, 7), 0.977),
     ] {
         let (on, off, _) = micro_shadow_pair(direction, &map);
         let field = HeightField::new(256, 256, &map.values, 2.0, 0.1);
@@ -413,8 +414,8 @@ fn low_light_micro_shadows_agree_with_the_ground_truth() {
         );
         assert!(shadowed > 10, "{name}: a low light casts micro-shadows");
         assert!(
-            share > baseline,
-            "{name}: micro-shadows agree better than none: {share} vs {baseline}"
+            (share - measured).abs() <= 0.01,
+            "{name}: micro-shadows agree on {share}, measured {measured} ± 0.01 (none: {baseline})"
         );
     }
 }
