@@ -119,8 +119,13 @@ pub fn mip_chain(values: Vec<f32>, w: u32, h: u32) -> Image {
     out
 }
 
-/// Azimuths of the texture-space horizon map: `i · 45°`, `i = 0..8`, in texel space (u, v).
-pub const HORIZON_AZIMUTHS: usize = 8;
+/// Azimuths of the texture-space horizon map: `i · 360° / 16`, in texel space (u, v). A
+/// multiple of 4 (the map stores four a texel per block); 16 rather than 8, because the light's
+/// horizon is interpolated between the two nearest, and at 45° apart that interpolation
+/// stretched shadows sideways (docs/accuracy.md, "Unseen content").
+pub const HORIZON_AZIMUTHS: usize = 16;
+/// Blocks of the horizon map's image: four azimuths each, then the gradient.
+pub const HORIZON_BLOCKS: usize = HORIZON_AZIMUTHS / 4 + 1;
 /// How far each horizon is searched, in texels of the horizon map's level.
 pub const HORIZON_RADIUS: u32 = 32;
 /// The horizon map is built at the finest level of the mip chain at most this many texels wide
@@ -222,20 +227,22 @@ impl HorizonMap {
         }
     }
 
-    /// The map as an `Rgba16Float` image three blocks wide: slopes of azimuths 0–3, slopes of
-    /// azimuths 4–7, then the gradient (in `xy`).
+    /// The map as an `Rgba16Float` image [`HORIZON_BLOCKS`] blocks wide: the slopes of
+    /// azimuths `4b … 4b + 3` in block `b`, then the gradient (in `xy`) in the last block.
     pub fn to_image(&self) -> Image {
         let (w, h) = (self.width, self.height);
-        let mut data = Vec::with_capacity((w * 3 * h * 8) as usize);
+        let blocks = HORIZON_BLOCKS as u32;
+        let mut data = Vec::with_capacity((w * blocks * h * 8) as usize);
         let mut push = |v: f32| data.extend(half::f16::from_f32(v).to_le_bytes());
         for y in 0..h {
-            for block in 0..3 {
+            for block in 0..HORIZON_BLOCKS {
                 for x in 0..w {
                     let i = (y * w + x) as usize;
-                    let v = match block {
-                        0 => [self.slopes[i][0], self.slopes[i][1], self.slopes[i][2], self.slopes[i][3]],
-                        1 => [self.slopes[i][4], self.slopes[i][5], self.slopes[i][6], self.slopes[i][7]],
-                        _ => [self.gradient[i][0], self.gradient[i][1], 0.0, 0.0],
+                    let v = if block + 1 < HORIZON_BLOCKS {
+                        let s = &self.slopes[i][4 * block..4 * block + 4];
+                        [s[0], s[1], s[2], s[3]]
+                    } else {
+                        [self.gradient[i][0], self.gradient[i][1], 0.0, 0.0]
                     };
                     v.into_iter().for_each(&mut push);
                 }
@@ -243,7 +250,7 @@ impl HorizonMap {
         }
         Image::new(
             Extent3d {
-                width: w * 3,
+                width: w * blocks,
                 height: h,
                 depth_or_array_layers: 1,
             },

@@ -811,6 +811,30 @@ pub fn run_scene(
             }
         }
     }
+    if let Some(dir) = std::env::var_os("UNSEEN_DUMP") {
+        // Micro-shadow confusion map: true positive green, false positive red, false negative
+        // blue, agreeing lit grey (only light-facing pixels with a lit core are coloured).
+        let mut image = image::RgbImage::new(size / step, size / step);
+        let mut k = 0;
+        for (&(x, y), t) in pixels.iter().zip(&truths) {
+            let Some(t) = t else { continue };
+            let e = estimates[k];
+            k += 1;
+            let colour = if !t.facing || t.core_shadowed {
+                [0, 0, 0]
+            } else {
+                match (!t.lit, e.shadowed) {
+                    (true, true) => [0, 200, 0],
+                    (false, true) => [255, 0, 0],
+                    (true, false) => [0, 80, 255],
+                    _ => [128, 128, 128],
+                }
+            };
+            image.put_pixel(x / step, y / step, image::Rgb(colour));
+        }
+        let path = std::path::Path::new(&dir).join(format!("{}.png", scene.name.replace('/', "_")));
+        image.save(&path).expect("cannot write the dump");
+    }
     texels.sort_by(f32::total_cmp);
     let tpp = texels.get(texels.len() / 2).copied().unwrap_or(0.0);
     let none: Vec<Estimate> = kept

@@ -12,7 +12,7 @@ fn slice_antiderivative(phi: f32, gamma: f32) -> f32 {
 }
 
 /// Cosine-weighted ambient occlusion of the true surface at texel `(x, y)` of `map`, about its
-/// true normal, from the horizons of its 8 azimuths (4 slices through the core normal `n`),
+/// true normal, from the horizons of its [`HORIZON_AZIMUTHS`] azimuths (half as many slices through the core normal `n`),
 /// each slice integrated in closed form. `pu`, `pv`: world vectors per UV unit; `k`: scale.
 pub fn texel_occlusion(map: &HorizonMap, x: u32, y: u32, n: Vec3, pu: Vec3, pv: Vec3, k: f32) -> f32 {
     let i = (y * map.width + x) as usize;
@@ -87,9 +87,9 @@ mod tests {
         }
     }
 
-    /// At the bottom of a V-groove with walls at slope α the cosine-weighted AO is cos α; 4
-    /// slices give `(cos² α + 2 cos² h45 + 1) / 4` with `tan h45 = tan α cos 45°`, within 0.002
-    /// of it at 25° and 40°.
+    /// At the bottom of a V-groove with walls at slope α the cosine-weighted AO is cos α: the
+    /// mean over the slices of `cos² h` with `tan h = tan α |cos θ|`, within 0.002 of it at 25°
+    /// and 40° (measured 0.9063 and 0.7660).
     #[test]
     fn v_groove_bottom_meets_the_closed_form() {
         for slope in [25.0f32, 40.0] {
@@ -108,13 +108,14 @@ mod tests {
 
     /// The model against the ray-traced ground truth of the same height field (cosine-weighted
     /// AO, infinite radius) at 64 texels of fractal noise (k 0.1) and of rivets (k 0.2): MAE
-    /// measured 0.0039 and 0.0286 (`cargo test --lib texture_space -- --nocapture`), held to
-    /// ±0.005.
+    /// measured 0.0039 and 0.0368 (`cargo test --lib texture_space -- --nocapture`), held to
+    /// ±0.005. The rivets' error is the search radius: they stand 32 texels apart, as far as
+    /// the horizons are searched, and the truth sees every one of them (too open by 0.037).
     #[test]
-    fn texture_space_horizons_is_close_to_the_ray_traced_truth() {
+    fn texture_space_occlusion_is_close_to_the_ray_traced_truth() {
         for (name, map, k, measured) in [
             ("stone", HeightMap::noise(128, 8, 4, 3), 0.1, 0.0039),
-            ("rivets", HeightMap::rivets(128, 4, 0.35), 0.2, 0.0286),
+            ("rivets", HeightMap::rivets(128, 4, 0.35), 0.2, 0.0368),
         ] {
             let horizons = HorizonMap::new(&map.values, map.width, map.height);
             let field = HeightField::new(map.width, map.height, &map.values, 2.0, k);

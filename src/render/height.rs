@@ -175,7 +175,12 @@ impl SpecializedMeshPipeline for HeightPassPipeline {
         let mut descriptor = self.mesh_pipeline.specialize(key, layout)?;
         descriptor.label = Some("mesostructure_height_pipeline".into());
         descriptor.layout.push(self.material_layout.clone());
-        let shader_defs = descriptor.vertex.shader_defs.clone();
+        let mut shader_defs = descriptor.vertex.shader_defs.clone();
+        // The horizon map's layout, from the one definition in `height_map_import`.
+        shader_defs.push(bevy::shader::ShaderDefVal::UInt(
+            "HORIZON_AZIMUTHS".into(),
+            crate::height_map_import::HORIZON_AZIMUTHS as u32,
+        ));
         descriptor.fragment = Some(FragmentState {
             shader: self.fragment_shader.clone(),
             shader_defs,

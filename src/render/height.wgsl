@@ -18,13 +18,16 @@ struct HeightMaterial {
 
 @group(3) @binding(0) var height_mips: texture_2d<f32>;
 @group(3) @binding(1) var<uniform> material: HeightMaterial;
-// Texture-space horizon map (`HorizonMap` in height_map_import.rs), three blocks wide: the
-// highest slope towards azimuths 0–3 and 4–7 (i · 45° in texel space; height per UV unit of
-// distance), then the height gradient per UV unit.
+// Texture-space horizon map (`HorizonMap` in height_map_import.rs), HORIZON_BLOCKS blocks wide:
+// the highest slope towards azimuths 4b … 4b + 3 in block b (i · 360° / HORIZON_AZIMUTHS in
+// texel space; height per UV unit of distance), then the height gradient per UV unit.
 @group(3) @binding(2) var horizons: texture_2d<f32>;
 
 const PI: f32 = 3.141592653589793;
-const HORIZON_AZIMUTHS: u32 = 8u;
+// Azimuths of the horizon map (`height_map_import::HORIZON_AZIMUTHS`, a multiple of 4), four a
+// block, then the gradient block.
+const HORIZON_AZIMUTHS: u32 = #{HORIZON_AZIMUTHS}u;
+const HORIZON_BLOCKS: i32 = i32(HORIZON_AZIMUTHS / 4u) + 1;
 
 struct HeightOutput {
     // (dis · k in world units, NDC depth, object id, dis)
@@ -120,21 +123,25 @@ fn slice_antiderivative(phi: f32, gamma: f32) -> f32 {
 }
 
 // Cosine-weighted ambient occlusion of the true surface at texel `texel` of the horizon map,
-// about its true normal, from the horizons of the 8 azimuths (4 slices through the core
+// about its true normal, from the horizons of its HORIZON_AZIMUTHS azimuths (half as many slices through the core
 // normal n): per slice, the directions above both horizons and in the normal's hemisphere,
 // integrated in closed form (the slice form of Jimenez et al. 2016, here about n). `pu`, `pv`:
 // world vectors per UV unit; `k`: the material's scale.
 fn texel_occlusion(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>, k: f32) -> f32 {
-    let first = textureLoad(horizons, texel, 0);
-    let second = textureLoad(horizons, texel + vec2(block, 0), 0);
-    let gradient = textureLoad(horizons, texel + vec2(2 * block, 0), 0).xy;
+    var slopes: array<f32, HORIZON_AZIMUTHS>;
+    for (var b = 0; b < HORIZON_BLOCKS - 1; b++) {
+        let v = textureLoad(horizons, texel + vec2(b * block, 0), 0);
+        slopes[4 * b] = v.x;
+        slopes[4 * b + 1] = v.y;
+        slopes[4 * b + 2] = v.z;
+        slopes[4 * b + 3] = v.w;
+    }
+    let gradient = textureLoad(horizons, texel + vec2((HORIZON_BLOCKS - 1) * block, 0), 0).xy;
     // The true normal by Blinn's formula with the map's own gradient (as the bump normal).
     let base = cross(pu, pv);
     let orientation = select(-1.0, 1.0, dot(base, n) >= 0.0);
     let true_normal = normalize(orientation
         * (base + k * gradient.x * cross(n, pv) - k * gradient.y * cross(n, pu)));
-    let ahead = array<f32, 4>(first.x, first.y, first.z, first.w);
-    let behind = array<f32, 4>(second.x, second.y, second.z, second.w);
     var sum = 0.0;
     for (var i = 0u; i < HORIZON_AZIMUTHS / 2u; i++) {
         let a = f32(i) * 2.0 * PI / f32(HORIZON_AZIMUTHS);
@@ -147,8 +154,8 @@ fn texel_occlusion(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv
         }
         let tangent = normalize(t);
         // Horizon elevations from the core plane on both sides of the slice.
-        let up = atan(k * ahead[i] / reach);
-        let down = atan(k * behind[i] / reach);
+        let up = atan(k * slopes[i] / reach);
+        let down = atan(k * slopes[i + HORIZON_AZIMUTHS / 2u] / reach);
         let projected = vec2(dot(true_normal, tangent), dot(true_normal, n));
         let gamma = atan2(projected.x, projected.y);
         let hi = max(min(0.5 * PI - up, gamma + 0.5 * PI), 0.0);
@@ -162,7 +169,7 @@ fn texel_occlusion(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv
 
 // Whether the light coming from `to_light` reaches the true surface at `texel` (1) or not (0):
 // its elevation above the core plane against the texel's horizon towards its azimuth (the two
-// nearest of the 8 azimuths interpolated) — horizon mapping (Max 1988) on the texture-space
+// nearest azimuths interpolated) — horizon mapping (Max 1988) on the texture-space
 // horizon map. `pu`, `pv`: world vectors per UV unit; `k`: the material's scale.
 fn texel_light_visibility(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>, k: f32, to_light: vec3<f32>) -> f32 {
     let sin_l = dot(to_light, n);
@@ -187,12 +194,12 @@ fn texel_light_visibility(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f
     let reach = length(pu * ab.x + pv * ab.y) / uv_length;
     let position = atan2(ab.y, ab.x) / (2.0 * PI) * f32(HORIZON_AZIMUTHS);
     let lower = floor(position);
-    let i0 = u32((i32(lower) % 8 + 8) % 8);
+    let count = i32(HORIZON_AZIMUTHS);
+    let i0 = u32((i32(lower) % count + count) % count);
     let i1 = (i0 + 1u) % HORIZON_AZIMUTHS;
-    let first = textureLoad(horizons, texel, 0);
-    let second = textureLoad(horizons, texel + vec2(block, 0), 0);
-    let slopes = array<f32, 8>(first.x, first.y, first.z, first.w, second.x, second.y, second.z, second.w);
-    let slope = mix(slopes[i0], slopes[i1], position - lower);
+    let s0 = textureLoad(horizons, texel + vec2(i32(i0 / 4u) * block, 0), 0)[i0 % 4u];
+    let s1 = textureLoad(horizons, texel + vec2(i32(i1 / 4u) * block, 0), 0)[i1 % 4u];
+    let slope = mix(s0, s1, position - lower);
     // tan of the horizon against tan of the light's elevation.
     return select(0.0, 1.0, sin_l * reach >= k * slope * sqrt(t2));
 }
@@ -211,7 +218,7 @@ fn horizon_texel(base: vec2<i32>, i: vec2<i32>, level: vec2<i32>) -> vec2<i32> {
 // `duv2`). Between 0.75 and 1.5 texels per pixel, a blend of the two.
 fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_pixel: f32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>, has_light: bool, to_light: vec3<f32>) -> vec2<f32> {
     let size = vec2<i32>(textureDimensions(horizons));
-    let block = size.x / 3;
+    let block = size.x / HORIZON_BLOCKS;
     let level = vec2<i32>(block, size.y);
     let k = material.scale;
     // Texels per pixel of the horizon map's level (it may be coarser than level 0).
