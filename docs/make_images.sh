@@ -39,6 +39,19 @@ cp "$out/gallery/gallery_none.png" docs/images/gallery.png
 run compare -- --frames 10 --out "$out/compare" --headless
 cp "$out"/compare/compare_*.png docs/images/
 
+# Unseen content: a torus with the photo-derived pebbles, the paper's screen-space terms against
+# the texture-space horizons (README).
+for v in before now; do
+  flag=""; [ "$v" = before ] && flag="--screen-space"
+  run render -- --mesh torus --height-map assets/height_maps/photo/pebbles.png --scale 0.05 \
+    --tiles 6,2 --eye 0,1.3,1.7 --light-dir 1,-0.3,-0.4 --size 384x288 $flag --out "$out/torus_$v.png"
+done
+python3 -c "
+from PIL import Image
+a, b = Image.open('$out/torus_before.png'), Image.open('$out/torus_now.png')
+s = Image.new('RGB', (a.width * 2 + 8, a.height), (255, 255, 255))
+s.paste(a, (0, 0)); s.paste(b, (a.width + 8, 0)); s.save('docs/images/unseen_torus.png')"
+
 # The window with the tuning panel (needs a display).
 if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ]; then
   run deforming -- --frames 20 --view none --out "$out/window"

@@ -5,7 +5,7 @@
 //! cargo run --example render -- [--mesh plane|sphere|torus|teapot|bunny|PATH.obj]
 //!     [--torus-radii R,r] [--height-map NAME|PATH] [--scale K] [--tiles U,V]
 //!     [--eye x,y,z] [--target x,y,z] [--fov DEG] [--light-dir x,y,z] [--albedo A]
-//!     [--reference-lighting] [--size N|WxH]
+//!     [--reference-lighting] [--screen-space] [--size N|WxH]
 //!     [--view lit|occlusion|micro-shadow|bleeding|height|uv] [--out PATH.png|PATH.exr]
 //! ```
 //!
@@ -107,6 +107,9 @@ struct Args {
     /// One directional light of irradiance 1, exposure 1, no ambient light, no specular
     #[arg(long)]
     reference_lighting: bool,
+    /// The paper's screen-space terms only (`Mesostructure::texture_space_horizons` off)
+    #[arg(long)]
+    screen_space: bool,
     /// Picture size, N or WxH
     #[arg(long, default_value = "256", value_parser = common::parse_size)]
     size: UVec2,
@@ -255,7 +258,10 @@ fn main() {
             ..default()
         }),
         Msaa::Off,
-        Mesostructure::default(),
+        Mesostructure {
+            texture_space_horizons: !args.screen_space,
+            ..default()
+        },
         MesostructureCapture,
         Transform::from_translation(args.eye).looking_at(args.target, up),
     ));
