@@ -744,7 +744,9 @@ pub struct SceneResult {
     pub truth_seconds: f32,
 }
 
-/// Runs one scene: renders it, casts the truth at every `step`-th covered pixel.
+/// Runs one scene: renders it, casts the truth at every `step`-th covered pixel. With
+/// `UNSEEN_DUMP=DIR` in the environment it also writes each scene's micro-shadow confusion map
+/// (true positives green, false positives red, misses blue) to `DIR`.
 pub fn run_scene(
     plugins: impl Fn() -> bevy::app::PluginGroupBuilder,
     scene: &Scene,
@@ -769,30 +771,6 @@ pub fn run_scene(
         truth.at(o, d, light, rings, rings)
     });
     let truth_seconds = clock.elapsed().as_secs_f32();
-    if std::env::var_os("UNSEEN_DEBUG").is_some() {
-        let (mut core_hits, mut truth_hits) = (0, 0);
-        for &(x, y) in &pixels {
-            let (o, d) = camera_ray(&frame, x, y);
-            core_hits += truth.core_hit(o, d).is_some() as u32;
-        }
-        truth_hits += truths.iter().filter(|t| t.is_some()).count();
-        let (o, d) = camera_ray(&frame, size / 2, size / 2);
-        let c = truth.core_hit(o, d).unwrap();
-        let above = c.position + c.normal * 0.2;
-        eprintln!(
-            "  debug: core {} n {}; down-hit {:?}; camera-ray hit {:?}; tri0 {:?}",
-            c.position,
-            c.normal,
-            truth.displaced.hit(above, -c.normal, f32::INFINITY),
-            truth.displaced.hit(o, d, f32::INFINITY),
-            truth.displaced.triangles[0]
-        );
-        eprintln!(
-            "  debug: {} covered pixels, {core_hits} core hits, {truth_hits} truths; centre ray {o} {d}; {} triangles",
-            pixels.len(),
-            truth.triangle_count()
-        );
-    }
     let (mut kept, mut estimates, mut texels) = (vec![], vec![], vec![]);
     for (&(x, y), t) in pixels.iter().zip(&truths) {
         let Some(t) = t else { continue };
