@@ -62,7 +62,6 @@ use clap::Parser;
 use bevy::{
     camera::{Hdr, RenderTarget},
     core_pipeline::tonemapping::Tonemapping,
-    diagnostic::{DiagnosticPath, DiagnosticsStore},
     pbr::ScreenSpaceAmbientOcclusion,
     prelude::*,
     render::{
@@ -71,7 +70,7 @@ use bevy::{
     },
 };
 use bevy_mesostructure::{
-    CapturedFrame, MesostructureCapture, MesostructureCaptures, prelude::*,
+    CapturedFrame, MesostructureCapture, prelude::*,
     reference::ground_truth::HeightField,
 };
 
@@ -160,61 +159,19 @@ fn render(
             .add(map.displaced_plane(k, 256));
         world.spawn((Mesh3d(grid), MeshMaterial3d(material)));
     }
-    // Until every pipeline has compiled (on a busy machine that can take more than a few
-    // frames; a pass whose pipeline is not ready does not run, and its image is not this
-    // frame's).
-    for frame in 0.. {
-        app.update();
-        let cache = app
-            .get_sub_app(bevy::render::RenderApp)
-            .expect("the render app")
-            .world()
-            .resource::<bevy::render::render_resource::PipelineCache>();
-        let pending = cache.pipelines().any(|p| {
-            !matches!(
-                p.state,
-                bevy::render::render_resource::CachedPipelineState::Ok(_)
-                    | bevy::render::render_resource::CachedPipelineState::Err(_)
-            )
-        });
-        if frame >= 12 && !pending {
-            break;
-        }
-        assert!(frame < 600, "pipelines still compiling after 600 frames");
-    }
-    let captures = app.world().resource::<MesostructureCaptures>().clone();
-    let mut frame = None;
-    for _ in 0..10 {
-        app.update();
-        if let Some(f) = captures.take(camera) {
-            frame = Some(f);
-            break;
-        }
-    }
-    let store = app.world().resource::<DiagnosticsStore>();
-    let median = |span: &str| {
-        let path = DiagnosticPath::new(format!("render/{span}/elapsed_gpu"));
-        let mut v: Vec<f64> = store
-            .get(&path)
-            .map(|d| d.values().copied().collect())
-            .unwrap_or_default();
-        v.sort_by(f64::total_cmp);
-        v.get(v.len() / 2).copied().unwrap_or(0.0)
-    };
+    use common::unseen::{ADDED_PASSES, median_gpu_ms, take_capture, wait_for_pipelines};
+    assert!(
+        wait_for_pipelines(&mut app),
+        "pipelines still compiling after 600 frames"
+    );
+    let frame = take_capture(&mut app, camera);
     let gpu_ms = if ssao {
-        median("ssao")
+        median_gpu_ms(&app, "ssao")
     } else if settings.is_some() {
-        [
-            "height",
-            "gradient",
-            "apex",
-            "occlusion",
-            "bleeding",
-            "bleeding_composite",
-        ]
-        .iter()
-        .map(|p| median(&format!("mesostructure/{p}")))
-        .sum()
+        ADDED_PASSES
+            .iter()
+            .map(|p| median_gpu_ms(&app, &format!("mesostructure/{p}")))
+            .sum()
     } else {
         0.0
     };
@@ -320,22 +277,6 @@ fn flip_mean(reference: &[f32], test: &[f32], w: u32) -> f32 {
         nv_flip::DEFAULT_PIXELS_PER_DEGREE,
     );
     nv_flip::FlipPool::from_image(&error).mean()
-}
-
-/// `f` over `items` on every core (the ground truth at every pixel is the slow part).
-fn par_map<T: Send>(items: &[(u32, u32)], f: impl Fn(&(u32, u32)) -> T + Sync) -> Vec<T> {
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let chunk = items.len().div_ceil(threads).max(1);
-    std::thread::scope(|scope| {
-        let handles: Vec<_> = items
-            .chunks(chunk)
-            .map(|part| scope.spawn(|| part.iter().map(&f).collect::<Vec<T>>()))
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().expect("a ground-truth thread panicked"))
-            .collect()
-    })
 }
 
 /// Error against the ground truth for each method at each cost (the speed/accuracy chart), on
@@ -472,7 +413,7 @@ fn main() {
                     .map(|s| field.ambient_occlusion(at(s), 8, 16))
                     .collect();
                 let clock = std::time::Instant::now();
-                let ao_truth_full = par_map(&interior, |s| field.ambient_occlusion(at(s), 8, 16));
+                let ao_truth_full = common::unseen::par_map(&interior, |s| field.ambient_occlusion(at(s), 8, 16));
                 println!("  ground-truth AO: {:.1} s", clock.elapsed().as_secs_f32());
                 // SSAO on real geometry: its AO is the ratio of ambient-only pictures.
                 let (with, lit_with) = render(map, k, size, None, true, None);
@@ -516,7 +457,7 @@ fn main() {
                         .collect();
                     // The reference picture, from the ground truth at every interior pixel.
                     let clock = std::time::Instant::now();
-                    let reference: Vec<f32> = par_map(&interior, |s| {
+                    let reference: Vec<f32> = common::unseen::par_map(&interior, |s| {
                         let lit = field.light_visible(at(s), light) as u32 as f32
                             * field.normal(at(s)).dot(-light).max(0.0);
                         (lit, field.one_bounce(at(s), light, 6, 16))

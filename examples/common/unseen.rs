@@ -38,7 +38,10 @@ use bevy::{
         render_resource::{CachedPipelineState, PipelineCache, TextureFormat, TextureUsages},
     },
 };
-use bevy_mesostructure::{CapturedFrame, MesostructureCapture, MesostructureCaptures, prelude::*};
+use bevy_mesostructure::{
+    CapturedFrame, MesostructureCapture, MesostructureCaptures, prelude::*,
+    reference::ground_truth::HeightField,
+};
 use obvhs::{
     BvhBuildParams,
     cwbvh::{CwBvh, builder::build_cwbvh_from_tris},
@@ -178,19 +181,6 @@ pub fn height_map(name: &str) -> HeightMap {
         }
         sum / (f * f) as f32
     })
-}
-
-/// Bilinear, wrapped sample of `map` at `uv` (texel centres at (i + ½) / n, as the GPU samples).
-pub fn sample(map: &HeightMap, uv: Vec2) -> f32 {
-    let (w, h) = (map.width as i64, map.height as i64);
-    let p = uv * Vec2::new(w as f32, h as f32) - 0.5;
-    let (x0, y0) = (p.x.floor(), p.y.floor());
-    let (fx, fy) = (p.x - x0, p.y - y0);
-    let at = |x: i64, y: i64| map.values[(y.rem_euclid(h) * w + x.rem_euclid(w)) as usize];
-    let (x0, y0) = (x0 as i64, y0 as i64);
-    let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
-    let bottom = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
-    top * (1.0 - fy) + bottom * fy
 }
 
 fn a(v: Vec3) -> Vec3A {
@@ -374,6 +364,10 @@ impl GroundTruth {
     pub fn new(core: Core, map: HeightMap, scale: f32, tiles: Vec2) -> Self {
         let core = CoreMesh::new(&core.mesh());
         let texel = Vec2::new(map.width as f32, map.height as f32) * tiles;
+        // Bilinear, wrapped heights in [0, 1] at texel coordinates (texel centres at i + ½, as
+        // the GPU samples): the crate's height field at unit scale.
+        let heights = HeightField::new(map.width, map.height, &map.values, 1.0, 1.0);
+        let map_size = Vec2::new(map.width as f32, map.height as f32);
         let mut displaced = vec![];
         for tri in &core.vertices {
             // Subdivide so that each small triangle spans at most half a texel: with vertices a
@@ -387,7 +381,7 @@ impl GroundTruth {
             let lifted = |i: usize, j: usize| {
                 let (wi, wj) = (i as f32 / n as f32, j as f32 / n as f32);
                 let v = Vertex::blend(*tri, [1.0 - wi - wj, wi, wj]);
-                v.position + v.normal * scale * sample(&map, v.uv * tiles)
+                v.position + v.normal * scale * heights.sample(v.uv * tiles * map_size)
             };
             // Rows of vertices, (n + 1)(n + 2) / 2 of them, lifted once each.
             let rows: Vec<Vec<Vec3>> = (0..=n)
@@ -588,7 +582,27 @@ pub fn render(
             uv_transform: Affine2::from_scale(scene.tiles),
         },
     ));
-    for frame in 0.. {
+    if !wait_for_pipelines(&mut app) {
+        return None;
+    }
+    let captured = take_capture(&mut app, camera);
+    let gpu_ms = ADDED_PASSES
+        .iter()
+        .map(|p| median_gpu_ms(&app, &format!("mesostructure/{p}")))
+        .sum();
+    captured.map(|f| (f, gpu_ms))
+}
+
+/// The plugin's passes but the lighting pass (which replaces Bevy's own deferred lighting for
+/// these pixels): what it adds to a frame's GPU time.
+pub const ADDED_PASSES: [&str; 6] =
+    ["height", "gradient", "apex", "occlusion", "bleeding", "bleeding_composite"];
+
+/// Updates `app` until every pipeline has compiled, 12 frames at least (a pass whose pipeline is
+/// not ready does not run, and its image is not this frame's; on a busy machine compiling can
+/// take more than a few frames). False if some are still compiling after 600 frames.
+pub fn wait_for_pipelines(app: &mut App) -> bool {
+    for frame in 0..=600 {
         app.update();
         let cache = app
             .get_sub_app(bevy::render::RenderApp)
@@ -599,36 +613,33 @@ pub fn render(
             !matches!(p.state, CachedPipelineState::Ok(_) | CachedPipelineState::Err(_))
         });
         if frame >= 12 && !pending {
-            break;
-        }
-        if frame >= 600 {
-            return None;
+            return true;
         }
     }
+    false
+}
+
+/// The next capture of `camera`, within 10 frames.
+pub fn take_capture(app: &mut App, camera: Entity) -> Option<CapturedFrame> {
     let captures = app.world().resource::<MesostructureCaptures>().clone();
-    let mut captured = None;
-    for _ in 0..10 {
+    (0..10).find_map(|_| {
         app.update();
-        if let Some(f) = captures.take(camera) {
-            captured = Some(f);
-            break;
-        }
-    }
-    let store = app.world().resource::<DiagnosticsStore>();
-    let median = |span: &str| {
-        let path = DiagnosticPath::new(format!("render/mesostructure/{span}/elapsed_gpu"));
-        let mut v: Vec<f64> = store
-            .get(&path)
-            .map(|d| d.values().copied().collect())
-            .unwrap_or_default();
-        v.sort_by(f64::total_cmp);
-        v.get(v.len() / 2).copied().unwrap_or(0.0)
-    };
-    let gpu_ms = ["height", "gradient", "apex", "occlusion", "bleeding", "bleeding_composite"]
-        .iter()
-        .map(|p| median(p))
-        .sum();
-    captured.map(|f| (f, gpu_ms))
+        captures.take(camera)
+    })
+}
+
+/// Median of the GPU time span `render/{span}/elapsed_gpu` over the frames the diagnostics
+/// keep, ms; 0 where the span was never recorded.
+pub fn median_gpu_ms(app: &App, span: &str) -> f64 {
+    let path = DiagnosticPath::new(format!("render/{span}/elapsed_gpu"));
+    let mut v: Vec<f64> = app
+        .world()
+        .resource::<DiagnosticsStore>()
+        .get(&path)
+        .map(|d| d.values().copied().collect())
+        .unwrap_or_default();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
 /// The lit radiance of a white surface facing the light (ρE0/π, exposure applied), the unit of

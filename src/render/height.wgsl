@@ -116,6 +116,15 @@ fn height_taps(uv: vec2<f32>, level: i32) -> HeightTaps {
     return HeightTaps(mix(row0, row1, f.y), vec2(right - left, below - above), vec2<f32>(size));
 }
 
+// Blinn bump mapping (seed 003), unnormalised: N' = Pu × Pv + Fu (n × Pv) − Fv (n × Pu),
+// oriented like n; `pu`, `pv` the surface's derivatives along the texture axes, `fu`, `fv`
+// those of the displacement F = k · dis.
+fn blinn_normal(n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>, fu: f32, fv: f32) -> vec3<f32> {
+    let base = cross(pu, pv);
+    let orientation = select(-1.0, 1.0, dot(base, n) >= 0.0);
+    return orientation * (base + fu * cross(n, pv) - fv * cross(n, pu));
+}
+
 // ∫ cos(φ − γ) sin φ dφ (antiderivative): the cosine-weighted solid angle of a slice through
 // the core normal, φ measured from it, γ the angle of the true normal projected into the slice.
 fn slice_antiderivative(phi: f32, gamma: f32) -> f32 {
@@ -138,10 +147,7 @@ fn texel_occlusion(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv
     }
     let gradient = textureLoad(horizons, texel + vec2((HORIZON_BLOCKS - 1) * block, 0), 0).xy;
     // The true normal by Blinn's formula with the map's own gradient (as the bump normal).
-    let base = cross(pu, pv);
-    let orientation = select(-1.0, 1.0, dot(base, n) >= 0.0);
-    let true_normal = normalize(orientation
-        * (base + k * gradient.x * cross(n, pv) - k * gradient.y * cross(n, pu)));
+    let true_normal = normalize(blinn_normal(n, pu, pv, k * gradient.x, k * gradient.y));
     var sum = 0.0;
     for (var i = 0u; i < HORIZON_AZIMUTHS / 2u; i++) {
         let a = f32(i) * 2.0 * PI / f32(HORIZON_AZIMUTHS);
@@ -303,9 +309,11 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     let det = duv1.x * duv2.y - duv1.y * duv2.x;
     // Texels of level 0 per pixel along the footprint's longer axis.
     let texels_per_pixel = sqrt(rho2);
+    // The surface's derivatives along the texture axes (world per UV unit), for the bump and
+    // the texture-space horizons alike.
+    let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
+    let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
     if abs(det) > 1e-12 {
-        let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
-        let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
         let has_light = lights.n_directional_lights > 0u;
         let to_light = select(vec3(0.0, 0.0, 1.0), lights.directional_lights[0].direction_to_light, has_light);
         let terms = footprint_terms(uv, duv1, duv2, texels_per_pixel, n, pu, pv, has_light, to_light);
@@ -313,14 +321,10 @@ fn fragment(in: VertexOutput) -> HeightOutput {
         texture_visibility = select(-1.0, terms.y, has_light);
     }
     if material.bump > 0.0 && abs(det) > 1e-12 {
-        let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
-        let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
         // Central differences over two texels of level l0, per UV unit.
         let fu = material.scale * taps.across.x * taps.size.x * 0.5;
         let fv = material.scale * taps.across.y * taps.size.y * 0.5;
-        let base = cross(pu, pv);
-        let orientation = select(-1.0, 1.0, dot(base, n) >= 0.0);
-        let bumped = orientation * (base + fu * cross(n, pv) - fv * cross(n, pu));
+        let bumped = blinn_normal(n, pu, pv, fu, fv);
         let len = length(bumped);
         if len > 0.0 {
             bump = bumped / len;
