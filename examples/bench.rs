@@ -29,13 +29,17 @@
 
 #[path = "common/mod.rs"]
 mod common;
+#[path = "common/frame_timer.rs"]
+mod frame_timer;
 
 use std::{fmt::Write as _, path::PathBuf};
 
 use bevy::{
     camera::RenderTarget,
     diagnostic::{DiagnosticPath, DiagnosticsStore},
+    core_pipeline::prepass::{DeferredPrepass, DepthPrepass},
     pbr::{ContactShadows, ScreenSpaceAmbientOcclusion},
+    camera::Hdr,
     prelude::*,
     render::{
         diagnostic::RenderDiagnosticsPlugin,
@@ -106,17 +110,24 @@ fn triangles(mesh: &Mesh) -> usize {
     mesh.indices().map_or(mesh.count_vertices(), |i| i.len()) / 3
 }
 
+/// How a scene is rendered: with the plugin, or without (the same meshes lit by Bevy's deferred
+/// renderer), to measure what the plugin adds to a frame.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Run {
+    PluginOn,
+    /// The plugin on, Bevy's contact shadows too.
+    ContactShadows,
+    PluginOff,
+}
+
 /// Renders `config` for `warm_up + frames` frames; the per-frame GPU milliseconds of each span
-/// in `spans`, and the adapter's name.
-fn measure(
-    config: Config,
-    contact_shadows: bool,
-    frames: usize,
-    warm_up: usize,
-) -> (Vec<(String, Vec<f64>)>, usize, String) {
+/// in `spans` and of the whole frame (`frame`) and Bevy's deferred lighting
+/// (`bevy/deferred_lighting`), and the adapter's name.
+fn measure(config: Config, run: Run, frames: usize, warm_up: usize) -> (Vec<(String, Vec<f64>)>, usize, String) {
+    let contact_shadows = run == Run::ContactShadows;
     let mut app = App::new();
     app.add_plugins(common::headless_plugins().disable::<bevy::log::LogPlugin>())
-        .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
+        .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin, frame_timer::FrameTimerPlugin));
     app.finish();
     app.cleanup();
     let world = app.world_mut();
@@ -132,10 +143,17 @@ fn measure(
         Camera3d::default(),
         RenderTarget::Image(target.into()),
         Msaa::Off,
-        Mesostructure::default().with_quality(config.quality),
+        // What `Mesostructure` requires, so that the plugin-off frame is the same deferred
+        // frame without the plugin's passes.
+        DepthPrepass,
+        DeferredPrepass,
+        Hdr,
         ScreenSpaceAmbientOcclusion::default(),
         Transform::from_xyz(0.0, 1.2, 2.2).looking_at(Vec3::ZERO, Vec3::Y),
     ));
+    if run != Run::PluginOff {
+        camera.insert(Mesostructure::default().with_quality(config.quality));
+    }
     if contact_shadows {
         camera.insert(ContactShadows::default());
     }
@@ -158,17 +176,15 @@ fn measure(
     let height_map = world
         .resource_mut::<Assets<Image>>()
         .add(HeightMap::bricks(512, 8, 0.15).to_image());
-    let material = world
-        .resource_mut::<Assets<StandardMaterial>>()
-        .add(Color::srgb(0.75, 0.4, 0.3));
-    world.spawn((
+    // Deferred in both runs: with the plugin off Bevy's deferred lighting lights the mesh (the
+    // frame the plugin's lighting pass replaces); with it on the plugin's copy is deferred too.
+    let material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        opaque_render_method: bevy::material::OpaqueRendererMethod::Deferred,
+        ..StandardMaterial::from(Color::srgb(0.75, 0.4, 0.3))
+    });
+    let mut mesh = world.spawn((
         Mesh3d(object),
         MeshMaterial3d(material),
-        MesostructureMaterial {
-            height_map,
-            scale: config.scale,
-            uv_transform: bevy::math::Affine2::from_scale(Vec2::new(6.0, 3.0)),
-        },
         if config.scene == "fullscreen" {
             // Facing the camera and filling its view: every pixel a mesostructure pixel.
             Transform::from_rotation(Quat::from_rotation_arc(
@@ -179,6 +195,13 @@ fn measure(
             Transform::from_rotation(Quat::from_rotation_x(0.5))
         },
     ));
+    if run != Run::PluginOff {
+        mesh.insert(MesostructureMaterial {
+            height_map,
+            scale: config.scale,
+            uv_transform: bevy::math::Affine2::from_scale(Vec2::new(6.0, 3.0)),
+        });
+    }
     for _ in 0..warm_up + frames {
         app.update();
     }
@@ -193,15 +216,35 @@ fn measure(
         .collect();
     spans.push("ssao".into());
     spans.extend(YARDSTICKS.iter().map(|s| s.to_string()));
-    let series = spans
+    let tail = |values: &[f64]| values[values.len().saturating_sub(frames)..].to_vec();
+    let mut series: Vec<(String, Vec<f64>)> = spans
         .into_iter()
         .filter_map(|span| {
             let path = DiagnosticPath::new(format!("render/{span}/elapsed_gpu"));
             let values: Vec<f64> = store.get(&path)?.values().copied().collect();
-            let tail = values[values.len().saturating_sub(frames)..].to_vec();
+            let tail = tail(&values);
             (!tail.is_empty()).then_some((span, tail))
         })
         .collect();
+    // Fragment invocations of the raster passes (pipeline statistics; where supported).
+    for pass in ["height", "lighting", "bleeding_composite"] {
+        let path = DiagnosticPath::new(format!(
+            "render/mesostructure/{pass}/fragment_shader_invocations"
+        ));
+        if let Some(median) = store.get(&path).map(|d| percentile(&d.values().copied().collect::<Vec<_>>(), 0.5)) {
+            println!("  mesostructure/{pass}: {median:.0} fragment invocations a frame");
+        }
+    }
+    let times = app.world().resource::<frame_timer::FrameGpuTimes>();
+    let times = times.0.lock().expect("frame timer lock");
+    for (name, values) in [
+        ("frame", &times.frame_ms),
+        ("bevy/deferred_lighting", &times.deferred_lighting_ms),
+    ] {
+        if !values.is_empty() {
+            series.push((name.to_string(), tail(values)));
+        }
+    }
     (series, count, adapter)
 }
 
@@ -328,7 +371,7 @@ fn main() {
             config.size.y,
             config.scale
         );
-        let (series, triangles, name) = measure(config, false, frames, warm_up);
+        let (series, triangles, name) = measure(config, Run::PluginOn, frames, warm_up);
         adapter = name;
         // All passes, and all but the lighting pass (which replaces Bevy's own deferred lighting
         // for these pixels rather than adding to it).
@@ -344,6 +387,9 @@ fn main() {
         let mut added = vec![0.0; reported];
         let mut lighting_without = None;
         for (span, values) in &series {
+            if span == "frame" {
+                continue; // `frame/plugin_on` below
+            }
             if span.starts_with("mesostructure/") {
                 let newest = &values[values.len() - reported..];
                 for (t, v) in total.iter_mut().zip(newest) {
@@ -383,8 +429,44 @@ fn main() {
             p95: percentile(&added, 0.95),
             frames: reported,
         });
+        // What the plugin adds: the same frame without it (Bevy's deferred lighting for the
+        // same meshes), whole frames bracketed by raw timestamps.
+        let (off, _, _) = measure(config, Run::PluginOff, frames, warm_up);
+        let find = |series: &[(String, Vec<f64>)], name: &str| {
+            series.iter().find(|(s, _)| s == name).map(|(_, v)| v.clone())
+        };
+        if let (Some(on_frames), Some(off_frames)) = (find(&series, "frame"), find(&off, "frame")) {
+            for (pass, values) in [("frame/plugin_on", &on_frames), ("frame/plugin_off", &off_frames)] {
+                rows.push(Row {
+                    config,
+                    triangles,
+                    pass: pass.into(),
+                    median: percentile(values, 0.5),
+                    p95: percentile(values, 0.95),
+                    frames: values.len(),
+                });
+            }
+            rows.push(Row {
+                config,
+                triangles,
+                pass: "frame/added".into(),
+                median: percentile(&on_frames, 0.5) - percentile(&off_frames, 0.5),
+                p95: percentile(&on_frames, 0.95) - percentile(&off_frames, 0.95),
+                frames: on_frames.len().min(off_frames.len()),
+            });
+        }
+        if let Some(values) = find(&off, "bevy/deferred_lighting") {
+            rows.push(Row {
+                config,
+                triangles,
+                pass: "bevy/deferred_lighting_plugin_off".into(),
+                median: percentile(&values, 0.5),
+                p95: percentile(&values, 0.95),
+                frames: values.len(),
+            });
+        }
         // Contact shadows: the same scene with them on; their cost is the lighting pass's growth.
-        let (with, _, _) = measure(config, true, frames, warm_up);
+        let (with, _, _) = measure(config, Run::ContactShadows, frames, warm_up);
         if let (Some(without), Some((_, values))) = (
             lighting_without,
             with.iter().find(|(s, _)| s == "mesostructure/lighting"),
@@ -399,6 +481,7 @@ fn main() {
             });
         }
     }
+
 
     let mut csv = String::from(
         "scene,triangles,width,height,scale,pass,gpu_ms_median,gpu_ms_p95,frames,adapter\n",

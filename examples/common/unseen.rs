@@ -757,7 +757,8 @@ pub struct SceneResult {
 
 /// Runs one scene: renders it, casts the truth at every `step`-th covered pixel. With
 /// `UNSEEN_DUMP=DIR` in the environment it also writes each scene's micro-shadow confusion map
-/// (true positives green, false positives red, misses blue) to `DIR`.
+/// (true positives green, false positives red, misses blue) and AO error map (`_ao`: red too
+/// open, blue too dark, full colour at ±0.25) to `DIR`.
 pub fn run_scene(
     plugins: impl Fn() -> bevy::app::PluginGroupBuilder,
     scene: &Scene,
@@ -822,6 +823,18 @@ pub fn run_scene(
             image.put_pixel(x / step, y / step, image::Rgb(colour));
         }
         let path = std::path::Path::new(&dir).join(format!("{}.png", scene.name.replace('/', "_")));
+        image.save(&path).expect("cannot write the dump");
+        // AO error map: red where the method is too open, blue where too dark (full at ±0.25).
+        let mut image = image::RgbImage::new(size / step, size / step);
+        let mut k = 0;
+        for (&(x, y), t) in pixels.iter().zip(&truths) {
+            let Some(t) = t else { continue };
+            let error = ((estimates[k].ao - t.ao) / 0.25).clamp(-1.0, 1.0);
+            k += 1;
+            let fade = |e: f32| (255.0 * (1.0 - e.max(0.0))) as u8;
+            image.put_pixel(x / step, y / step, image::Rgb([fade(-error), fade(error.abs()), fade(error)]));
+        }
+        let path = std::path::Path::new(&dir).join(format!("{}_ao.png", scene.name.replace('/', "_")));
         image.save(&path).expect("cannot write the dump");
     }
     texels.sort_by(f32::total_cmp);

@@ -249,7 +249,6 @@ pub fn bleeding_composite_pass(
     );
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
-    let span = diagnostics.time_span(ctx.command_encoder(), "mesostructure/bleeding_composite");
     ctx.command_encoder()
         .push_debug_group("mesostructure/bleeding_composite");
     {
@@ -261,10 +260,13 @@ pub fn bleeding_composite_pass(
             occlusion_query_set: None,
             multiview_mask: None,
         });
+        // A pass span: inside the pass, so that pipeline statistics (fragment invocations)
+        // are recorded where the backend has them.
+        let span = diagnostics.pass_span(&mut pass, "mesostructure/bleeding_composite");
         pass.set_render_pipeline(composite);
         pass.set_bind_group(0, &composite_group, &[]);
         pass.draw(0..3, 0..1);
+        span.end(&mut pass);
     }
     ctx.command_encoder().pop_debug_group();
-    span.end(ctx.command_encoder());
 }

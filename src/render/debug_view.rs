@@ -119,7 +119,6 @@ pub fn debug_view_pass(
     };
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
-    let span = diagnostics.time_span(ctx.command_encoder(), "mesostructure/debug_view");
     ctx.command_encoder()
         .push_debug_group("mesostructure/debug_view");
     {
@@ -131,13 +130,16 @@ pub fn debug_view_pass(
             occlusion_query_set: None,
             multiview_mask: None,
         });
+        // A pass span: inside the pass, so that pipeline statistics (fragment invocations)
+        // are recorded where the backend has them.
+        let span = diagnostics.pass_span(&mut pass, "mesostructure/debug_view");
         if let Some(viewport) = camera.viewport.as_ref() {
             pass.set_camera_viewport(viewport);
         }
         pass.set_render_pipeline(pipeline);
         pass.set_bind_group(0, &bind_groups.debug_view, &[offset.0]);
         pass.draw(0..3, 0..1);
+        span.end(&mut pass);
     }
     ctx.command_encoder().pop_debug_group();
-    span.end(ctx.command_encoder());
 }

@@ -181,6 +181,10 @@ impl SpecializedMeshPipeline for HeightPassPipeline {
             "HORIZON_AZIMUTHS".into(),
             crate::height_map_import::HORIZON_AZIMUTHS as u32,
         ));
+        shader_defs.push(bevy::shader::ShaderDefVal::Int(
+            "HORIZON_BANDS".into(),
+            crate::height_map_import::HORIZON_BANDS as i32,
+        ));
         descriptor.fragment = Some(FragmentState {
             shader: self.fragment_shader.clone(),
             shader_defs,
@@ -499,7 +503,6 @@ pub fn height_pass(
     }
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
-    let span = diagnostics.time_span(ctx.command_encoder(), "mesostructure/height");
     ctx.command_encoder()
         .push_debug_group("mesostructure/height");
     {
@@ -533,6 +536,9 @@ pub fn height_pass(
             occlusion_query_set: None,
             multiview_mask: None,
         });
+        // A pass span: inside the pass, so that pipeline statistics (fragment invocations)
+        // are recorded where the backend has them.
+        let span = diagnostics.pass_span(&mut pass, "mesostructure/height");
         if let Some(viewport) =
             Viewport::from_viewport_and_override(camera.viewport.as_ref(), resolution_override)
         {
@@ -541,7 +547,7 @@ pub fn height_pass(
         if let Err(err) = phase.render(&mut pass, world, view_entity) {
             error!("bevy_mesostructure: height pass failed: {err:?}");
         }
+        span.end(&mut pass);
     }
     ctx.command_encoder().pop_debug_group();
-    span.end(ctx.command_encoder());
 }

@@ -20,14 +20,19 @@ struct HeightMaterial {
 @group(3) @binding(1) var<uniform> material: HeightMaterial;
 // Texture-space horizon map (`HorizonMap` in height_map_import.rs), HORIZON_BLOCKS blocks wide:
 // the highest slope towards azimuths 4b … 4b + 3 in block b (i · 360° / HORIZON_AZIMUTHS in
-// texel space; height per UV unit of distance), then the height gradient per UV unit.
+// texel space; height per UV unit of distance) and the UV distances where they are reached,
+// per distance band (see `HorizonMap::to_image`), then the height gradient per UV unit.
 @group(3) @binding(2) var horizons: texture_2d<f32>;
 
 const PI: f32 = 3.141592653589793;
-// Azimuths of the horizon map (`height_map_import::HORIZON_AZIMUTHS`, a multiple of 4), four a
-// block, then the gradient block.
+// Azimuths of the horizon map (`height_map_import::HORIZON_AZIMUTHS`, a multiple of 4): per
+// distance band their slopes four a block, then their distances four a block; then the
+// gradient block.
 const HORIZON_AZIMUTHS: u32 = #{HORIZON_AZIMUTHS}u;
-const HORIZON_BLOCKS: i32 = i32(HORIZON_AZIMUTHS / 4u) + 1;
+const AZIMUTH_BLOCKS: i32 = i32(HORIZON_AZIMUTHS / 4u);
+// Distance bands (`height_map_import::HORIZON_BANDS`).
+const HORIZON_BANDS: i32 = #{HORIZON_BANDS};
+const HORIZON_BLOCKS: i32 = HORIZON_BANDS * 2 * AZIMUTH_BLOCKS + 1;
 
 struct HeightOutput {
     // (dis · k in world units, NDC depth, object id, dis)
@@ -131,37 +136,78 @@ fn slice_antiderivative(phi: f32, gamma: f32) -> f32 {
     return -0.25 * cos(2.0 * phi - gamma) + 0.5 * phi * sin(gamma);
 }
 
-// Cosine-weighted ambient occlusion of the true surface at texel `texel` of the horizon map,
-// about its true normal, from the horizons of its HORIZON_AZIMUTHS azimuths (half as many slices through the core
-// normal n): per slice, the directions above both horizons and in the normal's hemisphere,
-// integrated in closed form (the slice form of Jimenez et al. 2016, here about n). `pu`, `pv`:
-// world vectors per UV unit; `k`: the material's scale.
-fn texel_occlusion(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>, k: f32) -> f32 {
-    var slopes: array<f32, HORIZON_AZIMUTHS>;
-    for (var b = 0; b < HORIZON_BLOCKS - 1; b++) {
-        let v = textureLoad(horizons, texel + vec2(b * block, 0), 0);
-        slopes[4 * b] = v.x;
-        slopes[4 * b + 1] = v.y;
-        slopes[4 * b + 2] = v.z;
-        slopes[4 * b + 3] = v.w;
+// The core around a pixel, as the texture-space horizons need it: the core normal `n`, the
+// world vectors per UV unit `pu`, `pv`, the normal's change per UV unit `nu`, `nv` (from which
+// the core's curvature along any azimuth), and the material's scale `k`.
+struct CoreFrame {
+    n: vec3<f32>,
+    pu: vec3<f32>,
+    pv: vec3<f32>,
+    nu: vec3<f32>,
+    nv: vec3<f32>,
+    k: f32,
+}
+
+// The world vector per UV unit along texel-space direction `d`, and the core's normal
+// curvature along it (1/world units, positive where convex: dN · dP / |dP|²).
+struct Along {
+    along: vec3<f32>,
+    curvature: f32,
+}
+
+fn along_direction(core: CoreFrame, d: vec2<f32>) -> Along {
+    let along = core.pu * d.x + core.pv * d.y;
+    let bend = core.nu * d.x + core.nv * d.y;
+    let reach2 = dot(along, along);
+    return Along(along, select(0.0, dot(bend, along) / reach2, reach2 > 0.0));
+}
+
+// The tangent of the horizon's elevation above the core's tangent plane from a horizon-map
+// `slope` reached at UV `distance` (`height_map_import::horizon_tangent`): the map's slope in
+// world units, less the core's fall κ D² / 2 below its tangent plane at D = distance · reach.
+fn horizon_tangent(slope: f32, distance: f32, k: f32, reach: f32, curvature: f32) -> f32 {
+    return k * slope / reach - 0.5 * curvature * distance * reach;
+}
+
+// The highest horizon tangent of azimuth `i` at `texel` (`block`: texels per block) over the
+// distance bands, each band's slope lowered by the core's fall where it is reached (exact on a
+// flat core; a lower bound on a curved one, tight at both bands' distances).
+fn texel_horizon_tangent(texel: vec2<i32>, block: i32, i: u32, k: f32, reach: f32, curvature: f32) -> f32 {
+    var best = -3.0e38;
+    for (var band = 0; band < HORIZON_BANDS; band++) {
+        let slopes = (2 * band * AZIMUTH_BLOCKS + i32(i / 4u)) * block;
+        let slope = textureLoad(horizons, texel + vec2(slopes, 0), 0)[i % 4u];
+        let distance = textureLoad(horizons, texel + vec2(slopes + AZIMUTH_BLOCKS * block, 0), 0)[i % 4u];
+        best = max(best, horizon_tangent(slope, distance, k, reach, curvature));
     }
+    return best;
+}
+
+// Cosine-weighted ambient occlusion of the true surface at texel `texel` of the horizon map,
+// about its true normal, from the horizons of its HORIZON_AZIMUTHS azimuths (half as many
+// slices through the core normal), each lowered by the core's curvature along it: per slice,
+// the directions above both horizons and in the normal's hemisphere, integrated in closed form
+// (the slice form of Jimenez et al. 2016, here about n).
+fn texel_occlusion(texel: vec2<i32>, block: i32, core: CoreFrame) -> f32 {
+    let n = core.n;
     let gradient = textureLoad(horizons, texel + vec2((HORIZON_BLOCKS - 1) * block, 0), 0).xy;
     // The true normal by Blinn's formula with the map's own gradient (as the bump normal).
-    let true_normal = normalize(blinn_normal(n, pu, pv, k * gradient.x, k * gradient.y));
+    let true_normal = normalize(blinn_normal(n, core.pu, core.pv, core.k * gradient.x, core.k * gradient.y));
     var sum = 0.0;
     for (var i = 0u; i < HORIZON_AZIMUTHS / 2u; i++) {
         let a = f32(i) * 2.0 * PI / f32(HORIZON_AZIMUTHS);
-        let along = pu * cos(a) + pv * sin(a);
-        let reach = length(along);
-        let t = along - n * dot(along, n);
+        let along = along_direction(core, vec2(cos(a), sin(a)));
+        let reach = length(along.along);
+        let t = along.along - n * dot(along.along, n);
         if reach <= 0.0 || dot(t, t) <= 0.0 {
             sum += 1.0;
             continue;
         }
         let tangent = normalize(t);
-        // Horizon elevations from the core plane on both sides of the slice.
-        let up = atan(k * slopes[i] / reach);
-        let down = atan(k * slopes[i + HORIZON_AZIMUTHS / 2u] / reach);
+        // Horizon elevations from the core plane on both sides of the slice (the curvature
+        // along the opposite azimuth is the same).
+        let up = atan(texel_horizon_tangent(texel, block, i, core.k, reach, along.curvature));
+        let down = atan(texel_horizon_tangent(texel, block, i + HORIZON_AZIMUTHS / 2u, core.k, reach, along.curvature));
         let projected = vec2(dot(true_normal, tangent), dot(true_normal, n));
         let gamma = atan2(projected.x, projected.y);
         let hi = max(min(0.5 * PI - up, gamma + 0.5 * PI), 0.0);
@@ -175,9 +221,12 @@ fn texel_occlusion(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv
 
 // Whether the light coming from `to_light` reaches the true surface at `texel` (1) or not (0):
 // its elevation above the core plane against the texel's horizon towards its azimuth (the two
-// nearest azimuths interpolated) — horizon mapping (Max 1988) on the texture-space
-// horizon map. `pu`, `pv`: world vectors per UV unit; `k`: the material's scale.
-fn texel_light_visibility(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>, k: f32, to_light: vec3<f32>) -> f32 {
+// nearest azimuths interpolated, each lowered by the core's curvature) — horizon mapping
+// (Max 1988) on the texture-space horizon map.
+fn texel_light_visibility(texel: vec2<i32>, block: i32, core: CoreFrame, to_light: vec3<f32>) -> f32 {
+    let n = core.n;
+    let pu = core.pu;
+    let pv = core.pv;
     let sin_l = dot(to_light, n);
     let tangential = to_light - n * sin_l;
     let t2 = dot(tangential, tangential);
@@ -197,17 +246,19 @@ fn texel_light_visibility(texel: vec2<i32>, block: i32, n: vec3<f32>, pu: vec3<f
     if uv_length <= 0.0 {
         return 1.0;
     }
-    let reach = length(pu * ab.x + pv * ab.y) / uv_length;
+    let along = along_direction(core, ab / uv_length);
+    let reach = length(along.along);
     let position = atan2(ab.y, ab.x) / (2.0 * PI) * f32(HORIZON_AZIMUTHS);
     let lower = floor(position);
     let count = i32(HORIZON_AZIMUTHS);
     let i0 = u32((i32(lower) % count + count) % count);
     let i1 = (i0 + 1u) % HORIZON_AZIMUTHS;
-    let s0 = textureLoad(horizons, texel + vec2(i32(i0 / 4u) * block, 0), 0)[i0 % 4u];
-    let s1 = textureLoad(horizons, texel + vec2(i32(i1 / 4u) * block, 0), 0)[i1 % 4u];
-    let slope = mix(s0, s1, position - lower);
+    let horizon = mix(
+        texel_horizon_tangent(texel, block, i0, core.k, reach, along.curvature),
+        texel_horizon_tangent(texel, block, i1, core.k, reach, along.curvature),
+        position - lower);
     // tan of the horizon against tan of the light's elevation.
-    return select(0.0, 1.0, sin_l * reach >= k * slope * sqrt(t2));
+    return select(0.0, 1.0, sin_l >= horizon * sqrt(t2));
 }
 
 // The texel of the horizon map `i` texels from `base`, wrapped (height maps tile).
@@ -222,11 +273,10 @@ fn horizon_texel(base: vec2<i32>, i: vec2<i32>, level: vec2<i32>) -> vec2<i32> {
 // footprint, not the occlusion of the filtered heights that the screen-space passes see
 // (which flattens the relief): 2 × 2 taps spread over the footprint (UV derivatives `duv1`,
 // `duv2`). Between 0.75 and 1.5 texels per pixel, a blend of the two.
-fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_pixel: f32, n: vec3<f32>, pu: vec3<f32>, pv: vec3<f32>, has_light: bool, to_light: vec3<f32>) -> vec2<f32> {
+fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_pixel: f32, core: CoreFrame, has_light: bool, to_light: vec3<f32>) -> vec2<f32> {
     let size = vec2<i32>(textureDimensions(horizons));
     let block = size.x / HORIZON_BLOCKS;
     let level = vec2<i32>(block, size.y);
-    let k = material.scale;
     // Texels per pixel of the horizon map's level (it may be coarser than level 0).
     let horizon_texels = texels_per_pixel * f32(block) / f32(textureDimensions(height_mips, 0).x);
     let minified = smoothstep(0.75, 1.5, horizon_texels);
@@ -240,9 +290,9 @@ fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_p
             let texel = horizon_texel(base, vec2<i32>(corner & 1, corner >> 1u), level);
             var visible = 1.0;
             if has_light {
-                visible = texel_light_visibility(texel, block, n, pu, pv, k, to_light);
+                visible = texel_light_visibility(texel, block, core, to_light);
             }
-            corners[corner] = vec2(texel_occlusion(texel, block, n, pu, pv, k), visible);
+            corners[corner] = vec2(texel_occlusion(texel, block, core), visible);
         }
         // Nested mixes: four equal corners give exactly their value (an open, lit flat map
         // stays exactly 1).
@@ -256,9 +306,9 @@ fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_p
             let texel = horizon_texel(vec2<i32>(tap_uv * vec2<f32>(level)), vec2(0), level);
             var visible = 1.0;
             if has_light {
-                visible = texel_light_visibility(texel, block, n, pu, pv, k, to_light);
+                visible = texel_light_visibility(texel, block, core, to_light);
             }
-            minified_terms += 0.25 * vec2(texel_occlusion(texel, block, n, pu, pv, k), visible);
+            minified_terms += 0.25 * vec2(texel_occlusion(texel, block, core), visible);
         }
     }
     return mix(magnified_terms, minified_terms, minified);
@@ -306,6 +356,10 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     var texture_visibility = -1.0;
 #ifdef VERTEX_NORMALS
     let n = normalize(in.world_normal);
+    // The normal's change per UV unit, from its screen derivatives like pu and pv: the core's
+    // curvature, which lowers (convex) or raises (concave) the texture-space horizons.
+    let dn1 = dpdx(n);
+    let dn2 = dpdy(n);
     let det = duv1.x * duv2.y - duv1.y * duv2.x;
     // Texels of level 0 per pixel along the footprint's longer axis.
     let texels_per_pixel = sqrt(rho2);
@@ -316,7 +370,10 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     if abs(det) > 1e-12 {
         let has_light = lights.n_directional_lights > 0u;
         let to_light = select(vec3(0.0, 0.0, 1.0), lights.directional_lights[0].direction_to_light, has_light);
-        let terms = footprint_terms(uv, duv1, duv2, texels_per_pixel, n, pu, pv, has_light, to_light);
+        let nu = (dn1 * duv2.y - dn2 * duv1.y) / det;
+        let nv = (dn2 * duv1.x - dn1 * duv2.x) / det;
+        let core = CoreFrame(n, pu, pv, nu, nv, material.scale);
+        let terms = footprint_terms(uv, duv1, duv2, texels_per_pixel, core, has_light, to_light);
         texture_occlusion = terms.x;
         texture_visibility = select(-1.0, terms.y, has_light);
     }

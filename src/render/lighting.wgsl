@@ -236,6 +236,13 @@ fn vertex(@builtin(vertex_index) vertex_index: u32) -> FullscreenVertexOutput {
     return FullscreenVertexOutput(clip_position, uv);
 }
 
+// Early depth testing forced: the id-depth test (only this pass's pixels) must reject the
+// foreign pixels before the shader runs, which the storage write below would otherwise prevent
+// (the shader writes no depth, so the early test decides exactly as the late one would).
+// `micro_shadow_out` is therefore written on mesostructure pixels only.
+#ifdef EARLY_DEPTH_TEST
+@early_depth_test(force)
+#endif
 @fragment
 fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     var frag_coord = vec4(in.position.xy, 0.0, 0.0);

@@ -769,10 +769,7 @@ fn texture_space_occlusion_matches_its_cpu_mirror() {
             let cpu = texture_space::magnified_occlusion(
                 &horizons,
                 top_down_uv(x, y, SIZE),
-                n,
-                pu,
-                pv,
-                k,
+                &texture_space::CoreFrame::flat(n, pu, pv, k),
             );
             let gpu = frame.occlusion[(y * SIZE + x) as usize];
             worst = worst.max((gpu - cpu).abs());
