@@ -162,14 +162,29 @@ pub fn init_height_pass_pipeline(
     });
 }
 
+/// The height pipeline's key: Bevy's mesh key (vertex layout, view), and whether the view
+/// uses the texture-space horizons (`Mesostructure::texture_space_horizons`), which are
+/// compiled out of the fragment shader where it does not.
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+pub struct HeightPipelineKey {
+    /// Bevy's mesh pipeline key.
+    pub mesh: MeshPipelineKey,
+    /// Compile the texture-space horizons in.
+    pub texture_space_horizons: bool,
+}
+
 impl SpecializedMeshPipeline for HeightPassPipeline {
-    type Key = MeshPipelineKey;
+    type Key = HeightPipelineKey;
 
     fn specialize(
         &self,
-        key: MeshPipelineKey,
+        key: HeightPipelineKey,
         layout: &MeshVertexBufferLayoutRef,
     ) -> Result<RenderPipelineDescriptor, SpecializedMeshPipelineError> {
+        let HeightPipelineKey {
+            mesh: key,
+            texture_space_horizons,
+        } = key;
         // Bevy's own mesh pipeline gives the vertex stage (skinning, morph targets, the same
         // position math as the prepass), the vertex buffers and groups 0–2.
         let mut descriptor = self.mesh_pipeline.specialize(key, layout)?;
@@ -185,6 +200,9 @@ impl SpecializedMeshPipeline for HeightPassPipeline {
             "HORIZON_BANDS".into(),
             crate::height_map_import::HORIZON_BANDS as i32,
         ));
+        if texture_space_horizons {
+            shader_defs.push("TEXTURE_SPACE_HORIZONS".into());
+        }
         descriptor.fragment = Some(FragmentState {
             shader: self.fragment_shader.clone(),
             shader_defs,
@@ -388,7 +406,7 @@ pub fn queue_height_phase(
     render_meshes: Res<RenderAssets<RenderMesh>>,
     render_mesh_instances: Res<RenderMeshInstances>,
     mut phases: ResMut<ViewSortedRenderPhases<HeightPhaseItem>>,
-    views: Query<(&ExtractedView, &RenderVisibleEntities), With<ExtractedMesostructure>>,
+    views: Query<(&ExtractedView, &RenderVisibleEntities, &ExtractedMesostructure)>,
     view_key_cache: Res<ViewKeyCache>,
     materials: Query<(Entity, &MainEntity), With<PreparedMesostructure>>,
     groups: Res<HeightMaterialBindGroups>,
@@ -398,7 +416,7 @@ pub fn queue_height_phase(
         return;
     }
     let draw_function = draw_functions.read().id::<DrawHeight>();
-    for (view, visible) in &views {
+    for (view, visible, settings) in &views {
         let Some(phase) = phases.get_mut(&view.retained_view_entity) else {
             continue;
         };
@@ -443,12 +461,15 @@ pub fn queue_height_phase(
                 });
                 continue;
             }
-            let key = view_key
-                | MeshPipelineKey::from_bits_retain(mesh.key_bits.bits())
-                | MeshPipelineKey::from_primitive_topology_and_strip_index(
-                    mesh.primitive_topology(),
-                    mesh.index_format(),
-                );
+            let key = HeightPipelineKey {
+                mesh: view_key
+                    | MeshPipelineKey::from_bits_retain(mesh.key_bits.bits())
+                    | MeshPipelineKey::from_primitive_topology_and_strip_index(
+                        mesh.primitive_topology(),
+                        mesh.index_format(),
+                    ),
+                texture_space_horizons: settings.0.texture_space_horizons,
+            };
             let pipeline_id =
                 match pipelines.specialize(&pipeline_cache, &pipeline, key, &mesh.layout) {
                     Ok(id) => id,
@@ -506,23 +527,29 @@ pub fn height_pass(
     ctx.command_encoder()
         .push_debug_group("mesostructure/height");
     {
-        let clear = |view| {
+        let attachment = |view, load| {
             Some(RenderPassColorAttachment {
                 view,
                 depth_slice: None,
                 resolve_target: None,
                 ops: Operations {
-                    load: LoadOp::Clear(Default::default()),
+                    load,
                     store: StoreOp::Store,
                 },
             })
         };
+        // Only the MHM is cleared: its object id (0 = no mesostructure) is what every later
+        // pass checks before it reads a pixel's normals, and this pass writes all three
+        // targets wherever it writes an id, so stale normals elsewhere are never read. (The
+        // clears were ~1.2 ms of a 1080p frame on an H100, issue 11; the normals are half of
+        // their bytes.)
+        let clear = LoadOp::Clear(Default::default());
         let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
             label: Some("mesostructure_height_pass"),
             color_attachments: &[
-                clear(&textures.mhm.default_view),
-                clear(&textures.core_normal.default_view),
-                clear(&textures.bump_normal.default_view),
+                attachment(&textures.mhm.default_view, clear),
+                attachment(&textures.core_normal.default_view, LoadOp::Load),
+                attachment(&textures.bump_normal.default_view, LoadOp::Load),
             ],
             depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
                 view: depth.view(),

@@ -367,6 +367,7 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     // the texture-space horizons alike.
     let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
     let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
+#ifdef TEXTURE_SPACE_HORIZONS
     if abs(det) > 1e-12 {
         let has_light = lights.n_directional_lights > 0u;
         let to_light = select(vec3(0.0, 0.0, 1.0), lights.directional_lights[0].direction_to_light, has_light);
@@ -377,6 +378,7 @@ fn fragment(in: VertexOutput) -> HeightOutput {
         texture_occlusion = terms.x;
         texture_visibility = select(-1.0, terms.y, has_light);
     }
+#endif
     if material.bump > 0.0 && abs(det) > 1e-12 {
         // Central differences over two texels of level l0, per UV unit.
         let fu = material.scale * taps.across.x * taps.size.x * 0.5;

@@ -122,10 +122,17 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     let apexes = apex_set_of(mhm, settings, p, apex_sets[base], base);
     let sp = surface_point(p);
     let n0 = textureLoad(core_normal, p, 0).xyz;
+    // The texture-space occlusion of the true surface (the mean over the pixel's footprint
+    // where the map is minified; see height.wgsl) takes over from the apex horizons where the
+    // height pass computed it; then only the apexes' distances are needed (the coarse term's
+    // step), not their horizons nor N'.
+    let texture_space = textureLoad(bump_normal, p, 0).w;
+    let from_texture_space = settings.texture_space_horizons != 0u && texture_space >= 0.0
+        && settings.horizon_search_steps == 0u;
     // The paper's eq. (6) measures from the core plane; the cosine-weighted form from the
     // tangent plane of the mesostructure surface.
     var n = n0;
-    if settings.occlusion_form == 0u {
+    if settings.occlusion_form == 0u && !from_texture_space {
         n = surface::mesostructure_normal(
             mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, sp, n0);
     }
@@ -142,6 +149,9 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
         if distance > 0.0 {
             nearest = min(nearest, distance);
             farthest = max(farthest, distance);
+        }
+        if from_texture_space {
+            continue;
         }
         let d = surface_point(p + o) - sp;
         let len = length(d);
@@ -161,10 +171,7 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     visibility /= f32(SECTORS);
-    // Where the height map is minified the mean of the fine occlusion over the pixel's
-    // footprint, from the texture-space horizon map, takes over (see height.wgsl).
-    let texture_space = textureLoad(bump_normal, p, 0).w;
-    if settings.texture_space_horizons != 0u && texture_space >= 0.0 {
+    if from_texture_space {
         visibility = texture_space;
     }
     // No apex, no scale for the coarse step: a flat height map stays neutral.
