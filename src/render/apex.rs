@@ -2,6 +2,7 @@
 
 use bevy::{
     prelude::*,
+    shader::ShaderDefVal,
     render::{
         render_phase::ViewSortedRenderPhases,
         render_resource::{binding_types::*, *},
@@ -23,6 +24,9 @@ pub struct ApexPipeline {
     pub layout: BindGroupLayoutDescriptor,
     /// The compute pipeline.
     pub pipeline: CachedComputePipelineId,
+    /// The same with the search statistics counted (shader def `STATISTICS`), for views whose
+    /// frames are captured ([`super::capture::CapturedFrame::apex_stats`]).
+    pub pipeline_with_statistics: CachedComputePipelineId,
 }
 
 /// Queues the apex pipeline (render startup).
@@ -44,14 +48,25 @@ pub fn init_apex_pipeline(
             ),
         ),
     );
-    let pipeline = pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
-        label: Some("mesostructure_apex_pipeline".into()),
+    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "apex.wgsl");
+    let descriptor = |label: &'static str, shader_defs: Vec<ShaderDefVal>| ComputePipelineDescriptor {
+        label: Some(label.into()),
         layout: vec![layout.clone()],
-        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "apex.wgsl"),
+        shader: shader.clone(),
+        shader_defs,
         entry_point: Some("apex".into()),
         ..default()
+    };
+    let pipeline = pipeline_cache.queue_compute_pipeline(descriptor("mesostructure_apex_pipeline", vec![]));
+    let pipeline_with_statistics = pipeline_cache.queue_compute_pipeline(descriptor(
+        "mesostructure_apex_statistics_pipeline",
+        vec!["STATISTICS".into()],
+    ));
+    commands.insert_resource(ApexPipeline {
+        layout,
+        pipeline,
+        pipeline_with_statistics,
     });
-    commands.insert_resource(ApexPipeline { layout, pipeline });
 }
 
 /// Core3d system: dispatches the apex pass for the current view, timed as `mesostructure/apex`.
@@ -62,17 +77,24 @@ pub fn apex_pass(
         &ViewMesostructureBindGroups,
         &ViewMesostructureUniformOffset,
         &crate::settings::ExtractedMesostructure,
+        Has<super::capture::ExtractedCapture>,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     pipeline: Res<ApexPipeline>,
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, textures, bind_groups, offset, settings) = view.into_inner();
+    let (extracted_view, textures, bind_groups, offset, settings, captured) = view.into_inner();
     if !settings.0.needs_apex_sets() || !view_has_mesostructure(&phases, extracted_view) {
         return;
     }
-    let Some(compute) = pipeline_cache.get_compute_pipeline(pipeline.pipeline) else {
+    // Captured views count the search statistics (until that variant has compiled, the plain
+    // one runs and they read zero).
+    let counted = captured
+        .then(|| pipeline_cache.get_compute_pipeline(pipeline.pipeline_with_statistics))
+        .flatten();
+    let Some(compute) = counted.or_else(|| pipeline_cache.get_compute_pipeline(pipeline.pipeline))
+    else {
         return;
     };
     dispatch_per_pixel(

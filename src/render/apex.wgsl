@@ -236,11 +236,17 @@ fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 
     header |= count;
+#ifdef STATISTICS
+    // Only in the variant for captured views: three global atomics per pixel are contended
+    // work that nothing reads otherwise (the debug view reads APEX_TRUNCATED from the header).
     atomicAdd(&stats[0], 1u);
     atomicAdd(&stats[2], steps);
     if truncated {
-        header |= APEX_TRUNCATED;
         atomicAdd(&stats[1], 1u);
+    }
+#endif
+    if truncated {
+        header |= APEX_TRUNCATED;
     }
     apex_sets[base] = header;
 }
