@@ -171,6 +171,7 @@ pub fn lighting_pass(
         &ViewLightingPipeline,
         &ViewMesostructureTextures,
         &super::ViewMesostructureUniformOffset,
+        Option<&super::occlusion::ViewOcclusionPipeline>,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     lighting: Res<LightingPipeline>,
@@ -179,12 +180,20 @@ pub fn lighting_pass(
     occlusion_inputs: (
         Res<super::gradient::GradientPipeline>,
         Res<super::apex::ApexPipeline>,
-        Res<super::occlusion::OcclusionPipeline>,
     ),
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, settings, mesh_view, target, id_depth, pipeline_id, textures, offset) =
-        view.into_inner();
+    let (
+        extracted_view,
+        settings,
+        mesh_view,
+        target,
+        id_depth,
+        pipeline_id,
+        textures,
+        offset,
+        occlusion_pipeline,
+    ) = view.into_inner();
     let (Some(pipeline), Some(settings_binding)) = (
         pipeline_cache.get_render_pipeline(pipeline_id.0),
         uniforms.0.binding(),
@@ -198,8 +207,8 @@ pub fn lighting_pass(
     // compiled (in the background, over the first frames); until then "open", never the
     // zero-initialised image (a dark flash at start-up).
     let compiled = |id| pipeline_cache.get_compute_pipeline(id).is_some();
-    let (gradient, apex, occlusion_pipeline) = &occlusion_inputs;
-    let occlusion_ran = compiled(occlusion_pipeline.pipeline)
+    let (gradient, apex) = &occlusion_inputs;
+    let occlusion_ran = occlusion_pipeline.is_some_and(|p| compiled(p.0))
         && compiled(gradient.pipeline)
         && (settings.0.horizon_search_steps > 0 || compiled(apex.pipeline));
     let occlusion = if settings.0.occlusion && current && occlusion_ran {

@@ -189,6 +189,7 @@ pub(crate) fn build(app: &mut App) {
         .init_resource::<SpecializedMeshPipelines<height::HeightPassPipeline>>()
         .init_resource::<SpecializedRenderPipelines<debug_view::DebugViewPipeline>>()
         .init_resource::<SpecializedRenderPipelines<bleeding::BleedingPipeline>>()
+        .init_resource::<SpecializedComputePipelines<occlusion::OcclusionPipeline>>()
         .init_resource::<DrawFunctions<height::HeightPhaseItem>>()
         .init_resource::<ViewSortedRenderPhases<height::HeightPhaseItem>>()
         .add_render_command::<height::HeightPhaseItem, height::DrawHeight>()
@@ -220,6 +221,7 @@ pub(crate) fn build(app: &mut App) {
                 debug_view::prepare_debug_view_pipelines.in_set(RenderSystems::Prepare),
                 lighting::prepare_lighting_pipelines.in_set(RenderSystems::Prepare),
                 bleeding::prepare_bleeding_pipelines.in_set(RenderSystems::Prepare),
+                occlusion::prepare_occlusion_pipelines.in_set(RenderSystems::Prepare),
                 (prepare_view_textures, prepare_view_uniforms)
                     .in_set(RenderSystems::PrepareResources),
                 height::prepare_height_material_bind_groups

@@ -3,6 +3,7 @@
 
 use bevy::{
     prelude::*,
+    shader::ShaderDefVal,
     render::{
         render_phase::ViewSortedRenderPhases,
         render_resource::{binding_types::*, *},
@@ -16,24 +17,82 @@ use super::{
     ViewMesostructureUniformOffset, dispatch_per_pixel, height::HeightPhaseItem,
     view_has_mesostructure,
 };
-use crate::settings::{ExtractedMesostructure, MesostructureUniform};
+use crate::{
+    reference::OcclusionForm,
+    settings::{ExtractedMesostructure, MesostructureUniform},
+};
 
-/// Pipeline and layout of the occlusion pass.
+/// Layout and shader of the occlusion pass; its pipelines are specialised per
+/// [`OcclusionPipelineKey`], as Bevy keys its SSAO pipeline.
 #[derive(Resource)]
 pub struct OcclusionPipeline {
     /// MHM, core normals, apex sets, occlusion (storage), settings, view, MHGM, prepass depth,
     /// bump normals (whose `w` carries the height pass's texture-space occlusion).
     pub layout: BindGroupLayoutDescriptor,
-    /// The compute pipeline.
-    pub pipeline: CachedComputePipelineId,
+    shader: Handle<Shader>,
 }
 
+/// What the occlusion shader is compiled for (shader defs instead of per-pixel branches on
+/// uniforms).
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+pub struct OcclusionPipelineKey {
+    /// The integral (`OCCLUSION_FORM_PAPER` for eq. (6)).
+    pub form: OcclusionForm,
+    /// The coarse depth-buffer term multiplies (`COARSE_OCCLUSION`).
+    pub coarse: bool,
+    /// The height pass's texture-space occlusion replaces the apex horizons where it has one
+    /// (`TEXTURE_SPACE_HORIZONS`).
+    pub texture_space_horizons: bool,
+    /// The brute-force horizon-search baseline instead of the apex sets (`HORIZON_SEARCH`).
+    pub horizon_search: bool,
+}
+
+impl OcclusionPipelineKey {
+    /// The key of a view's settings.
+    pub fn of(settings: &crate::Mesostructure) -> Self {
+        Self {
+            form: settings.occlusion_form,
+            coarse: settings.coarse_occlusion,
+            // The baseline stays the baseline: it never takes the texture-space occlusion.
+            texture_space_horizons: settings.texture_space_horizons
+                && settings.horizon_search_steps == 0,
+            horizon_search: settings.horizon_search_steps > 0,
+        }
+    }
+}
+
+impl SpecializedComputePipeline for OcclusionPipeline {
+    type Key = OcclusionPipelineKey;
+
+    fn specialize(&self, key: OcclusionPipelineKey) -> ComputePipelineDescriptor {
+        let mut shader_defs: Vec<ShaderDefVal> = vec![];
+        for (on, def) in [
+            (key.form == OcclusionForm::Paper, "OCCLUSION_FORM_PAPER"),
+            (key.coarse, "COARSE_OCCLUSION"),
+            (key.texture_space_horizons, "TEXTURE_SPACE_HORIZONS"),
+            (key.horizon_search, "HORIZON_SEARCH"),
+        ] {
+            if on {
+                shader_defs.push(def.into());
+            }
+        }
+        ComputePipelineDescriptor {
+            label: Some("mesostructure_occlusion_pipeline".into()),
+            layout: vec![self.layout.clone()],
+            shader: self.shader.clone(),
+            shader_defs,
+            entry_point: Some("occlusion".into()),
+            ..default()
+        }
+    }
+}
+
+/// The occlusion pipeline of a view.
+#[derive(Component)]
+pub struct ViewOcclusionPipeline(pub CachedComputePipelineId);
+
 /// Queues the occlusion pipeline (render startup).
-pub fn init_occlusion_pipeline(
-    mut commands: Commands,
-    pipeline_cache: Res<PipelineCache>,
-    asset_server: Res<AssetServer>,
-) {
+pub fn init_occlusion_pipeline(mut commands: Commands, asset_server: Res<AssetServer>) {
     let layout = BindGroupLayoutDescriptor::new(
         "mesostructure_occlusion_layout",
         &BindGroupLayoutEntries::sequential(
@@ -51,14 +110,24 @@ pub fn init_occlusion_pipeline(
             ),
         ),
     );
-    let pipeline = pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
-        label: Some("mesostructure_occlusion_pipeline".into()),
-        layout: vec![layout.clone()],
+    commands.insert_resource(OcclusionPipeline {
+        layout,
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "occlusion.wgsl"),
-        entry_point: Some("occlusion".into()),
-        ..default()
     });
-    commands.insert_resource(OcclusionPipeline { layout, pipeline });
+}
+
+/// Specialises each view's occlusion pipeline for its settings (render `Prepare`).
+pub fn prepare_occlusion_pipelines(
+    mut commands: Commands,
+    pipeline_cache: Res<PipelineCache>,
+    mut pipelines: ResMut<SpecializedComputePipelines<OcclusionPipeline>>,
+    pipeline: Res<OcclusionPipeline>,
+    views: Query<(Entity, &ExtractedMesostructure)>,
+) {
+    for (entity, settings) in &views {
+        let id = pipelines.specialize(&pipeline_cache, &pipeline, OcclusionPipelineKey::of(&settings.0));
+        commands.entity(entity).insert(ViewOcclusionPipeline(id));
+    }
 }
 
 /// Core3d system: computes the occlusion of the current view, timed as
@@ -71,17 +140,18 @@ pub fn occlusion_pass(
         &ViewMesostructureBindGroups,
         &ViewMesostructureUniformOffset,
         &ViewUniformOffset,
+        &ViewOcclusionPipeline,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
-    pipeline: Res<OcclusionPipeline>,
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, settings, textures, bind_groups, offset, view_offset) = view.into_inner();
+    let (extracted_view, settings, textures, bind_groups, offset, view_offset, pipeline) =
+        view.into_inner();
     if !settings.0.occlusion || !view_has_mesostructure(&phases, extracted_view) {
         return;
     }
-    let Some(compute) = pipeline_cache.get_compute_pipeline(pipeline.pipeline) else {
+    let Some(compute) = pipeline_cache.get_compute_pipeline(pipeline.0) else {
         return;
     };
     dispatch_per_pixel(

@@ -102,7 +102,11 @@ fn horizon_search(p: vec2<i32>, size: vec2<i32>, sp: vec3<f32>, n: vec3<f32>) ->
                 sin_h = max(sin_h, clamp(dot(d, n) / len, 0.0, 1.0));
             }
         }
-        visibility += select(1.0 - sin_h * sin_h, 1.0 - sin_h, settings.occlusion_form == 1u);
+#ifdef OCCLUSION_FORM_PAPER
+        visibility += 1.0 - sin_h;
+#else
+        visibility += 1.0 - sin_h * sin_h;
+#endif
     }
     return visibility / f32(directions);
 }
@@ -127,19 +131,23 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     // height pass computed it; then only the apexes' distances are needed (the coarse term's
     // step), not their horizons nor N'.
     let texture_space = textureLoad(bump_normal, p, 0).w;
-    let from_texture_space = settings.texture_space_horizons != 0u && texture_space >= 0.0
-        && settings.horizon_search_steps == 0u;
+#ifdef TEXTURE_SPACE_HORIZONS
+    let from_texture_space = texture_space >= 0.0;
+#else
+    let from_texture_space = false;
+#endif
     // The paper's eq. (6) measures from the core plane; the cosine-weighted form from the
     // tangent plane of the mesostructure surface.
     var n = n0;
-    if settings.occlusion_form == 0u && !from_texture_space {
+#ifndef OCCLUSION_FORM_PAPER
+    if !from_texture_space {
         n = surface::mesostructure_normal(
             mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, sp, n0);
     }
-    if settings.horizon_search_steps > 0u {
-        textureStore(occlusion_out, p, vec4<f32>(horizon_search(p, size, sp, n)));
-        return;
-    }
+#endif
+#ifdef HORIZON_SEARCH
+    textureStore(occlusion_out, p, vec4<f32>(horizon_search(p, size, sp, n)));
+#else
     var sin_h = array<f32, 8>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     var nearest = 1.0e9;
     var farthest = 0.0;
@@ -164,19 +172,22 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     var visibility = 0.0;
     for (var s = 0u; s < SECTORS; s++) {
-        if settings.occlusion_form == 1u {
-            visibility += 1.0 - sin_h[s];
-        } else {
-            visibility += 1.0 - sin_h[s] * sin_h[s];
-        }
+#ifdef OCCLUSION_FORM_PAPER
+        visibility += 1.0 - sin_h[s];
+#else
+        visibility += 1.0 - sin_h[s] * sin_h[s];
+#endif
     }
     visibility /= f32(SECTORS);
     if from_texture_space {
         visibility = texture_space;
     }
+#ifdef COARSE_OCCLUSION
     // No apex, no scale for the coarse step: a flat height map stays neutral.
-    if settings.coarse_occlusion != 0u && farthest > 0.0 {
+    if farthest > 0.0 {
         visibility *= coarse_occlusion(p, n0, max(0.5 * (nearest + farthest), 1.0));
     }
+#endif
     textureStore(occlusion_out, p, vec4<f32>(visibility));
+#endif
 }
