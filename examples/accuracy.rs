@@ -31,7 +31,7 @@
 //! Methods: `none` (no mesostructure term); `bevy-ssao` (Bevy's SSAO on the same bricks built as
 //! real geometry — a 256² grid — its AO taken as the ratio of an ambient-only picture with and
 //! without it; it has no shadow or bounce term); `horizon-search` (the brute-force baseline,
-//! `Mesostructure::horizon_search_steps`: 8 directions out to 32 px with 4, 8, 16 and 32
+//! `HorizonSearchBaseline`: 8 directions out to 32 px with 4, 8, 16 and 32
 //! samples each; AO only); `mesostructure` at each quality preset (`low`, `medium`, `high`,
 //! `ultra`) and the default at quarter working resolution (`high@quarter`; `medium` is `high`
 //! at half).
@@ -70,7 +70,7 @@ use bevy::{
     },
 };
 use bevy_mesostructure::{
-    CapturedFrame, MesostructureCapture, prelude::*,
+    CapturedFrame, HorizonSearchBaseline, MesostructureCapture, prelude::*,
     reference::ground_truth::HeightField,
 };
 
@@ -90,7 +90,7 @@ fn render(
     map: &HeightMap,
     k: f32,
     size: u32,
-    settings: Option<Mesostructure>,
+    settings: Option<common::unseen::Variant>,
     ssao: bool,
     elevation: Option<f32>,
 ) -> (Render, Vec<f32>) {
@@ -111,8 +111,11 @@ fn render(
         Tonemapping::None,
         Transform::from_xyz(0.0, HEIGHT, 0.0).looking_at(Vec3::ZERO, Vec3::NEG_Z),
     ));
-    if let Some(s) = settings.clone() {
-        camera.insert((s, MesostructureCapture));
+    if let Some(v) = settings.clone() {
+        camera.insert((v.settings, MesostructureCapture));
+        if let Some(baseline) = v.baseline {
+            camera.insert(baseline);
+        }
     }
     if ssao {
         camera.insert(ScreenSpaceAmbientOcclusion::default());
@@ -392,7 +395,7 @@ fn main() {
             &flat,
             0.1,
             size,
-            Some(Mesostructure::default()),
+            Some(Mesostructure::default().into()),
             false,
             Some(90.0),
         );
@@ -428,11 +431,13 @@ fn main() {
                 let searches: Vec<(u32, f64, CapturedFrame)> = [4u32, 8, 16, 32]
                     .into_iter()
                     .filter_map(|steps| {
-                        let settings = Mesostructure {
-                            horizon_search_steps: steps,
-                            micro_shadows: false,
-                            bleeding: false,
-                            ..default()
+                        let settings = common::unseen::Variant {
+                            settings: Mesostructure {
+                                micro_shadows: false,
+                                bleeding: false,
+                                ..default()
+                            },
+                            baseline: Some(HorizonSearchBaseline { steps }),
                         };
                         let (r, _) = render(map, k, size, Some(settings), false, None);
                         Some((steps, r.gpu_ms, r.frame?))
@@ -534,22 +539,20 @@ fn main() {
                             flip: flip_of(&picture),
                         });
                     }
-                    let variants = MesostructureQuality::ALL.map(|q| {
-                        (
-                            q.name().to_string(),
-                            Mesostructure::default().with_quality(q),
-                        )
+                    let variants = MesostructureQuality::ALL.map(|quality| {
+                        (quality.name().to_string(), Mesostructure { quality, ..default() })
                     });
                     let quarter = (
                         "high@quarter".to_string(),
                         Mesostructure {
-                            working_resolution: WorkingResolution::Quarter,
+                            quality: MesostructureQuality::High
+                                .custom(|c| c.working_resolution = WorkingResolution::Quarter),
                             ..default()
                         },
                     );
                     for (setting, settings) in variants.into_iter().chain([quarter]) {
                         // AO under ambient light alone is not needed: the capture carries it.
-                        let (lit, _) = render(map, k, size, Some(settings), false, Some(e));
+                        let (lit, _) = render(map, k, size, Some(settings.into()), false, Some(e));
                         let Some(frame) = lit.frame else { continue };
                         let ao: Vec<f32> =
                             samples.iter().map(|s| frame.occlusion[index(s)]).collect();
@@ -755,47 +758,56 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
 }
 
 /// The settings a `--variants` name stands for.
-fn variant_settings(name: &str) -> Option<Mesostructure> {
-    if let Some(q) = MesostructureQuality::from_name(name) {
-        return Some(Mesostructure::default().with_quality(q));
+fn variant_settings(name: &str) -> Option<common::unseen::Variant> {
+    if let Some(quality) = MesostructureQuality::from_name(name) {
+        return Some(Mesostructure { quality, ..default() }.into());
     }
     let (key, value) = name.split_once('=').unwrap_or((name, ""));
     let n = value.parse::<u32>().ok();
-    Some(match key {
-        "search" => Mesostructure {
-            horizon_search_steps: n?,
-            ..default()
-        },
-        "radius" => Mesostructure {
-            max_sample_radius: n?,
-            ..default()
-        },
-        "directions" => Mesostructure {
-            apex_directions: n?,
-            ..default()
-        },
-        "steps" => Mesostructure {
-            max_ascent_steps: n?,
-            ..default()
-        },
-        "softness" => Mesostructure {
-            micro_shadow_softness: value.parse().ok()?,
-            ..default()
-        },
-        "samples" => Mesostructure {
-            bleeding_samples: n?,
-            ..default()
-        },
-        "no-coarse" => Mesostructure {
-            coarse_occlusion: false,
-            ..default()
-        },
-        "screen-space" => Mesostructure {
-            texture_space_horizons: false,
-            ..default()
-        },
-        _ => return None,
-    })
+    let custom = |change: &dyn Fn(&mut MesostructureCost)| Mesostructure {
+        quality: MesostructureQuality::High.custom(change),
+        ..default()
+    };
+    Some(
+        match key {
+            "search" => {
+                return Some(common::unseen::Variant {
+                    settings: Mesostructure::default(),
+                    baseline: Some(HorizonSearchBaseline { steps: n? }),
+                });
+            }
+            "radius" => {
+                let n = n?;
+                custom(&|c| c.max_sample_radius = n)
+            }
+            "directions" => {
+                let n = n?;
+                custom(&|c| c.apex_directions = n)
+            }
+            "steps" => {
+                let n = n?;
+                custom(&|c| c.max_ascent_steps = n)
+            }
+            "samples" => {
+                let n = n?;
+                custom(&|c| c.bleeding_samples = n)
+            }
+            "softness" => Mesostructure {
+                micro_shadow_softness: value.parse().ok()?,
+                ..default()
+            },
+            "no-coarse" => Mesostructure {
+                coarse_occlusion: false,
+                ..default()
+            },
+            "screen-space" => Mesostructure {
+                texture_space_horizons: false,
+                ..default()
+            },
+            _ => return None,
+        }
+        .into(),
+    )
 }
 
 /// The unseen-content suite (`--suite unseen`): per scene, the plugin at its defaults and no

@@ -152,7 +152,10 @@ fn measure(config: Config, run: Run, frames: usize, warm_up: usize) -> (Vec<(Str
         Transform::from_xyz(0.0, 1.2, 2.2).looking_at(Vec3::ZERO, Vec3::Y),
     ));
     if run != Run::PluginOff {
-        camera.insert(Mesostructure::default().with_quality(config.quality));
+        camera.insert(Mesostructure {
+            quality: config.quality,
+            ..default()
+        });
     }
     if contact_shadows {
         camera.insert(ContactShadows::default());

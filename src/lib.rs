@@ -57,14 +57,15 @@
 //! one warning, and the mesh or camera renders as it would without the plugin.
 //!
 //! ## Settings
-//! [`Mesostructure::with_quality`] sets the fields that trade cost for accuracy together
-//! ([`MesostructureQuality`]: `Low`, `Medium`, `High` = default, `Ultra`); among them
-//! [`WorkingResolution`], which searches the apex sets — the largest pass — once per pixel or
-//! once per 2×2 or 4×4 block. `docs/accuracy.md` and `docs/bench.md` give each preset's error
-//! and GPU time.
+//! [`Mesostructure::quality`] sets what trades cost for accuracy ([`MesostructureQuality`]:
+//! the presets `Low`, `Medium`, `High` = default, `Ultra`, or `Custom` values of
+//! [`MesostructureCost`]); among them [`WorkingResolution`], which searches the apex sets — the
+//! largest pass — once per pixel or once per 2×2 or 4×4 block. `docs/accuracy.md` and
+//! `docs/bench.md` give each preset's error and GPU time. A [`MesostructureDebugView`] next to
+//! the camera's [`Mesostructure`] shows an intermediate image instead of the lit scene.
 //!
 //! Every field of [`Mesostructure`] and [`MesostructureMaterial`] is documented with its unit and
-//! range ([`Mesostructure::RANGES`]); each effect switches off by itself and then costs nothing
+//! range ([`Mesostructure::RANGES`], [`MesostructureCost::RANGES`]); each effect switches off by itself and then costs nothing
 //! (with every term off and no bump mapping, no pass runs at all). The weights λa, λs, λd of the
 //! paper's eq. (2) are `ambient_weight`, `direct_weight` and `bleeding_weight`.
 //!
@@ -95,14 +96,15 @@ use bevy::{
 pub use material::MesostructureMaterial;
 pub use render::capture::{CapturedFrame, MesostructureCapture, MesostructureCaptures};
 pub use settings::{
-    Mesostructure, MesostructureDebugView, MesostructureQuality, WorkingResolution,
+    HorizonSearchBaseline, Mesostructure, MesostructureCost, MesostructureDebugView,
+    MesostructureQuality, WorkingResolution,
 };
 
 /// Everything an app needs.
 pub mod prelude {
     pub use crate::{
-        Mesostructure, MesostructureDebugView, MesostructureMaterial, MesostructurePlugin,
-        MesostructureQuality, WorkingResolution, height_maps::HeightMap,
+        Mesostructure, MesostructureCost, MesostructureDebugView, MesostructureMaterial,
+        MesostructurePlugin, MesostructureQuality, WorkingResolution, height_maps::HeightMap,
     };
 }
 
@@ -115,6 +117,9 @@ impl Plugin for MesostructurePlugin {
     fn build(&self, app: &mut App) {
         app.register_type::<Mesostructure>()
             .register_type::<MesostructureQuality>()
+            .register_type::<MesostructureCost>()
+            .register_type::<MesostructureDebugView>()
+            .register_type::<HorizonSearchBaseline>()
             .register_type::<MesostructureMaterial>()
             .init_resource::<warn_once::WarnedOnce>()
             .init_resource::<material::HeightMapMips>()

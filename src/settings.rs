@@ -34,29 +34,11 @@ use crate::reference::{
 #[reflect(Component, Default, Clone, Debug, PartialEq)]
 #[require(DepthPrepass, DeferredPrepass, Hdr)]
 pub struct Mesostructure {
-    /// What the camera shows: the lit scene, or one of the intermediate images.
-    pub debug_view: MesostructureDebugView,
-    /// Indirect sample directions around each pixel for its apex set (0–16). More directions
-    /// find more of the apexes that occlude a pixel, at a cost linear in the count.
-    pub apex_directions: u32,
-    /// Bound on the steps (one pixel each) of the gradient ascent to the direct apex (1–512).
-    /// Where it is hit the pixel reached stands in for the apex; the `ApexCount` debug view
-    /// shows those pixels in magenta. The work per pixel is at most
-    /// `max_ascent_steps + 2 × apex_directions × max_sample_radius` texel reads.
-    pub max_ascent_steps: u32,
-    /// How far, in pixels (1–256), each direction's walk from the pixel goes looking for the
-    /// valley beyond which something stands up, and how far the climb along the direction then
-    /// goes to that structure's apex. Both stop on their own (where the height first rises,
-    /// where it stops rising), so the apex set adapts to the size of the structures; this only
-    /// bounds them.
-    pub max_sample_radius: u32,
-    /// The resolution the apex sets are searched at: every pixel (`Full`, the paper's), or once
-    /// per 2×2 (`Half`) or 4×4 (`Quarter`) block of pixels, whose pixels then share that set
-    /// (the apex search is the largest pass; it costs about a quarter or a sixteenth). The
-    /// occlusion, micro-shadows and bleeding stay per pixel: each measures its own horizons
-    /// against the shared apexes. Pixels across a depth jump or on another object than the
-    /// block's searched pixel get no apexes.
-    pub working_resolution: WorkingResolution,
+    /// Cost against accuracy: a preset ([`MesostructureQuality::High`] by default) or
+    /// [`MesostructureQuality::Custom`] values of the apex search and the bleeding gather
+    /// ([`MesostructureCost`]). `docs/accuracy.md` and `docs/bench.md` give each preset's error
+    /// and GPU time.
+    pub quality: MesostructureQuality,
     /// Relative depth jump (fraction of NDC depth, 0.0001–1) above which two neighbouring pixels
     /// of the same object count as separated (a depth discontinuity ends the visible region).
     pub depth_discontinuity: f32,
@@ -65,11 +47,6 @@ pub struct Mesostructure {
     /// The integral that turns horizon angles into occlusion: the physically based
     /// cosine-weighted form (default) or the paper's eq. (6).
     pub occlusion_form: OcclusionForm,
-    /// 0 (default): horizons from the apex sets, the paper's method. N (1–64): a brute-force
-    /// horizon search instead — N samples along each of `apex_directions` directions out to
-    /// `max_sample_radius` pixels — a fixed-radius baseline for comparisons (the `accuracy`
-    /// example), not a quality setting.
-    pub horizon_search_steps: u32,
     /// Multiply the mesostructure occlusion with a coarse horizon-based AO on the depth buffer
     /// (Bavoil et al. 2008), whose step is the adaptive `(min + max) / 2` of the pixel's apex
     /// distances (paper §3.1): the occlusion of the core geometry around the bumps. Pixels
@@ -96,9 +73,6 @@ pub struct Mesostructure {
     /// One-bounce colour bleeding (paper §3.3, eq. 8): light reflected by the directly lit
     /// bumps onto their neighbours.
     pub bleeding: bool,
-    /// Samples (1–16) along the path from a pixel to each apex of its set that the bleeding
-    /// gathers from. Cost is linear in the count.
-    pub bleeding_samples: u32,
     /// λa of paper eq. (2): weight of ambient and environment light (0–4; 1 = physical).
     pub ambient_weight: f32,
     /// λs of paper eq. (2): weight of direct light from directional, point and spot lights
@@ -109,36 +83,92 @@ pub struct Mesostructure {
 }
 
 impl Default for Mesostructure {
-    /// 8 directions (the paper's "several directions", one per 8-neighbour direction), 64 ascent
-    /// steps (enough for structures up to ~64 px across, a quarter of a 256² texture cache),
-    /// walks of up to 32 px, and a 2 % depth jump, which keeps planes at grazing angles
-    /// connected (the slope test covers them) but separates overlapping parts of one object.
-    /// Every effect on; weights 1 (eq. 2 with physical weights: the result approximates a
-    /// path tracer's one-bounce image); 4 bleeding samples per apex path, which resolve the
-    /// walls of a groove to a few percent of a 16-sample gather.
+    /// The `High` preset (see [`MesostructureCost`]), a 2 % depth jump, which keeps planes at
+    /// grazing angles connected (the slope test covers them) but separates overlapping parts
+    /// of one object. Every effect on; weights 1 (eq. 2 with physical weights: the result
+    /// approximates a path tracer's one-bounce image).
     fn default() -> Self {
         Self {
-            debug_view: MesostructureDebugView::None,
-            apex_directions: 8,
-            max_ascent_steps: 64,
-            max_sample_radius: 32,
-            working_resolution: WorkingResolution::Full,
+            quality: MesostructureQuality::High,
             depth_discontinuity: 0.02,
             occlusion: true,
             occlusion_form: OcclusionForm::CosineWeighted,
-            horizon_search_steps: 0,
             coarse_occlusion: true,
             texture_space_horizons: true,
             micro_shadows: true,
             micro_shadow_softness: 0.05,
             bump_mapping: true,
             bleeding: true,
-            bleeding_samples: 4,
             ambient_weight: 1.0,
             direct_weight: 1.0,
             bleeding_weight: 1.0,
         }
     }
+}
+
+/// What a quality level sets: the size of the apex search and of the bleeding gather (see
+/// [`MesostructureQuality`]). The work of one apex search is at most
+/// `max_ascent_steps + 2 × apex_directions × max_sample_radius` texel reads, once per
+/// `working_resolution` block.
+#[derive(Reflect, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[reflect(Default, Clone, Debug, PartialEq, Hash)]
+pub struct MesostructureCost {
+    /// The resolution the apex sets are searched at: every pixel (`Full`, the paper's), or once
+    /// per 2×2 (`Half`) or 4×4 (`Quarter`) block of pixels, whose pixels then share that set
+    /// (the apex search is the largest pass; it costs about a quarter or a sixteenth). The
+    /// occlusion, micro-shadows and bleeding stay per pixel: each measures its own horizons
+    /// against the shared apexes. Pixels across a depth jump or on another object than the
+    /// block's searched pixel get no apexes.
+    pub working_resolution: WorkingResolution,
+    /// Indirect sample directions around each pixel for its apex set (0–16). More directions
+    /// find more of the apexes that occlude a pixel, at a cost linear in the count.
+    pub apex_directions: u32,
+    /// Bound on the steps (one pixel each) of the gradient ascent to the direct apex (1–512).
+    /// Where it is hit the pixel reached stands in for the apex; the `ApexCount` debug view
+    /// shows those pixels in magenta.
+    pub max_ascent_steps: u32,
+    /// How far, in pixels (1–256), each direction's walk from the pixel goes looking for the
+    /// valley beyond which something stands up, and how far the climb along the direction then
+    /// goes to that structure's apex. Both stop on their own (where the height first rises,
+    /// where it stops rising), so the apex set adapts to the size of the structures; this only
+    /// bounds them.
+    pub max_sample_radius: u32,
+    /// Samples (1–16) along the path from a pixel to each apex of its set that the bleeding
+    /// gathers from. Cost is linear in the count.
+    pub bleeding_samples: u32,
+}
+
+impl Default for MesostructureCost {
+    /// The `High` preset's: 8 directions (the paper's "several directions", one per
+    /// 8-neighbour direction), 64 ascent steps (enough for structures up to ~64 px across, a
+    /// quarter of a 256² texture cache), walks of up to 32 px, apex sets per pixel, 4 bleeding
+    /// samples per apex path (which resolve the walls of a groove to a few percent of a
+    /// 16-sample gather).
+    fn default() -> Self {
+        MesostructureQuality::High.cost()
+    }
+}
+
+impl MesostructureCost {
+    /// The valid range of each field, `(name, min, max)`: what the plugin clamps to, and what
+    /// an inspector's sliders should offer.
+    pub const RANGES: [(&'static str, f32, f32); 4] = [
+        ("apex_directions", 0.0, MAX_APEX_DIRECTIONS as f32),
+        ("max_ascent_steps", 1.0, 512.0),
+        ("max_sample_radius", 1.0, 256.0),
+        ("bleeding_samples", 1.0, 16.0),
+    ];
+}
+
+/// A brute-force horizon search instead of the apex sets for the occlusion — `steps` samples
+/// (1–64) along each of `apex_directions` directions out to `max_sample_radius` pixels: a
+/// fixed-radius baseline for comparisons (the `accuracy` example), not a quality setting. Add
+/// it to a camera next to [`Mesostructure`].
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq, Eq)]
+#[reflect(Component, Clone, Debug, PartialEq)]
+pub struct HorizonSearchBaseline {
+    /// Samples per direction (1–64).
+    pub steps: u32,
 }
 
 /// The resolution the apex sets are searched at (see [`Mesostructure::working_resolution`]).
@@ -177,8 +207,9 @@ impl WorkingResolution {
     }
 }
 
-/// Quality presets: the settings that trade cost for accuracy, together (see
-/// [`Mesostructure::with_quality`]). `docs/accuracy.md` charts each one's error and GPU time.
+/// Quality levels: the settings that trade cost for accuracy ([`MesostructureCost`]),
+/// together — four presets, or `Custom` values. `docs/accuracy.md` charts each preset's error
+/// and GPU time.
 #[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[reflect(Default, Clone, Debug, PartialEq, Hash)]
 pub enum MesostructureQuality {
@@ -187,37 +218,68 @@ pub enum MesostructureQuality {
     Low,
     /// Apex sets per 2×2 pixels, otherwise as `High`.
     Medium,
-    /// The defaults: apex sets per pixel, 8 directions, walks of 32 px, 64 ascent steps, 4
+    /// The default: apex sets per pixel, 8 directions, walks of 32 px, 64 ascent steps, 4
     /// bleeding samples.
     #[default]
     High,
     /// Apex sets per pixel, 16 directions, walks of 64 px, 128 ascent steps, 8 bleeding samples.
     Ultra,
+    /// Values of your own (clamped to [`MesostructureCost::RANGES`]).
+    Custom(MesostructureCost),
 }
 
 impl MesostructureQuality {
-    /// All presets, cheapest first.
+    /// The presets, cheapest first.
     pub const ALL: [Self; 4] = [Self::Low, Self::Medium, Self::High, Self::Ultra];
 
-    /// The name in lower case (`medium`), for command lines and file names.
+    /// What this level sets.
+    pub fn cost(self) -> MesostructureCost {
+        let (working_resolution, apex_directions, max_ascent_steps, max_sample_radius, bleeding_samples) =
+            match self {
+                Self::Low => (WorkingResolution::Quarter, 4, 32, 16, 2),
+                Self::Medium => (WorkingResolution::Half, 8, 64, 32, 4),
+                Self::High => (WorkingResolution::Full, 8, 64, 32, 4),
+                Self::Ultra => (WorkingResolution::Full, 16, 128, 64, 8),
+                Self::Custom(cost) => return cost,
+            };
+        MesostructureCost {
+            working_resolution,
+            apex_directions,
+            max_ascent_steps,
+            max_sample_radius,
+            bleeding_samples,
+        }
+    }
+
+    /// `Custom` values: this level's, changed by `change` (e.g. `High.custom(|c|
+    /// c.apex_directions = 16)`).
+    pub fn custom(self, change: impl FnOnce(&mut MesostructureCost)) -> Self {
+        let mut cost = self.cost();
+        change(&mut cost);
+        Self::Custom(cost)
+    }
+
+    /// The name in lower case (`medium`; `custom`), for command lines and file names.
     pub fn name(self) -> &'static str {
         match self {
             Self::Low => "low",
             Self::Medium => "medium",
             Self::High => "high",
             Self::Ultra => "ultra",
+            Self::Custom(_) => "custom",
         }
     }
 
-    /// The preset of a [`Self::name`].
+    /// The preset of a [`Self::name`] (`custom` names no preset).
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|q| q.name() == name)
     }
 }
 
-/// Which image the camera shows instead of (or over) the lit scene.
-#[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-#[reflect(Default, Clone, Debug, PartialEq, Hash)]
+/// Which image a camera with [`Mesostructure`] shows instead of (or over) the lit scene: add
+/// it to the camera (absent: the normal picture).
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[reflect(Component, Default, Clone, Debug, PartialEq, Hash)]
 pub enum MesostructureDebugView {
     /// The normal picture.
     #[default]
@@ -291,52 +353,59 @@ impl MesostructureDebugView {
 }
 
 impl Mesostructure {
-    /// These settings with the cost/accuracy fields of a preset (`apex_directions`,
-    /// `max_ascent_steps`, `max_sample_radius`, `working_resolution`, `bleeding_samples`);
-    /// the effects, weights and views stay as they are.
-    pub fn with_quality(mut self, quality: MesostructureQuality) -> Self {
-        let (resolution, directions, steps, radius, bleeding) = match quality {
-            MesostructureQuality::Low => (WorkingResolution::Quarter, 4, 32, 16, 2),
-            MesostructureQuality::Medium => (WorkingResolution::Half, 8, 64, 32, 4),
-            MesostructureQuality::High => (WorkingResolution::Full, 8, 64, 32, 4),
-            MesostructureQuality::Ultra => (WorkingResolution::Full, 16, 128, 64, 8),
-        };
-        self.working_resolution = resolution;
-        self.apex_directions = directions;
-        self.max_ascent_steps = steps;
-        self.max_sample_radius = radius;
-        self.bleeding_samples = bleeding;
-        self
-    }
-
-    /// The valid range of each numeric field, `(name, min, max)`: what [`Self::sanitized`]
-    /// clamps to, and what an inspector's sliders should offer.
-    pub const RANGES: [(&'static str, f32, f32); 10] = [
-        ("apex_directions", 0.0, MAX_APEX_DIRECTIONS as f32),
-        ("max_ascent_steps", 1.0, 512.0),
-        ("max_sample_radius", 1.0, 256.0),
+    /// The valid range of each numeric field, `(name, min, max)`: what the plugin clamps to,
+    /// and what an inspector's sliders should offer (the quality's own in
+    /// [`MesostructureCost::RANGES`]).
+    pub const RANGES: [(&'static str, f32, f32); 5] = [
         ("depth_discontinuity", 0.0001, 1.0),
         ("micro_shadow_softness", 0.0, 0.5),
-        ("bleeding_samples", 1.0, 16.0),
-        ("horizon_search_steps", 0.0, 64.0),
         ("ambient_weight", 0.0, 4.0),
         ("direct_weight", 0.0, 4.0),
         ("bleeding_weight", 0.0, 4.0),
     ];
 
-    /// The valid range of the numeric field `name` (see [`Self::RANGES`]).
+    /// The valid range of the numeric field `name` of these settings or of their
+    /// [`MesostructureCost`] (see [`Self::RANGES`]).
     pub fn range(name: &str) -> Option<(f32, f32)> {
         Self::RANGES
             .iter()
+            .chain(MesostructureCost::RANGES.iter())
+            .chain([("horizon_search_steps", 1.0, 64.0)].iter())
             .find(|(n, _, _)| *n == name)
             .map(|&(_, lo, hi)| (lo, hi))
     }
 
-    /// A copy with every field inside its documented range; the names of the fields that had
-    /// to be changed.
-    pub fn sanitized(&self) -> (Self, Vec<&'static str>) {
+    /// The settings one view renders with: the quality resolved, the camera's debug view and
+    /// horizon-search baseline merged in, every field inside its documented range; the names
+    /// of the fields that had to be changed.
+    pub fn resolve(
+        &self,
+        debug_view: MesostructureDebugView,
+        baseline: Option<HorizonSearchBaseline>,
+    ) -> (ViewSettings, Vec<&'static str>) {
         let d = Self::default();
-        let mut s = self.clone();
+        let cost = self.quality.cost();
+        let mut s = ViewSettings {
+            debug_view,
+            apex_directions: cost.apex_directions,
+            max_ascent_steps: cost.max_ascent_steps,
+            max_sample_radius: cost.max_sample_radius,
+            working_resolution: cost.working_resolution,
+            depth_discontinuity: self.depth_discontinuity,
+            occlusion: self.occlusion,
+            occlusion_form: self.occlusion_form,
+            horizon_search_steps: baseline.map_or(0, |b| b.steps),
+            coarse_occlusion: self.coarse_occlusion,
+            texture_space_horizons: self.texture_space_horizons,
+            micro_shadows: self.micro_shadows,
+            micro_shadow_softness: self.micro_shadow_softness,
+            bump_mapping: self.bump_mapping,
+            bleeding: self.bleeding,
+            bleeding_samples: cost.bleeding_samples,
+            ambient_weight: self.ambient_weight,
+            direct_weight: self.direct_weight,
+            bleeding_weight: self.bleeding_weight,
+        };
         let mut changed = Vec::new();
         let mut clamp_u32 = |v: &mut u32, name: &'static str| {
             let (lo, hi) = Self::range(name).expect("a documented range");
@@ -350,7 +419,9 @@ impl Mesostructure {
         clamp_u32(&mut s.max_ascent_steps, "max_ascent_steps");
         clamp_u32(&mut s.max_sample_radius, "max_sample_radius");
         clamp_u32(&mut s.bleeding_samples, "bleeding_samples");
-        clamp_u32(&mut s.horizon_search_steps, "horizon_search_steps");
+        if baseline.is_some() {
+            clamp_u32(&mut s.horizon_search_steps, "horizon_search_steps");
+        }
         let mut clamp_f32 = |v: &mut f32, default: f32, name: &'static str| {
             let (lo, hi) = Self::range(name).expect("a documented range");
             if !v.is_finite() {
@@ -377,12 +448,61 @@ impl Mesostructure {
         (s, changed)
     }
 
+    /// The apex search these settings describe (for the CPU oracle).
+    pub fn apex_search(&self) -> ApexSearch {
+        let cost = self.quality.cost();
+        ApexSearch {
+            directions: cost.apex_directions,
+            max_steps: cost.max_ascent_steps,
+            max_walk: cost.max_sample_radius,
+        }
+    }
+
+    /// The depth-continuity test these settings describe (for the CPU oracle).
+    pub fn depth_continuity(&self) -> DepthContinuity {
+        DepthContinuity {
+            relative: self.depth_discontinuity,
+            ..default()
+        }
+    }
+}
+
+/// The settings of one view as the render world uses them ([`Mesostructure::resolve`]): the
+/// quality's values, the debug view and the baseline in one flat, sanitized struct. Its fields
+/// are those of [`Mesostructure`], [`MesostructureCost`], [`MesostructureDebugView`] and
+/// [`HorizonSearchBaseline`].
+#[derive(Clone, Debug, PartialEq)]
+#[allow(missing_docs)]
+pub struct ViewSettings {
+    pub debug_view: MesostructureDebugView,
+    pub apex_directions: u32,
+    pub max_ascent_steps: u32,
+    pub max_sample_radius: u32,
+    pub working_resolution: WorkingResolution,
+    pub depth_discontinuity: f32,
+    pub occlusion: bool,
+    pub occlusion_form: OcclusionForm,
+    /// 0: the apex sets.
+    pub horizon_search_steps: u32,
+    pub coarse_occlusion: bool,
+    pub texture_space_horizons: bool,
+    pub micro_shadows: bool,
+    pub micro_shadow_softness: f32,
+    pub bump_mapping: bool,
+    pub bleeding: bool,
+    pub bleeding_samples: u32,
+    pub ambient_weight: f32,
+    pub direct_weight: f32,
+    pub bleeding_weight: f32,
+}
+
+impl ViewSettings {
     /// Whether a frame needs the gradient map and the apex sets: a lighting term or a debug
     /// view reads them. With none, the gradient and apex passes do not run.
     pub fn needs_apex_sets(&self) -> bool {
         (self.occlusion && self.horizon_search_steps == 0)
             || self.micro_shadows
-            || crate::render::bleeding::bleeding_runs(self)
+            || self.bleeding_runs()
             || self.debug_view != MesostructureDebugView::None
     }
 
@@ -398,16 +518,12 @@ impl Mesostructure {
         self.needs_apex_sets() || self.occlusion
     }
 
-    /// The apex search these settings describe (for the CPU oracle).
-    pub fn apex_search(&self) -> ApexSearch {
-        ApexSearch {
-            directions: self.apex_directions,
-            max_steps: self.max_ascent_steps,
-            max_walk: self.max_sample_radius,
-        }
+    /// Whether the settings ask for bleeding at all (a zero weight costs nothing either).
+    pub fn bleeding_runs(&self) -> bool {
+        self.bleeding && self.bleeding_weight > 0.0
     }
 
-    /// The depth-continuity test these settings describe (for the CPU oracle).
+    /// The depth-continuity test these settings describe.
     pub fn depth_continuity(&self) -> DepthContinuity {
         DepthContinuity {
             relative: self.depth_discontinuity,
@@ -416,9 +532,9 @@ impl Mesostructure {
     }
 }
 
-/// Render-world copy of a camera's sanitized [`Mesostructure`] settings.
+/// Render-world copy of a camera's resolved settings ([`Mesostructure::resolve`]).
 #[derive(Component, Clone, Debug)]
-pub struct ExtractedMesostructure(pub Mesostructure);
+pub struct ExtractedMesostructure(pub ViewSettings);
 
 /// The camera settings as the shaders see them (`MesostructureUniform` in `common.wgsl`).
 #[derive(Clone, Copy, Debug, ShaderType)]
@@ -465,8 +581,8 @@ pub struct MesostructureUniform {
     pub directions: [Vec4; 8],
 }
 
-impl From<&Mesostructure> for MesostructureUniform {
-    fn from(s: &Mesostructure) -> Self {
+impl From<&ViewSettings> for MesostructureUniform {
+    fn from(s: &ViewSettings) -> Self {
         let table = sample_directions(s.apex_directions);
         let mut directions = [Vec4::ZERO; 8];
         for (i, d) in table.iter().enumerate() {
@@ -494,7 +610,7 @@ impl From<&Mesostructure> for MesostructureUniform {
             micro_shadows: s.micro_shadows as u32,
             micro_shadow_softness: s.micro_shadow_softness,
             bump_mapping: s.bump_mapping as u32,
-            bleeding_enabled: crate::render::bleeding::bleeding_runs(s) as u32,
+            bleeding_enabled: s.bleeding_runs() as u32,
             bleeding_samples: s.bleeding_samples,
             coarse_occlusion: s.coarse_occlusion as u32,
             texture_space_horizons: s.texture_space_horizons as u32,
@@ -522,19 +638,25 @@ impl bevy::render::sync_component::SyncComponent for Mesostructure {
 mod tests {
     use super::*;
 
+    fn resolved(m: &Mesostructure) -> (ViewSettings, Vec<&'static str>) {
+        m.resolve(MesostructureDebugView::None, None)
+    }
+
     #[test]
     fn sanitize_replaces_nan_and_clamps() {
         let bad = Mesostructure {
-            apex_directions: 99,
-            max_ascent_steps: 0,
-            max_sample_radius: 0,
+            quality: MesostructureQuality::High.custom(|c| {
+                c.apex_directions = 99;
+                c.max_ascent_steps = 0;
+                c.max_sample_radius = 0;
+                c.bleeding_samples = 0;
+            }),
             depth_discontinuity: f32::NAN,
             bleeding_weight: f32::INFINITY,
             direct_weight: -1.0,
-            bleeding_samples: 0,
             ..default()
         };
-        let (s, changed) = bad.sanitized();
+        let (s, changed) = resolved(&bad);
         assert_eq!(s.apex_directions, MAX_APEX_DIRECTIONS);
         assert_eq!(s.max_ascent_steps, 1);
         assert_eq!(s.max_sample_radius, 1);
@@ -542,23 +664,25 @@ mod tests {
         assert!(changed.contains(&"depth_discontinuity"));
         assert_eq!((s.bleeding_weight, s.direct_weight), (1.0, 0.0));
         assert_eq!(s.bleeding_samples, 1);
-        assert!(Mesostructure::default().sanitized().1.is_empty());
+        assert!(resolved(&Mesostructure::default()).1.is_empty());
+        let (baseline, changed) = Mesostructure::default()
+            .resolve(MesostructureDebugView::None, Some(HorizonSearchBaseline { steps: 0 }));
+        assert_eq!((baseline.horizon_search_steps, changed), (1, vec!["horizon_search_steps"]));
     }
 
     #[test]
     fn presets_stay_in_range_and_high_is_the_default() {
-        assert_eq!(
-            Mesostructure::default().with_quality(MesostructureQuality::High),
-            Mesostructure::default()
-        );
+        assert_eq!(MesostructureCost::default(), MesostructureQuality::High.cost());
+        assert_eq!(Mesostructure::default().quality, MesostructureQuality::High);
         let mut previous_cost = 0;
         for q in MesostructureQuality::ALL {
-            let s = Mesostructure {
+            let m = Mesostructure {
+                quality: q,
                 micro_shadows: false,
                 ..default()
-            }
-            .with_quality(q);
-            assert!(s.sanitized().1.is_empty(), "{q:?} leaves a range");
+            };
+            let (s, changed) = resolved(&m);
+            assert!(changed.is_empty(), "{q:?} leaves a range");
             assert!(!s.micro_shadows, "a preset touched an effect switch");
             assert_eq!(MesostructureQuality::from_name(q.name()), Some(q));
             // The bound on texel reads of one apex search, per pixel.
@@ -571,37 +695,47 @@ mod tests {
             );
             previous_cost = cost;
         }
-        let u = MesostructureUniform::from(
-            &Mesostructure::default().with_quality(MesostructureQuality::Low),
-        );
-        assert_eq!(u.apex_block, 4);
+        let custom = MesostructureQuality::Low.custom(|c| c.apex_directions = 6);
+        assert_eq!(custom.cost().working_resolution, WorkingResolution::Quarter);
+        assert_eq!((custom.cost().apex_directions, custom.name()), (6, "custom"));
+        assert_eq!(MesostructureQuality::from_name("custom"), None);
+        let low = Mesostructure {
+            quality: MesostructureQuality::Low,
+            ..default()
+        };
+        assert_eq!(MesostructureUniform::from(&resolved(&low).0).apex_block, 4);
     }
 
     #[test]
     fn every_range_names_a_field_and_holds_its_default() {
         use bevy::reflect::{Reflect, structs::Struct};
-        let d = Mesostructure::default();
-        for (name, lo, hi) in Mesostructure::RANGES {
-            let value = d.field(name).unwrap_or_else(|| panic!("no field {name}"));
-            let v = value
+        let number = |value: &dyn PartialReflect, name: &str| {
+            value
                 .try_downcast_ref::<f32>()
                 .copied()
                 .or(value.try_downcast_ref::<u32>().map(|&u| u as f32))
-                .unwrap_or_else(|| panic!("{name} is not a number"));
-            assert!(
-                (lo..=hi).contains(&v),
-                "default {name} = {v} outside {lo}..={hi}"
-            );
+                .unwrap_or_else(|| panic!("{name} is not a number"))
+        };
+        let d = Mesostructure::default();
+        let cost = MesostructureCost::default();
+        for (name, lo, hi) in Mesostructure::RANGES {
+            let v = number(d.field(name).unwrap_or_else(|| panic!("no field {name}")), name);
+            assert!((lo..=hi).contains(&v), "default {name} = {v} outside {lo}..={hi}");
+        }
+        for (name, lo, hi) in MesostructureCost::RANGES {
+            let v = number(cost.field(name).unwrap_or_else(|| panic!("no field {name}")), name);
+            assert!((lo..=hi).contains(&v), "default {name} = {v} outside {lo}..={hi}");
         }
         let _ = d.as_reflect();
     }
 
     #[test]
     fn uniform_carries_the_direction_table() {
-        let u = MesostructureUniform::from(&Mesostructure {
-            apex_directions: 4,
+        let m = Mesostructure {
+            quality: MesostructureQuality::High.custom(|c| c.apex_directions = 4),
             ..default()
-        });
+        };
+        let u = MesostructureUniform::from(&resolved(&m).0);
         assert!((u.directions[0].x - 1.0).abs() < 1e-6);
         assert!((u.directions[0].w - 1.0).abs() < 1e-6); // θ_1 = 90°
         assert_eq!(u.apex_stride, 6);

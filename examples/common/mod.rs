@@ -326,9 +326,10 @@ pub fn view_shot(prefix: &str, view: MesostructureDebugView) -> Shot {
     Shot {
         file: format!("{prefix}_{}.png", view.name()),
         apply: Box::new(move |world: &mut World| {
-            let mut q = world.query::<&mut Mesostructure>();
-            for mut m in q.iter_mut(world) {
-                m.debug_view = view;
+            let mut q = world.query_filtered::<Entity, With<Mesostructure>>();
+            let cameras: Vec<Entity> = q.iter(world).collect();
+            for camera in cameras {
+                world.entity_mut(camera).insert(view);
             }
         }),
     }

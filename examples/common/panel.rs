@@ -36,8 +36,8 @@ pub fn add(app: &mut App) {
     register_ranges(app);
 }
 
-/// Slider ranges from `Mesostructure::RANGES` (the same ranges the plugin clamps to) and for
-/// the material's scale.
+/// Slider ranges from `Mesostructure::RANGES` and `MesostructureCost::RANGES` (the same ranges
+/// the plugin clamps to) and for the material's scale.
 fn register_ranges(app: &mut App) {
     let registry = app.world().resource::<AppTypeRegistry>().clone();
     let mut registry = registry.write();
@@ -47,20 +47,22 @@ fn register_ranges(app: &mut App) {
     };
     let mut camera = InspectorOptions::new();
     for (name, lo, hi) in Mesostructure::RANGES {
-        let Some(i) = field_index(Mesostructure::type_info(), name) else {
-            continue;
-        };
-        if matches!(
-            name,
-            "apex_directions" | "max_ascent_steps" | "max_sample_radius" | "bleeding_samples"
-        ) {
-            camera.insert(Target::Field(i), slider(lo as u32, hi as u32));
-        } else {
+        if let Some(i) = field_index(Mesostructure::type_info(), name) {
             camera.insert(Target::Field(i), slider(lo, hi));
         }
     }
     if let Some(registration) = registry.get_mut(std::any::TypeId::of::<Mesostructure>()) {
         registration.insert(ReflectInspectorOptions(camera));
+    }
+    // The `Custom` quality's values (all counts).
+    let mut cost = InspectorOptions::new();
+    for (name, lo, hi) in MesostructureCost::RANGES {
+        if let Some(i) = field_index(MesostructureCost::type_info(), name) {
+            cost.insert(Target::Field(i), slider(lo as u32, hi as u32));
+        }
+    }
+    if let Some(registration) = registry.get_mut(std::any::TypeId::of::<MesostructureCost>()) {
+        registration.insert(ReflectInspectorOptions(cost));
     }
     let mut material = InspectorOptions::new();
     if let Some(i) = field_index(MesostructureMaterial::type_info(), "scale") {
@@ -129,9 +131,9 @@ fn panel(world: &mut World) {
                             ui.horizontal(|ui| {
                                 ui.label("quality preset:");
                                 for q in MesostructureQuality::ALL {
-                                    let current = settings.clone().with_quality(q) == settings;
+                                    let current = settings.quality == q;
                                     if ui.selectable_label(current, q.name()).clicked() {
-                                        settings = settings.clone().with_quality(q);
+                                        settings.quality = q;
                                         changed = true;
                                     }
                                 }
@@ -170,7 +172,7 @@ fn panel(world: &mut World) {
 fn keys(
     mut commands: Commands,
     input: Res<ButtonInput<KeyCode>>,
-    mut cameras: Query<&mut Mesostructure>,
+    mut cameras: Query<(Entity, &mut Mesostructure, Option<&MesostructureDebugView>)>,
     mut clock: ResMut<super::Clock>,
     script: Res<super::Script>,
     mut taken: Local<u32>,
@@ -186,7 +188,7 @@ fn keys(
             .spawn(bevy::render::view::screenshot::Screenshot::primary_window())
             .observe(bevy::render::view::screenshot::save_to_disk(path));
     }
-    for mut m in &mut cameras {
+    for (camera, mut m, view) in &mut cameras {
         if input.just_pressed(KeyCode::KeyO) {
             m.occlusion = !m.occlusion;
         }
@@ -200,7 +202,8 @@ fn keys(
             m.bump_mapping = !m.bump_mapping;
         }
         if input.just_pressed(KeyCode::KeyV) {
-            m.debug_view = m.debug_view.next();
+            let next = view.copied().unwrap_or_default().next();
+            commands.entity(camera).insert(next);
         }
     }
 }

@@ -517,14 +517,30 @@ pub fn camera_ray(frame: &CapturedFrame, x: u32, y: u32) -> (Vec3, Vec3) {
     (near, (far - near).normalize())
 }
 
-/// Renders `scene` once with `settings` (`None`: the plugin's camera component left off — the
-/// picture without any mesostructure term) and returns the capture and the median GPU time
-/// of the plugin's passes but the lighting pass (which replaces Bevy's own).
+/// A camera's settings for one scored variant: the component, and the horizon-search baseline
+/// where the variant is that baseline.
+#[derive(Clone, Default)]
+pub struct Variant {
+    pub settings: Mesostructure,
+    pub baseline: Option<bevy_mesostructure::HorizonSearchBaseline>,
+}
+
+impl From<Mesostructure> for Variant {
+    fn from(settings: Mesostructure) -> Self {
+        Self {
+            settings,
+            baseline: None,
+        }
+    }
+}
+
+/// Renders `scene` once with `variant` and returns the capture and the median GPU time of the
+/// plugin's passes but the lighting pass (which replaces Bevy's own).
 pub fn render(
     plugins: bevy::app::PluginGroupBuilder,
     scene: &Scene,
     map: &HeightMap,
-    settings: Mesostructure,
+    variant: Variant,
     size: u32,
     to_light: Vec3,
 ) -> Option<(CapturedFrame, f64)> {
@@ -547,10 +563,13 @@ pub fn render(
             Hdr,
             Tonemapping::None,
             Transform::from_translation(scene.eye).looking_at(scene.target, up),
-            settings,
+            variant.settings,
             MesostructureCapture,
         ))
         .id();
+    if let Some(baseline) = variant.baseline {
+        world.entity_mut(camera).insert(baseline);
+    }
     world.insert_resource(bevy::light::GlobalAmbientLight {
         brightness: 0.0,
         ..default()
@@ -658,7 +677,7 @@ pub fn radiance_unit(plugins: bevy::app::PluginGroupBuilder, size: u32) -> f32 {
         light_azimuth: 0.0,
     };
     let flat = HeightMap::from_fn(16, 16, |_, _| 0.5);
-    let (frame, _) = render(plugins, &scene, &flat, Mesostructure::default(), size, Vec3::Y)
+    let (frame, _) = render(plugins, &scene, &flat, Mesostructure::default().into(), size, Vec3::Y)
         .expect("the flat plane renders");
     let (mut sum, mut n) = (0.0, 0);
     for y in size / 4..3 * size / 4 {
@@ -762,7 +781,7 @@ pub struct SceneResult {
 pub fn run_scene(
     plugins: impl Fn() -> bevy::app::PluginGroupBuilder,
     scene: &Scene,
-    settings: Mesostructure,
+    settings: impl Into<Variant>,
     size: u32,
     step: u32,
     unit: f32,
@@ -772,7 +791,7 @@ pub fn run_scene(
     let truth = GroundTruth::new(scene.core, map.clone(), scene.scale, scene.tiles);
     let normal = truth.normal_towards(scene.eye, scene.target);
     let light = to_light(scene, normal);
-    let (frame, gpu_ms) = render(plugins(), scene, &map, settings, size, light)?;
+    let (frame, gpu_ms) = render(plugins(), scene, &map, settings.into(), size, light)?;
     let pixels: Vec<(u32, u32)> = (0..size / step)
         .flat_map(|j| (0..size / step).map(move |i| (i * step + step / 2, j * step + step / 2)))
         .filter(|&(x, y)| frame.mhm[(y * size + x) as usize][2] != 0.0)

@@ -133,18 +133,13 @@ pub fn prepare_bleeding_pipelines(
     views: Query<(Entity, &ViewTarget, &ExtractedMesostructure)>,
 ) {
     for (entity, target, settings) in &views {
-        if !bleeding_runs(&settings.0) {
+        if !settings.0.bleeding_runs() {
             commands.entity(entity).remove::<ViewBleedingPipeline>();
             continue;
         }
         let id = pipelines.specialize(&pipeline_cache, &pipeline, target.main_texture_format());
         commands.entity(entity).insert(ViewBleedingPipeline(id));
     }
-}
-
-/// Whether the settings ask for bleeding at all (a zero weight costs nothing either).
-pub fn bleeding_runs(settings: &crate::Mesostructure) -> bool {
-    settings.bleeding && settings.bleeding_weight > 0.0
 }
 
 /// Core3d system between Bevy's opaque and transparent passes: gathers the bleeding of the

@@ -288,13 +288,17 @@ pub fn extract_mesostructure_cameras(
                 &Mesostructure,
                 Option<&Msaa>,
                 Has<DepthPrepass>,
+                Option<&crate::MesostructureDebugView>,
+                Option<&crate::settings::HorizonSearchBaseline>,
             ),
             With<Camera3d>,
         >,
     >,
     mut warned: ResMut<WarnedOnce>,
 ) {
-    for (render_entity, entity, camera, settings, msaa, has_depth_prepass) in &cameras {
+    for (render_entity, entity, camera, settings, msaa, has_depth_prepass, debug_view, baseline) in
+        &cameras
+    {
         let Ok(mut target) = commands.get_entity(render_entity) else {
             continue;
         };
@@ -332,7 +336,8 @@ pub fn extract_mesostructure_cameras(
         }
         warned.forget(&format!("msaa {entity}"));
         warned.forget(&format!("size {entity}"));
-        let (sanitized, changed) = settings.sanitized();
+        let (sanitized, changed) =
+            settings.resolve(debug_view.copied().unwrap_or_default(), baseline.copied());
         if !changed.is_empty() {
             warned.warn(format!("settings {entity} {changed:?}"), || {
                 format!(

@@ -49,7 +49,7 @@ pub struct OcclusionPipelineKey {
 
 impl OcclusionPipelineKey {
     /// The key of a view's settings.
-    pub fn of(settings: &crate::Mesostructure) -> Self {
+    pub fn of(settings: &crate::settings::ViewSettings) -> Self {
         Self {
             form: settings.occlusion_form,
             coarse: settings.coarse_occlusion,

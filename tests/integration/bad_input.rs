@@ -264,8 +264,10 @@ fn msaa_and_nan_settings_do_not_panic() {
         top_down(),
         Mesostructure {
             depth_discontinuity: f32::NAN,
-            apex_directions: 1000,
-            max_ascent_steps: 0,
+            quality: MesostructureQuality::High.custom(|c| {
+                c.apex_directions = 1000;
+                c.max_ascent_steps = 0;
+            }),
             ..default()
         },
     );

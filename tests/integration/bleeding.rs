@@ -109,7 +109,7 @@ fn bleeding_matches_the_oracle() {
         lit: &lit,
         normals: &facing,
     };
-    let samples = Mesostructure::default().bleeding_samples;
+    let samples = MesostructureCost::default().bleeding_samples;
     let (mut total, mut close, mut largest) = (0, 0, 0.0f32);
     let mut expected = vec![];
     for y in 2..SIZE - 2 {

@@ -24,9 +24,22 @@ fn render(slope_deg: f32, elevation_deg: f32) -> CapturedFrame {
 }
 
 fn render_with(slope_deg: f32, elevation_deg: f32, settings: Mesostructure) -> CapturedFrame {
+    render_with_baseline(slope_deg, elevation_deg, settings, None)
+}
+
+/// [`render_with`], with the horizon-search baseline on the camera where given.
+fn render_with_baseline(
+    slope_deg: f32,
+    elevation_deg: f32,
+    settings: Mesostructure,
+    baseline: Option<bevy_mesostructure::HorizonSearchBaseline>,
+) -> CapturedFrame {
     let mut app = app();
     let target = target(&mut app, SIZE, SIZE);
     let camera = camera(&mut app, &target, top_down(), settings);
+    if let Some(baseline) = baseline {
+        app.world_mut().entity_mut(camera).insert(baseline);
+    }
     let (map, k) = grooves(slope_deg);
     let height_map = image(&mut app, map.to_image());
     app.insert_resource(GlobalAmbientLight {
@@ -135,15 +148,17 @@ fn brute_force_horizon_search_matches_its_oracle_and_the_closed_form() {
     // The fixed-radius baseline of the accuracy chart: 16 directions, 32 samples out to 24 px
     // (each half-groove is ~10 px wide here).
     let settings = Mesostructure {
-        horizon_search_steps: 32,
-        apex_directions: 16,
-        max_sample_radius: 24,
+        quality: MesostructureQuality::High.custom(|c| {
+            c.apex_directions = 16;
+            c.max_sample_radius = 24;
+        }),
         micro_shadows: false,
         bleeding: false,
         ..default()
     };
     for slope in [25.0f32, 40.0] {
-        let frame = render_with(slope, 60.0, settings.clone());
+        let baseline = bevy_mesostructure::HorizonSearchBaseline { steps: 32 };
+        let frame = render_with_baseline(slope, 60.0, settings.clone(), Some(baseline));
         // Against the CPU oracle on the same captured images, every pixel.
         let mhm = frame.screen_height_map();
         let mhgm = frame.gradient_map();

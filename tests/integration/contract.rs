@@ -277,11 +277,11 @@ fn two_cameras_get_their_own_images_and_debug_views_draw() {
         &mut app,
         &b,
         Transform::from_xyz(0.0, 1.2, 1.6).looking_at(Vec3::ZERO, Vec3::Y),
-        Mesostructure {
-            debug_view: MesostructureDebugView::Height,
-            ..default()
-        },
+        Mesostructure::default(),
     );
+    app.world_mut()
+        .entity_mut(cam_b)
+        .insert(MesostructureDebugView::Height);
     let map = image(&mut app, HeightMap::sine(128, 4).to_image());
     let material = unlit(&mut app, Color::srgb(1.0, 0.0, 0.0));
     mesostructure_plane(&mut app, material, map, 0.1);
@@ -322,15 +322,10 @@ fn each_pass_reports_a_gpu_time_span() {
         app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
     });
     let target = target(&mut app, 64, 64);
-    camera(
-        &mut app,
-        &target,
-        top_down(),
-        Mesostructure {
-            debug_view: MesostructureDebugView::ApexCount,
-            ..default()
-        },
-    );
+    let debugged = camera(&mut app, &target, top_down(), Mesostructure::default());
+    app.world_mut()
+        .entity_mut(debugged)
+        .insert(MesostructureDebugView::ApexCount);
     let map = image(&mut app, HeightMap::bricks(64, 4, 0.1).to_image());
     let material = unlit(&mut app, Color::WHITE);
     mesostructure_plane(&mut app, material, map, 0.1);
@@ -430,11 +425,11 @@ fn passes_cost_nothing_without_mesostructure_on_screen() {
         &mut app,
         &target,
         Transform::from_xyz(0.0, 2.0, 0.0).looking_at(Vec3::new(0.0, 5.0, 0.0), Vec3::Z),
-        Mesostructure {
-            debug_view: MesostructureDebugView::Boundary,
-            ..default()
-        },
+        Mesostructure::default(),
     );
+    app.world_mut()
+        .entity_mut(camera)
+        .insert(MesostructureDebugView::Boundary);
     let map = image(&mut app, HeightMap::bricks(64, 4, 0.1).to_image());
     let material = unlit(&mut app, Color::WHITE);
     mesostructure_plane(&mut app, material, map, 0.1);
@@ -615,7 +610,7 @@ fn reduced_working_resolution_shares_the_block_apex_set() {
         let mut app = app();
         let target = target(&mut app, SIZE, SIZE);
         let settings = Mesostructure {
-            working_resolution: resolution,
+            quality: MesostructureQuality::High.custom(|c| c.working_resolution = resolution),
             ..default()
         };
         let camera = camera(&mut app, &target, top_down(), settings);
