@@ -15,7 +15,7 @@ use super::{
     ViewMesostructureBindGroups, ViewMesostructureTextures, ViewMesostructureUniformOffset,
     dispatch_per_pixel, height::HeightPhaseItem, view_has_mesostructure,
 };
-use crate::settings::MesostructureUniform;
+use crate::render::view_settings::MesostructureUniform;
 
 /// Pipeline and layout of the apex pass.
 #[derive(Resource)]
@@ -76,7 +76,7 @@ pub fn apex_pass(
         &ViewMesostructureTextures,
         &ViewMesostructureBindGroups,
         &ViewMesostructureUniformOffset,
-        &crate::settings::ExtractedMesostructure,
+        &crate::render::view_settings::ExtractedMesostructure,
         Has<super::capture::ExtractedCapture>,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,

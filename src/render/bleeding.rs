@@ -20,7 +20,7 @@ use super::{
     ViewMesostructureUniformOffset, dispatch_per_pixel, height::HeightPhaseItem,
     view_has_mesostructure,
 };
-use crate::settings::{ExtractedMesostructure, MesostructureUniform};
+use super::view_settings::{ExtractedMesostructure, MesostructureUniform};
 
 /// Layouts and pipelines of the gather (compute) and the composite (fullscreen draw).
 #[derive(Resource)]

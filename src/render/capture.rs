@@ -256,7 +256,7 @@ pub fn copy_capture(
         &ViewMesostructureTextures,
         &ExtractedCapture,
         &bevy::render::view::ExtractedView,
-        &crate::settings::ExtractedMesostructure,
+        &crate::render::view_settings::ExtractedMesostructure,
     )>,
     phases: Res<bevy::render::render_phase::ViewSortedRenderPhases<super::height::HeightPhaseItem>>,
     device: Res<RenderDevice>,

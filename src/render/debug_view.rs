@@ -12,7 +12,8 @@ use bevy::{
 };
 
 use super::{ViewMesostructureBindGroups, ViewMesostructureUniformOffset};
-use crate::settings::{ExtractedMesostructure, MesostructureDebugView, MesostructureUniform};
+use super::view_settings::{ExtractedMesostructure, MesostructureUniform};
+use crate::settings::MesostructureDebugView;
 
 /// Layout, shaders and per-format pipelines of the debug views.
 #[derive(Resource)]

@@ -15,7 +15,7 @@ use super::{
     ViewMesostructureUniformOffset, dispatch_per_pixel, height::HeightPhaseItem,
     view_has_mesostructure,
 };
-use crate::settings::MesostructureUniform;
+use crate::render::view_settings::MesostructureUniform;
 
 /// Pipeline and layout of the gradient pass.
 #[derive(Resource)]
@@ -60,7 +60,7 @@ pub fn gradient_pass(
         &ViewMesostructureTextures,
         &ViewMesostructureBindGroups,
         &ViewMesostructureUniformOffset,
-        &crate::settings::ExtractedMesostructure,
+        &crate::render::view_settings::ExtractedMesostructure,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     pipeline: Res<GradientPipeline>,

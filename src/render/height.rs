@@ -46,7 +46,8 @@ use nonmax::NonMaxU32;
 
 use super::{CORE_NORMAL_FORMAT, MHM_FORMAT, ViewMesostructureTextures};
 use crate::{
-    material::PreparedMesostructure, settings::ExtractedMesostructure, warn_once::WarnedOnce,
+    material::PreparedMesostructure, render::view_settings::ExtractedMesostructure,
+    warn_once::WarnedOnce,
 };
 
 /// One mesostructure mesh to draw into the height map of one view.
@@ -507,7 +508,7 @@ pub fn height_pass(
         &ViewDepthTexture,
         &ViewMesostructureTextures,
         Option<&MainPassResolutionOverride>,
-        &crate::settings::ExtractedMesostructure,
+        &crate::render::view_settings::ExtractedMesostructure,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     mut ctx: RenderContext,

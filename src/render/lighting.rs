@@ -24,7 +24,7 @@ use bevy::{
 };
 
 use super::{ViewMesostructureTextures, height::HeightPhaseItem, view_has_mesostructure};
-use crate::settings::ExtractedMesostructure;
+use crate::render::view_settings::ExtractedMesostructure;
 
 /// The deferred lighting pass id of mesostructure materials (Bevy's own is 1; 0 = no geometry).
 pub const MESOSTRUCTURE_LIGHTING_PASS_ID: u8 = 2;
@@ -59,7 +59,7 @@ pub fn init_lighting_pipeline(
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 storage_buffer_read_only_sized(false, None),
-                uniform_buffer::<crate::settings::MesostructureUniform>(true),
+                uniform_buffer::<crate::render::view_settings::MesostructureUniform>(true),
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 texture_storage_2d(super::MICRO_SHADOW_FORMAT, StorageTextureAccess::WriteOnly),
             ),

@@ -14,6 +14,7 @@ pub mod gradient;
 pub mod height;
 pub mod lighting;
 pub mod occlusion;
+pub mod view_settings;
 
 use bevy::{
     camera::Camera3d,
@@ -46,7 +47,8 @@ use bevy::{
 };
 
 use crate::{
-    settings::{ExtractedMesostructure, Mesostructure, MesostructureUniform},
+    render::view_settings::{ExtractedMesostructure, MesostructureUniform, ViewSettings},
+    settings::Mesostructure,
     warn_once::WarnedOnce,
 };
 
@@ -337,7 +339,7 @@ pub fn extract_mesostructure_cameras(
         warned.forget(&format!("msaa {entity}"));
         warned.forget(&format!("size {entity}"));
         let (sanitized, changed) =
-            settings.resolve(debug_view.copied().unwrap_or_default(), baseline.copied());
+            ViewSettings::resolve(settings, debug_view.copied().unwrap_or_default(), baseline.copied());
         if !changed.is_empty() {
             warned.warn(format!("settings {entity} {changed:?}"), || {
                 format!(

@@ -19,7 +19,7 @@ use super::{
 };
 use crate::{
     reference::OcclusionForm,
-    settings::{ExtractedMesostructure, MesostructureUniform},
+    render::view_settings::{ExtractedMesostructure, MesostructureUniform},
 };
 
 /// Layout and shader of the occlusion pass; its pipelines are specialised per
@@ -49,7 +49,7 @@ pub struct OcclusionPipelineKey {
 
 impl OcclusionPipelineKey {
     /// The key of a view's settings.
-    pub fn of(settings: &crate::settings::ViewSettings) -> Self {
+    pub fn of(settings: &crate::render::view_settings::ViewSettings) -> Self {
         Self {
             form: settings.occlusion_form,
             coarse: settings.coarse_occlusion,
