@@ -151,7 +151,7 @@ pub fn horizon_direction(i: usize) -> [f32; 2] {
 /// world units along the azimuth and whose core bends with normal curvature `curvature`
 /// (1/world units, positive where convex) along it: `k · slope / reach − κ D / 2` with
 /// `D = distance · reach` (the core falls `κ D² / 2` below its tangent plane at distance `D`).
-/// The mirror of `horizon_tangent` in `render/height.wgsl`.
+/// The mirror of `horizon_tangent` in `render/height/height.wgsl`.
 pub fn horizon_tangent(slope: f32, distance: f32, k: f32, reach: f32, curvature: f32) -> f32 {
     k * slope / reach - 0.5 * curvature * distance * reach
 }

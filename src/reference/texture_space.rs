@@ -1,5 +1,5 @@
 //! The texture-space occlusion in plain Rust: the mirror of `texel_occlusion` and
-//! `footprint_occlusion` (magnified branch) in `render/height.wgsl`, the oracle of its GPU
+//! `footprint_occlusion` (magnified branch) in `render/height/height.wgsl`, the oracle of its GPU
 //! contract test and of its CPU accuracy test.
 
 use bevy::math::{Vec2, Vec3};
@@ -7,7 +7,7 @@ use bevy::math::{Vec2, Vec3};
 use crate::height_map_import::{HORIZON_AZIMUTHS, HorizonMap};
 
 /// The core around a point, as the texture-space horizons need it (`CoreFrame` in
-/// `render/height.wgsl`): the core normal, the world vectors per UV unit, the normal's change
+/// `render/height/height.wgsl`): the core normal, the world vectors per UV unit, the normal's change
 /// per UV unit (the core's curvature; zero on a plane) and the material's scale.
 #[derive(Clone, Copy, Debug)]
 pub struct CoreFrame {

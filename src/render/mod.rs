@@ -162,14 +162,14 @@ pub struct MesostructureUniforms(pub DynamicUniformBuffer<MesostructureUniform>)
 pub(crate) fn build(app: &mut App) {
     load_shader_library!(app, "common.wgsl");
     load_shader_library!(app, "surface.wgsl");
-    bevy::asset::embedded_asset!(app, "height.wgsl");
-    bevy::asset::embedded_asset!(app, "gradient.wgsl");
-    bevy::asset::embedded_asset!(app, "apex.wgsl");
-    bevy::asset::embedded_asset!(app, "occlusion.wgsl");
-    bevy::asset::embedded_asset!(app, "lighting.wgsl");
-    bevy::asset::embedded_asset!(app, "bleeding.wgsl");
-    bevy::asset::embedded_asset!(app, "bleeding_composite.wgsl");
-    bevy::asset::embedded_asset!(app, "debug_view.wgsl");
+    // Each pass's folder embeds its own shaders.
+    height::embed_shaders(app);
+    gradient::embed_shaders(app);
+    apex::embed_shaders(app);
+    occlusion::embed_shaders(app);
+    lighting::embed_shaders(app);
+    bleeding::embed_shaders(app);
+    debug_view::embed_shaders(app);
 
     // The phase plugin adds the batching systems; with our pipeline type as their batch data,
     // items are never merged (each may bind another height map).

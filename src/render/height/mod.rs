@@ -50,6 +50,11 @@ use crate::{
     warn_once::WarnedOnce,
 };
 
+/// Embeds the pass's shaders (their asset paths follow this folder).
+pub(super) fn embed_shaders(app: &mut App) {
+    bevy::asset::embedded_asset!(app, "height.wgsl");
+}
+
 /// One mesostructure mesh to draw into the height map of one view.
 pub struct HeightPhaseItem {
     sorting_info: TransparentSortingInfo3d,

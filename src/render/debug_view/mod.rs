@@ -15,6 +15,11 @@ use super::{ViewMesostructureBindGroups, ViewMesostructureUniformOffset};
 use super::view_settings::{ExtractedMesostructure, MesostructureUniform};
 use crate::settings::MesostructureDebugView;
 
+/// Embeds the pass's shaders (their asset paths follow this folder).
+pub(super) fn embed_shaders(app: &mut App) {
+    bevy::asset::embedded_asset!(app, "debug_view.wgsl");
+}
+
 /// Layout, shaders and per-format pipelines of the debug views.
 #[derive(Resource)]
 pub struct DebugViewPipeline {

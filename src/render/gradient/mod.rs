@@ -17,6 +17,11 @@ use super::{
 };
 use crate::render::view_settings::MesostructureUniform;
 
+/// Embeds the pass's shaders (their asset paths follow this folder).
+pub(super) fn embed_shaders(app: &mut App) {
+    bevy::asset::embedded_asset!(app, "gradient.wgsl");
+}
+
 /// Pipeline and layout of the gradient pass.
 #[derive(Resource)]
 pub struct GradientPipeline {

@@ -17,6 +17,11 @@ use super::{
 };
 use crate::render::view_settings::MesostructureUniform;
 
+/// Embeds the pass's shaders (their asset paths follow this folder).
+pub(super) fn embed_shaders(app: &mut App) {
+    bevy::asset::embedded_asset!(app, "apex.wgsl");
+}
+
 /// Pipeline and layout of the apex pass.
 #[derive(Resource)]
 pub struct ApexPipeline {

@@ -26,6 +26,11 @@ use bevy::{
 use super::{ViewMesostructureTextures, height::HeightPhaseItem, view_has_mesostructure};
 use crate::render::view_settings::ExtractedMesostructure;
 
+/// Embeds the pass's shaders (their asset paths follow this folder).
+pub(super) fn embed_shaders(app: &mut App) {
+    bevy::asset::embedded_asset!(app, "lighting.wgsl");
+}
+
 /// The deferred lighting pass id of mesostructure materials (Bevy's own is 1; 0 = no geometry).
 pub const MESOSTRUCTURE_LIGHTING_PASS_ID: u8 = 2;
 

@@ -22,6 +22,11 @@ use crate::{
     render::view_settings::{ExtractedMesostructure, MesostructureUniform},
 };
 
+/// Embeds the pass's shaders (their asset paths follow this folder).
+pub(super) fn embed_shaders(app: &mut App) {
+    bevy::asset::embedded_asset!(app, "occlusion.wgsl");
+}
+
 /// Layout and shader of the occlusion pass; its pipelines are specialised per
 /// [`OcclusionPipelineKey`], as Bevy keys its SSAO pipeline.
 #[derive(Resource)]

@@ -22,6 +22,12 @@ use super::{
 };
 use super::view_settings::{ExtractedMesostructure, MesostructureUniform};
 
+/// Embeds the pass's shaders (their asset paths follow this folder).
+pub(super) fn embed_shaders(app: &mut App) {
+    bevy::asset::embedded_asset!(app, "bleeding.wgsl");
+    bevy::asset::embedded_asset!(app, "bleeding_composite.wgsl");
+}
+
 /// Layouts and pipelines of the gather (compute) and the composite (fullscreen draw).
 #[derive(Resource)]
 pub struct BleedingPipeline {
