@@ -20,7 +20,11 @@
 //! recorded as yardsticks of what the GPU does with raster work. For each pass: median and
 //! 95th percentile over N frames after the warm-up, and the sums `mesostructure/total` and
 //! `mesostructure/total_without_lighting` (the lighting pass replaces Bevy's own deferred
-//! lighting for these pixels, so it is not all added cost). `--quick` keeps 256² and 512², three
+//! lighting for these pixels, so it is not all added cost). Each scene is also rendered without
+//! the plugin (the same deferred camera and meshes, lit by Bevy): `frame/plugin_on`,
+//! `frame/plugin_off` and the headline `frame/added` are whole-frame GPU times from a raw
+//! timestamp pair around all cameras (`common/frame_timer.rs`), and `bevy/deferred_lighting`
+//! (`_plugin_off`) is Bevy's deferred lighting pass. `--quick` keeps 256² and 512², three
 //! scales and the presets at 256² (for the software driver, whose figures are relative only).
 //!
 //! Writes `FILE.csv` (default `out/bench.csv`) with the columns
