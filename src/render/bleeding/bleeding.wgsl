@@ -29,9 +29,6 @@
 @group(0) @binding(9) var mhgm: texture_2d<f32>;
 
 const PI: f32 = 3.141592653589793;
-// Largest factor the area-correct rescaling may apply (a gather that saw a sliver of the
-// surround is a poor mean).
-const MAX_BOUNCE_RESCALE: f32 = 4.0;
 
 fn surface_point(p: vec2<i32>) -> vec3<f32> {
     return surface::surface_point(mhm, core_normal, view.world_from_clip, view.viewport, p);
@@ -140,10 +137,14 @@ fn bleeding(@builtin(global_invocation_id) id: vec3<u32>) {
     // mean radiance of what P sees instead of the sky, and the texture-space occlusion says how
     // much that is: irradiance = mean radiance · π (1 − AO) (cosine-weighted blocked solid
     // angle), with the gather's own blocked fraction `covered · Δθ / π` in the denominator.
+    // No cap: irradiance / gathered is a weighted mean of the samples' radiance, so the result
+    // never exceeds the brightest sample's radiance times π (1 − AO), however little the gather
+    // covered. (A cap of 4 had kept minified and oblique views' bounce at 0.38–0.55 of the
+    // truth: there the screen-space gather covers a sliver; docs/accuracy.md.)
     let texture_space = textureLoad(bump_normal, p, 0).w;
     let gathered = covered * TAU / f32(SECTORS) / PI;
     if settings.texture_space_horizons != 0u && texture_space >= 0.0 && gathered > 1e-4 {
-        irradiance *= clamp((1.0 - texture_space) / gathered, 0.0, MAX_BOUNCE_RESCALE);
+        irradiance *= max(1.0 - texture_space, 0.0) / gathered;
     }
     let bleeding = settings.weights.z * albedo / PI * irradiance;
     textureStore(bleeding_out, p, vec4(bleeding, 1.0));
