@@ -96,6 +96,20 @@ struct Row {
     frames: usize,
 }
 
+impl Row {
+    /// The median and 95th percentile of `values` as the row of `pass`.
+    fn of(config: Config, triangles: usize, pass: impl Into<String>, values: &[f64]) -> Self {
+        Self {
+            config,
+            triangles,
+            pass: pass.into(),
+            median: percentile(values, 0.5),
+            p95: percentile(values, 0.95),
+            frames: values.len(),
+        }
+    }
+}
+
 fn mesh(scene: &str) -> Mesh {
     match scene {
         "torus" => Torus::new(0.45, 0.8)
@@ -411,31 +425,10 @@ fn main() {
             if span == "mesostructure/lighting" {
                 lighting_without = Some(percentile(values, 0.5));
             }
-            rows.push(Row {
-                config,
-                triangles,
-                pass: span.clone(),
-                median: percentile(values, 0.5),
-                p95: percentile(values, 0.95),
-                frames: values.len(),
-            });
+            rows.push(Row::of(config, triangles, span, values));
         }
-        rows.push(Row {
-            config,
-            triangles,
-            pass: "mesostructure/total".into(),
-            median: percentile(&total, 0.5),
-            p95: percentile(&total, 0.95),
-            frames: reported,
-        });
-        rows.push(Row {
-            config,
-            triangles,
-            pass: "mesostructure/total_without_lighting".into(),
-            median: percentile(&added, 0.5),
-            p95: percentile(&added, 0.95),
-            frames: reported,
-        });
+        rows.push(Row::of(config, triangles, "mesostructure/total", &total));
+        rows.push(Row::of(config, triangles, "mesostructure/total_without_lighting", &added));
         // What the plugin adds: the same frame without it (Bevy's deferred lighting for the
         // same meshes), whole frames bracketed by raw timestamps.
         let (off, _, _) = measure(config, Run::PluginOff, frames, warm_up);
@@ -444,14 +437,7 @@ fn main() {
         };
         if let (Some(on_frames), Some(off_frames)) = (find(&series, "frame"), find(&off, "frame")) {
             for (pass, values) in [("frame/plugin_on", &on_frames), ("frame/plugin_off", &off_frames)] {
-                rows.push(Row {
-                    config,
-                    triangles,
-                    pass: pass.into(),
-                    median: percentile(values, 0.5),
-                    p95: percentile(values, 0.95),
-                    frames: values.len(),
-                });
+                rows.push(Row::of(config, triangles, pass, values));
             }
             rows.push(Row {
                 config,
@@ -463,14 +449,7 @@ fn main() {
             });
         }
         if let Some(values) = find(&off, "bevy/deferred_lighting") {
-            rows.push(Row {
-                config,
-                triangles,
-                pass: "bevy/deferred_lighting_plugin_off".into(),
-                median: percentile(&values, 0.5),
-                p95: percentile(&values, 0.95),
-                frames: values.len(),
-            });
+            rows.push(Row::of(config, triangles, "bevy/deferred_lighting_plugin_off", &values));
         }
         // Contact shadows: the same scene with them on; their cost is the lighting pass's growth.
         let (with, _, _) = measure(config, Run::ContactShadows, frames, warm_up);
