@@ -82,7 +82,7 @@ pub mod height_map_import;
 pub mod height_maps;
 pub mod material;
 pub mod reference;
-pub mod render;
+mod render;
 pub mod settings;
 mod warn_once;
 
@@ -94,7 +94,11 @@ use bevy::{
 };
 
 pub use material::MesostructureMaterial;
-pub use render::capture::{CapturedFrame, MesostructureCapture, MesostructureCaptures};
+pub use render::{
+    MesostructureSystems,
+    capture::{CapturedFrame, MesostructureCapture, MesostructureCaptures},
+    lighting::MESOSTRUCTURE_LIGHTING_PASS_ID,
+};
 pub use settings::{
     HorizonSearchBaseline, Mesostructure, MesostructureCost, MesostructureDebugView,
     MesostructureQuality, WorkingResolution,

@@ -50,7 +50,7 @@ impl Default for MesostructureMaterial {
 /// What the render world needs of a valid [`MesostructureMaterial`]: inserted by the plugin
 /// once the height map is loaded and converted, removed while the input is invalid.
 #[derive(Component, ExtractComponent, Clone, Debug, PartialEq)]
-pub struct PreparedMesostructure {
+pub(crate) struct PreparedMesostructure {
     /// The height map converted to an `R32Float` mip chain.
     pub height_mips: AssetId<Image>,
     /// Its texture-space horizon map ([`crate::height_map_import::HorizonMap`]).
@@ -77,7 +77,7 @@ pub struct DerivedHeightMap {
 
 /// Validates each [`MesostructureMaterial`], converts its height map once, and keeps
 /// [`PreparedMesostructure`] in step.
-pub fn prepare_mesostructure_materials(
+pub(crate) fn prepare_mesostructure_materials(
     mut commands: Commands,
     materials: Query<(
         Entity,
@@ -257,7 +257,7 @@ pub fn adapt(material: &StandardMaterial) -> StandardMaterial {
 /// Swaps the `StandardMaterial` of each prepared mesostructure entity for its mesostructure
 /// copy (keeping the copy in step with the original), and restores the original when the
 /// entity is no longer one.
-pub fn adapt_standard_materials(
+pub(crate) fn adapt_standard_materials(
     mut commands: Commands,
     entities: Query<(
         Entity,

@@ -66,7 +66,7 @@ impl Plugin for FrameTimerPlugin {
                     deferred_lighting_begin
                         .in_set(Core3dSystems::MainPass)
                         .before(deferred_lighting)
-                        .after(bevy_mesostructure::render::lighting::lighting_pass),
+                        .after(bevy_mesostructure::MesostructureSystems::Lighting),
                     deferred_lighting_end
                         .in_set(Core3dSystems::MainPass)
                         .after(deferred_lighting)

@@ -155,6 +155,14 @@ pub(crate) fn dispatch_per_pixel(
     span.end(ctx.command_encoder());
 }
 
+/// The plugin's systems in the `Core3d` schedule that other code may order against.
+#[derive(bevy::ecs::schedule::SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MesostructureSystems {
+    /// The lighting pass (in `Core3dSystems::MainPass`, before Bevy's deferred lighting), which
+    /// lights the mesostructure pixels in place of Bevy's deferred lighting.
+    Lighting,
+}
+
 /// The settings of all views, one dynamic uniform buffer.
 #[derive(Resource, Default)]
 pub struct MesostructureUniforms(pub DynamicUniformBuffer<MesostructureUniform>);
@@ -253,6 +261,7 @@ pub(crate) fn build(app: &mut App) {
             Core3d,
             lighting::lighting_pass
                 .in_set(Core3dSystems::MainPass)
+                .in_set(MesostructureSystems::Lighting)
                 .before(bevy::pbr::deferred::deferred_lighting)
                 .before(main_opaque_pass_3d),
         )

@@ -307,7 +307,7 @@ fn shared_materials_are_copied_not_changed() {
     assert_eq!(materials.get(&shared).unwrap().deferred_lighting_pass_id, 1);
     assert_eq!(
         materials.get(&copy).unwrap().deferred_lighting_pass_id,
-        bevy_mesostructure::render::lighting::MESOSTRUCTURE_LIGHTING_PASS_ID
+        bevy_mesostructure::MESOSTRUCTURE_LIGHTING_PASS_ID
     );
     // Removing the component restores the original.
     app.world_mut()
