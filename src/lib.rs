@@ -49,7 +49,8 @@
 //! occlusion pass; in the main pass, a deferred lighting pass of the plugin's own for the
 //! mesostructure pixels (Bevy's BRDF, shadow maps and lights, with the occlusion on ambient light
 //! and the micro-shadows on each light) and, after the opaque pass, the bleeding pass. See
-//! [`render`]. [`reference`](mod@reference) is the same method in plain Rust, the oracle of the GPU tests.
+//! `src/render/` (a folder per pass). [`reference`](mod@reference) is the same method in plain
+//! Rust, the oracle of the GPU tests.
 //!
 //! ## Bad input
 //! Missing or still-loading height maps, unsupported formats, meshes without UVs or normals,

@@ -170,7 +170,7 @@ pub struct HorizonSearchBaseline {
     pub steps: u32,
 }
 
-/// The resolution the apex sets are searched at (see [`Mesostructure::working_resolution`]).
+/// The resolution the apex sets are searched at (see [`MesostructureCost::working_resolution`]).
 #[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[reflect(Default, Clone, Debug, PartialEq, Hash)]
 pub enum WorkingResolution {

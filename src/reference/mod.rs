@@ -1,7 +1,7 @@
 //! Plain-Rust implementation of the method on images: the test oracle for the GPU passes, and a
 //! tool for experiments (paper §2).
 //!
-//! The GPU passes in [`crate::render`] implement exactly these steps, with the same constants and
+//! The GPU passes (`src/render/`) implement exactly these steps, with the same constants and
 //! the same tie-breaking, so the GPU contract tests can feed the screen-space height map read
 //! back from the GPU into [`gradient_map`] and [`apex_sets`] and compare.
 //!
