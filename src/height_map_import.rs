@@ -131,14 +131,23 @@ pub const HORIZON_AZIMUTHS: usize = 16;
 pub const HORIZON_BANDS: usize = 1;
 /// The outer limit of each band, in texels (the last one is [`HORIZON_RADIUS`]).
 pub const HORIZON_BAND_LIMITS: [u32; HORIZON_BANDS] = [HORIZON_RADIUS];
-/// Blocks of the horizon map's image: per band, its slopes four azimuths a block, then their
-/// distances four a block; then the gradient.
-pub const HORIZON_BLOCKS: usize = HORIZON_BANDS * 2 * (HORIZON_AZIMUTHS / 4) + 1;
+/// Blocks of the horizon map's slope image: per band, its slopes four azimuths a block; then
+/// the gradient. (The distances are a second image, [`HorizonMap::distance_image`], one byte
+/// each: 18.9 MB for a 512² map in half floats, 14.7 MB so.)
+pub const HORIZON_BLOCKS: usize = HORIZON_BANDS * (HORIZON_AZIMUTHS / 4) + 1;
+/// Blocks of the horizon map's distance image: per band, four azimuths a block.
+pub const HORIZON_DISTANCE_BLOCKS: usize = HORIZON_BANDS * (HORIZON_AZIMUTHS / 4);
 /// How far each horizon is searched, in texels of the horizon map's level.
 pub const HORIZON_RADIUS: u32 = 32;
 /// The horizon map is built at the finest level of the mip chain at most this many texels wide
 /// (and high): it serves minified surfaces, where finer detail is below a pixel anyway.
 pub const HORIZON_MAX_SIZE: u32 = 512;
+
+/// The UV length of one texel step along horizon azimuth `i` on a `w × h` level.
+pub fn horizon_step(i: usize, w: u32, h: u32) -> f32 {
+    let [dx, dy] = horizon_direction(i);
+    ((dx / w as f32).powi(2) + (dy / h as f32).powi(2)).sqrt()
+}
 
 /// The unit texel-space direction of horizon azimuth `i`.
 pub fn horizon_direction(i: usize) -> [f32; 2] {
@@ -206,8 +215,7 @@ impl HorizonMap {
             let mut distances = [[0.0; HORIZON_AZIMUTHS]; HORIZON_BANDS];
             for i in 0..HORIZON_AZIMUTHS {
                 let [dx, dy] = horizon_direction(i);
-                // UV length of one texel step along this azimuth.
-                let step = ((dx / lw as f32).powi(2) + (dy / lh as f32).powi(2)).sqrt();
+                let step = horizon_step(i, lw, lh);
                 let mut inner = 1;
                 for band in 0..HORIZON_BANDS {
                     let outer = HORIZON_BAND_LIMITS[band].min(radius);
@@ -279,9 +287,9 @@ impl HorizonMap {
             .fold(f32::MIN, f32::max)
     }
 
-    /// The map as an `Rgba16Float` image [`HORIZON_BLOCKS`] blocks wide: per band `b`, the
-    /// slopes of azimuths `4j … 4j + 3` in block `2 b A/4 + j` and their distances in block
-    /// `(2 b + 1) A/4 + j` (A = [`HORIZON_AZIMUTHS`]); the gradient (in `xy`) in the last block.
+    /// The slopes as an `Rgba16Float` image [`HORIZON_BLOCKS`] blocks wide: per band `b`, the
+    /// slopes of azimuths `4j … 4j + 3` in block `b A/4 + j` (A = [`HORIZON_AZIMUTHS`]); the
+    /// gradient (in `xy`) in the last block.
     pub fn to_image(&self) -> Image {
         let (w, h) = (self.width, self.height);
         let blocks = HORIZON_BLOCKS as u32;
@@ -293,9 +301,8 @@ impl HorizonMap {
                 for x in 0..w {
                     let i = (y * w + x) as usize;
                     let v = if block + 1 < HORIZON_BLOCKS {
-                        let (band, kind, j) = (block / (2 * quarter), block / quarter % 2, block % quarter);
-                        let values = if kind == 0 { &self.slopes[i][band] } else { &self.distances[i][band] };
-                        let v = &values[4 * j..4 * j + 4];
+                        let (band, j) = (block / quarter, block % quarter);
+                        let v = &self.slopes[i][band][4 * j..4 * j + 4];
                         [v[0], v[1], v[2], v[3]]
                     } else {
                         [self.gradient[i][0], self.gradient[i][1], 0.0, 0.0]
@@ -313,6 +320,40 @@ impl HorizonMap {
             TextureDimension::D2,
             data,
             TextureFormat::Rgba16Float,
+            RenderAssetUsages::RENDER_WORLD,
+        )
+    }
+
+    /// The distances as an `Rgba8Uint` image [`HORIZON_DISTANCE_BLOCKS`] blocks wide, laid out
+    /// as the slopes: in texel steps along the azimuth (1 … [`HORIZON_RADIUS`]); the UV
+    /// distance is that times the UV length of one step ([`horizon_step`]).
+    pub fn distance_image(&self) -> Image {
+        let (w, h) = (self.width, self.height);
+        let blocks = HORIZON_DISTANCE_BLOCKS as u32;
+        let quarter = HORIZON_AZIMUTHS / 4;
+        let steps: Vec<f32> = (0..HORIZON_AZIMUTHS).map(|i| horizon_step(i, w, h)).collect();
+        let mut data = Vec::with_capacity((w * blocks * h * 4) as usize);
+        for y in 0..h {
+            for block in 0..HORIZON_DISTANCE_BLOCKS {
+                let (band, j) = (block / quarter, block % quarter);
+                for x in 0..w {
+                    let i = (y * w + x) as usize;
+                    for a in 4 * j..4 * j + 4 {
+                        let texels = (self.distances[i][band][a] / steps[a]).round();
+                        data.push(texels.clamp(1.0, 255.0) as u8);
+                    }
+                }
+            }
+        }
+        Image::new(
+            Extent3d {
+                width: w * blocks,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+            TextureDimension::D2,
+            data,
+            TextureFormat::Rgba8Uint,
             RenderAssetUsages::RENDER_WORLD,
         )
     }
@@ -423,5 +464,25 @@ mod tests {
             data[16..].iter().all(|v| (v - 0.5).abs() < 1e-6),
             "box filter averages"
         );
+    }
+
+    #[test]
+    fn horizon_images_lay_out_slopes_and_distances() {
+        // Flat at 0 but for a wall of height 1 at x = 24 … 27 on a 64² map.
+        let values: Vec<f32> = (0..64 * 64)
+            .map(|i| if (24..28).contains(&(i % 64)) { 1.0 } else { 0.0 })
+            .collect();
+        let map = HorizonMap::new(&values, 64, 64);
+        let (slopes, distances) = (map.to_image(), map.distance_image());
+        assert_eq!(slopes.width(), 64 * HORIZON_BLOCKS as u32);
+        assert_eq!(distances.width(), 64 * HORIZON_DISTANCE_BLOCKS as u32);
+        // Texel (16, 7), azimuth 0 (block 0, channel 0): the wall 8 texel steps away.
+        let d = distances.data.as_ref().unwrap();
+        let row = 64 * HORIZON_DISTANCE_BLOCKS * 4;
+        assert_eq!(d[7 * row + 16 * 4], 8);
+        let s = slopes.data.as_ref().unwrap();
+        let at = 7 * (64 * HORIZON_BLOCKS * 8) + 16 * 8;
+        let slope = half_to_f32(u16::from_le_bytes([s[at], s[at + 1]]));
+        assert!((slope - 64.0 / 8.0).abs() < 0.01, "slope {slope}");
     }
 }

@@ -53,8 +53,10 @@ impl Default for MesostructureMaterial {
 pub(crate) struct PreparedMesostructure {
     /// The height map converted to an `R32Float` mip chain.
     pub height_mips: AssetId<Image>,
-    /// Its texture-space horizon map ([`crate::height_map_import::HorizonMap`]).
+    /// Its texture-space horizon map ([`crate::height_map_import::HorizonMap`]): the slopes
+    /// and gradient, and the distances of the slopes.
     pub horizons: AssetId<Image>,
+    pub horizon_distances: AssetId<Image>,
     /// `k`, world units.
     pub scale: f32,
     /// UV transform.
@@ -73,6 +75,7 @@ pub struct HeightMapMips(HashMap<AssetId<Image>, Option<DerivedHeightMap>>);
 pub struct DerivedHeightMap {
     mips: Handle<Image>,
     horizons: Handle<Image>,
+    horizon_distances: Handle<Image>,
 }
 
 /// Validates each [`MesostructureMaterial`], converts its height map once, and keeps
@@ -103,6 +106,7 @@ pub(crate) fn prepare_mesostructure_materials(
             if let Some(Some(derived)) = mips.0.remove(id) {
                 images.remove(&derived.mips);
                 images.remove(&derived.horizons);
+                images.remove(&derived.horizon_distances);
             }
         }
     }
@@ -201,10 +205,11 @@ fn prepare_one(
                     });
                 }
                 let (w, h) = (source.width(), source.height());
-                let horizons = HorizonMap::new(&values, w, h).to_image();
+                let horizons = HorizonMap::new(&values, w, h);
                 Some(DerivedHeightMap {
                     mips: images.add(mip_chain(values, w, h)),
-                    horizons: images.add(horizons),
+                    horizons: images.add(horizons.to_image()),
+                    horizon_distances: images.add(horizons.distance_image()),
                 })
             }
             Err(err) => {
@@ -223,6 +228,7 @@ fn prepare_one(
     Some(PreparedMesostructure {
         height_mips: derived.mips.id(),
         horizons: derived.horizons.id(),
+        horizon_distances: derived.horizon_distances.id(),
         scale: material.scale,
         uv_transform: material.uv_transform,
         bump: true,

@@ -20,19 +20,21 @@ struct HeightMaterial {
 @group(3) @binding(1) var<uniform> material: HeightMaterial;
 // Texture-space horizon map (`HorizonMap` in height_map_import.rs), HORIZON_BLOCKS blocks wide:
 // the highest slope towards azimuths 4b … 4b + 3 in block b (i · 360° / HORIZON_AZIMUTHS in
-// texel space; height per UV unit of distance) and the UV distances where they are reached,
-// per distance band (see `HorizonMap::to_image`), then the height gradient per UV unit.
+// texel space; height per UV unit of distance), per distance band (see `HorizonMap::to_image`),
+// then the height gradient per UV unit.
 @group(3) @binding(2) var horizons: texture_2d<f32>;
+// The texel steps (1 … 32) at which those slopes are reached, one byte each, laid out as the
+// slopes but without the gradient block (`HorizonMap::distance_image`).
+@group(3) @binding(3) var horizon_distances: texture_2d<u32>;
 
 const PI: f32 = 3.141592653589793;
 // Azimuths of the horizon map (`height_map_import::HORIZON_AZIMUTHS`, a multiple of 4): per
-// distance band their slopes four a block, then their distances four a block; then the
-// gradient block.
+// distance band their slopes four a block; then the gradient block.
 const HORIZON_AZIMUTHS: u32 = #{HORIZON_AZIMUTHS}u;
 const AZIMUTH_BLOCKS: i32 = i32(HORIZON_AZIMUTHS / 4u);
 // Distance bands (`height_map_import::HORIZON_BANDS`).
 const HORIZON_BANDS: i32 = #{HORIZON_BANDS};
-const HORIZON_BLOCKS: i32 = HORIZON_BANDS * 2 * AZIMUTH_BLOCKS + 1;
+const HORIZON_BLOCKS: i32 = HORIZON_BANDS * AZIMUTH_BLOCKS + 1;
 
 struct HeightOutput {
     // (dis · k in world units, NDC depth, object id, dis)
@@ -173,11 +175,15 @@ fn horizon_tangent(slope: f32, distance: f32, k: f32, reach: f32, curvature: f32
 // distance bands, each band's slope lowered by the core's fall where it is reached (exact on a
 // flat core; a lower bound on a curved one, tight at both bands' distances).
 fn texel_horizon_tangent(texel: vec2<i32>, block: i32, i: u32, k: f32, reach: f32, curvature: f32) -> f32 {
+    // UV length of one texel step along the azimuth (`height_map_import::horizon_step`).
+    let a = f32(i) * 2.0 * PI / f32(HORIZON_AZIMUTHS);
+    let level = vec2<f32>(f32(block), f32(textureDimensions(horizons).y));
+    let step = length(vec2(cos(a), sin(a)) / level);
     var best = -3.0e38;
     for (var band = 0; band < HORIZON_BANDS; band++) {
-        let slopes = (2 * band * AZIMUTH_BLOCKS + i32(i / 4u)) * block;
-        let slope = textureLoad(horizons, texel + vec2(slopes, 0), 0)[i % 4u];
-        let distance = textureLoad(horizons, texel + vec2(slopes + AZIMUTH_BLOCKS * block, 0), 0)[i % 4u];
+        let offset = vec2((band * AZIMUTH_BLOCKS + i32(i / 4u)) * block, 0);
+        let slope = textureLoad(horizons, texel + offset, 0)[i % 4u];
+        let distance = f32(textureLoad(horizon_distances, texel + offset, 0)[i % 4u]) * step;
         best = max(best, horizon_tangent(slope, distance, k, reach, curvature));
     }
     return best;

@@ -158,6 +158,7 @@ pub fn init_height_pass_pipeline(
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 uniform_buffer::<HeightMaterialUniform>(true),
                 texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_2d(TextureSampleType::Uint),
             ),
         ),
     );
@@ -352,9 +353,10 @@ pub fn prepare_height_material_bind_groups(
     groups.uniforms.clear();
     let mut entries = Vec::new();
     for (main_entity, prepared) in &materials {
-        let (Some(image), Some(horizons)) = (
+        let (Some(image), Some(horizons), Some(distances)) = (
             images.get(prepared.height_mips),
             images.get(prepared.horizons),
+            images.get(prepared.horizon_distances),
         ) else {
             continue;
         };
@@ -375,6 +377,7 @@ pub fn prepare_height_material_bind_groups(
             *main_entity,
             image.texture_view.clone(),
             horizons.texture_view.clone(),
+            distances.texture_view.clone(),
             offset,
         ));
     }
@@ -386,11 +389,11 @@ pub fn prepare_height_material_bind_groups(
         return;
     };
     let layout = pipeline_cache.get_bind_group_layout(&pipeline.material_layout);
-    for (main_entity, view, horizons, offset) in entries {
+    for (main_entity, view, horizons, distances, offset) in entries {
         let group = device.create_bind_group(
             "mesostructure_height_material_bind_group",
             &layout,
-            &BindGroupEntries::sequential((&view, binding.clone(), &horizons)),
+            &BindGroupEntries::sequential((&view, binding.clone(), &horizons, &distances)),
         );
         groups.groups.insert(main_entity, (group, offset));
     }
