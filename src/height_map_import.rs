@@ -139,6 +139,8 @@ pub const HORIZON_BLOCKS: usize = HORIZON_BANDS * (HORIZON_AZIMUTHS / 4) + 1;
 pub const HORIZON_DISTANCE_BLOCKS: usize = HORIZON_BANDS * (HORIZON_AZIMUTHS / 4);
 /// How far each horizon is searched, in texels of the horizon map's level.
 pub const HORIZON_RADIUS: u32 = 32;
+// Each slope's distance is stored in texel steps, one byte each.
+const _: () = assert!(HORIZON_RADIUS <= u8::MAX as u32);
 /// The horizon map is built at the finest level of the mip chain at most this many texels wide
 /// (and high): it serves minified surfaces, where finer detail is below a pixel anyway.
 pub const HORIZON_MAX_SIZE: u32 = 512;
@@ -182,8 +184,9 @@ pub struct HorizonMap {
     pub height: u32,
     /// Per texel, row-major, per distance band: the highest slope towards each azimuth.
     pub slopes: Vec<[[f32; HORIZON_AZIMUTHS]; HORIZON_BANDS]>,
-    /// Per texel, per band: the UV distance at which each of those slopes is reached.
-    pub distances: Vec<[[f32; HORIZON_AZIMUTHS]; HORIZON_BANDS]>,
+    /// Per texel, per band: the texel steps along the azimuth (1 … [`HORIZON_RADIUS`]) at which
+    /// each of those slopes is reached; times [`horizon_step`], the UV distance.
+    pub distances: Vec<[[u8; HORIZON_AZIMUTHS]; HORIZON_BANDS]>,
     /// Per texel: `(∂h/∂u, ∂h/∂v)`.
     pub gradient: Vec<[f32; 2]>,
 }
@@ -212,7 +215,7 @@ impl HorizonMap {
             let (fx, fy) = (x as f32, y as f32);
             let h0 = at(x as i64, y as i64);
             let mut slopes = [[0.0; HORIZON_AZIMUTHS]; HORIZON_BANDS];
-            let mut distances = [[0.0; HORIZON_AZIMUTHS]; HORIZON_BANDS];
+            let mut distances = [[0u8; HORIZON_AZIMUTHS]; HORIZON_BANDS];
             for i in 0..HORIZON_AZIMUTHS {
                 let [dx, dy] = horizon_direction(i);
                 let step = horizon_step(i, lw, lh);
@@ -225,16 +228,16 @@ impl HorizonMap {
                         distances[band][i] = distances[band - 1][i];
                         continue;
                     }
-                    let (mut best, mut at_distance) = (f32::MIN, inner as f32 * step);
+                    let (mut best, mut at_distance) = (f32::MIN, inner);
                     for d in inner..=outer {
-                        let d = d as f32;
-                        let slope = (bilinear(fx + d * dx, fy + d * dy) - h0) / (d * step);
+                        let t = d as f32;
+                        let slope = (bilinear(fx + t * dx, fy + t * dy) - h0) / (t * step);
                         if slope > best {
-                            (best, at_distance) = (slope, d * step);
+                            (best, at_distance) = (slope, d);
                         }
                     }
                     slopes[band][i] = best;
-                    distances[band][i] = at_distance;
+                    distances[band][i] = at_distance as u8;
                     inner = outer + 1;
                 }
             }
@@ -248,8 +251,8 @@ impl HorizonMap {
         let rows: Vec<u32> = (0..lh).collect();
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let chunk = rows.len().div_ceil(threads).max(1);
-        type Bands = [[f32; HORIZON_AZIMUTHS]; HORIZON_BANDS];
-        type Texel = (Bands, Bands, [f32; 2]);
+        type Bands<T> = [[T; HORIZON_AZIMUTHS]; HORIZON_BANDS];
+        type Texel = (Bands<f32>, Bands<u8>, [f32; 2]);
         let texels: Vec<Texel> = std::thread::scope(|scope| {
             let handles: Vec<_> = rows
                 .chunks(chunk)
@@ -280,9 +283,11 @@ impl HorizonMap {
     /// ([`horizon_tangent`] of each; exact where the core is flat, a lower bound where it is
     /// curved).
     pub fn tangent(&self, index: usize, i: usize, k: f32, reach: f32, curvature: f32) -> f32 {
+        let step = horizon_step(i, self.width, self.height);
         (0..HORIZON_BANDS)
             .map(|b| {
-                horizon_tangent(self.slopes[index][b][i], self.distances[index][b][i], k, reach, curvature)
+                let distance = self.distances[index][b][i] as f32 * step;
+                horizon_tangent(self.slopes[index][b][i], distance, k, reach, curvature)
             })
             .fold(f32::MIN, f32::max)
     }
@@ -291,69 +296,59 @@ impl HorizonMap {
     /// slopes of azimuths `4j … 4j + 3` in block `b A/4 + j` (A = [`HORIZON_AZIMUTHS`]); the
     /// gradient (in `xy`) in the last block.
     pub fn to_image(&self) -> Image {
-        let (w, h) = (self.width, self.height);
-        let blocks = HORIZON_BLOCKS as u32;
-        let mut data = Vec::with_capacity((w * blocks * h * 8) as usize);
-        let mut push = |v: f32| data.extend(half::f16::from_f32(v).to_le_bytes());
         let quarter = HORIZON_AZIMUTHS / 4;
-        for y in 0..h {
-            for block in 0..HORIZON_BLOCKS {
-                for x in 0..w {
-                    let i = (y * w + x) as usize;
-                    let v = if block + 1 < HORIZON_BLOCKS {
-                        let (band, j) = (block / quarter, block % quarter);
-                        let v = &self.slopes[i][band][4 * j..4 * j + 4];
-                        [v[0], v[1], v[2], v[3]]
-                    } else {
-                        [self.gradient[i][0], self.gradient[i][1], 0.0, 0.0]
-                    };
-                    v.into_iter().for_each(&mut push);
-                }
+        self.blocks_image(HORIZON_BLOCKS, TextureFormat::Rgba16Float, |data, i, block| {
+            let v = if block + 1 < HORIZON_BLOCKS {
+                let (band, j) = (block / quarter, block % quarter);
+                let v = &self.slopes[i][band][4 * j..4 * j + 4];
+                [v[0], v[1], v[2], v[3]]
+            } else {
+                [self.gradient[i][0], self.gradient[i][1], 0.0, 0.0]
+            };
+            for c in v {
+                data.extend(half::f16::from_f32(c).to_le_bytes());
             }
-        }
-        Image::new(
-            Extent3d {
-                width: w * blocks,
-                height: h,
-                depth_or_array_layers: 1,
-            },
-            TextureDimension::D2,
-            data,
-            TextureFormat::Rgba16Float,
-            RenderAssetUsages::RENDER_WORLD,
-        )
+        })
     }
 
     /// The distances as an `Rgba8Uint` image [`HORIZON_DISTANCE_BLOCKS`] blocks wide, laid out
     /// as the slopes: in texel steps along the azimuth (1 … [`HORIZON_RADIUS`]); the UV
     /// distance is that times the UV length of one step ([`horizon_step`]).
     pub fn distance_image(&self) -> Image {
-        let (w, h) = (self.width, self.height);
-        let blocks = HORIZON_DISTANCE_BLOCKS as u32;
         let quarter = HORIZON_AZIMUTHS / 4;
-        let steps: Vec<f32> = (0..HORIZON_AZIMUTHS).map(|i| horizon_step(i, w, h)).collect();
-        let mut data = Vec::with_capacity((w * blocks * h * 4) as usize);
+        self.blocks_image(HORIZON_DISTANCE_BLOCKS, TextureFormat::Rgba8Uint, |data, i, block| {
+            let (band, j) = (block / quarter, block % quarter);
+            data.extend_from_slice(&self.distances[i][band][4 * j..4 * j + 4]);
+        })
+    }
+
+    /// An image `blocks` copies of the map wide, row by row: `texel(data, i, block)` appends
+    /// texel `i`'s value in block `block`.
+    fn blocks_image(
+        &self,
+        blocks: usize,
+        format: TextureFormat,
+        mut texel: impl FnMut(&mut Vec<u8>, usize, usize),
+    ) -> Image {
+        let (w, h) = (self.width, self.height);
+        let bytes = format.block_copy_size(None).unwrap_or(0) as usize;
+        let mut data = Vec::with_capacity(w as usize * blocks * h as usize * bytes);
         for y in 0..h {
-            for block in 0..HORIZON_DISTANCE_BLOCKS {
-                let (band, j) = (block / quarter, block % quarter);
+            for block in 0..blocks {
                 for x in 0..w {
-                    let i = (y * w + x) as usize;
-                    for a in 4 * j..4 * j + 4 {
-                        let texels = (self.distances[i][band][a] / steps[a]).round();
-                        data.push(texels.clamp(1.0, 255.0) as u8);
-                    }
+                    texel(&mut data, (y * w + x) as usize, block);
                 }
             }
         }
         Image::new(
             Extent3d {
-                width: w * blocks,
+                width: w * blocks as u32,
                 height: h,
                 depth_or_array_layers: 1,
             },
             TextureDimension::D2,
             data,
-            TextureFormat::Rgba8Uint,
+            format,
             RenderAssetUsages::RENDER_WORLD,
         )
     }

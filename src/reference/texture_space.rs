@@ -193,8 +193,9 @@ mod tests {
         });
         let horizons = HorizonMap::new(&map.values, 64, 64);
         let i = 7 * 64 + 16;
-        let (slope, distance) = (horizons.slopes[i][0][0], horizons.distances[i][0][0]);
-        assert!((distance - 8.0 / 64.0).abs() < 1e-6, "wall at 8 texels, found {}", distance * 64.0);
+        let (slope, steps) = (horizons.slopes[i][0][0], horizons.distances[i][0][0]);
+        assert_eq!(steps, 8, "the wall is 8 texels away");
+        let distance = steps as f32 / 64.0;
         assert!((slope - 1.0 / distance).abs() < 1e-3, "slope {slope}");
         // 2 world units per UV unit, k 0.2: the wall rises 0.2 at D = 0.25; a core of radius
         // R falls D² / 2R there, 0.2 at R = 0.15625.

@@ -171,17 +171,21 @@ fn horizon_tangent(slope: f32, distance: f32, k: f32, reach: f32, curvature: f32
     return k * slope / reach - 0.5 * curvature * distance * reach;
 }
 
-// The highest horizon tangent of azimuth `i` at `texel` (`block`: texels per block) over the
-// distance bands, each band's slope lowered by the core's fall where it is reached (exact on a
-// flat core; a lower bound on a curved one, tight at both bands' distances).
-fn texel_horizon_tangent(texel: vec2<i32>, block: i32, i: u32, k: f32, reach: f32, curvature: f32) -> f32 {
-    // UV length of one texel step along the azimuth (`height_map_import::horizon_step`).
+// UV length of one texel step along horizon azimuth `i` on a level `level` texels in size
+// (`height_map_import::horizon_step`); the same for the opposite azimuth.
+fn horizon_step(i: u32, level: vec2<i32>) -> f32 {
     let a = f32(i) * 2.0 * PI / f32(HORIZON_AZIMUTHS);
-    let level = vec2<f32>(f32(block), f32(textureDimensions(horizons).y));
-    let step = length(vec2(cos(a), sin(a)) / level);
+    return length(vec2(cos(a), sin(a)) / vec2<f32>(level));
+}
+
+// The highest horizon tangent of azimuth `i` at `texel` over the distance bands, each band's
+// slope lowered by the core's fall where it is reached (exact on a flat core; a lower bound on
+// a curved one, tight at both bands' distances). `level`: the horizon map level's size (one
+// block); `step`: `horizon_step(i, level)`.
+fn texel_horizon_tangent(texel: vec2<i32>, level: vec2<i32>, i: u32, step: f32, k: f32, reach: f32, curvature: f32) -> f32 {
     var best = -3.0e38;
     for (var band = 0; band < HORIZON_BANDS; band++) {
-        let offset = vec2((band * AZIMUTH_BLOCKS + i32(i / 4u)) * block, 0);
+        let offset = vec2((band * AZIMUTH_BLOCKS + i32(i / 4u)) * level.x, 0);
         let slope = textureLoad(horizons, texel + offset, 0)[i % 4u];
         let distance = f32(textureLoad(horizon_distances, texel + offset, 0)[i % 4u]) * step;
         best = max(best, horizon_tangent(slope, distance, k, reach, curvature));
@@ -194,9 +198,9 @@ fn texel_horizon_tangent(texel: vec2<i32>, block: i32, i: u32, k: f32, reach: f3
 // slices through the core normal), each lowered by the core's curvature along it: per slice,
 // the directions above both horizons and in the normal's hemisphere, integrated in closed form
 // (the slice form of Jimenez et al. 2016, here about n).
-fn texel_occlusion(texel: vec2<i32>, block: i32, core: CoreFrame) -> f32 {
+fn texel_occlusion(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame) -> f32 {
     let n = core.n;
-    let gradient = textureLoad(horizons, texel + vec2((HORIZON_BLOCKS - 1) * block, 0), 0).xy;
+    let gradient = textureLoad(horizons, texel + vec2((HORIZON_BLOCKS - 1) * level.x, 0), 0).xy;
     // The true normal by Blinn's formula with the map's own gradient (as the bump normal).
     let true_normal = normalize(blinn_normal(n, core.pu, core.pv, core.k * gradient.x, core.k * gradient.y));
     var sum = 0.0;
@@ -211,9 +215,10 @@ fn texel_occlusion(texel: vec2<i32>, block: i32, core: CoreFrame) -> f32 {
         }
         let tangent = normalize(t);
         // Horizon elevations from the core plane on both sides of the slice (the curvature
-        // along the opposite azimuth is the same).
-        let up = atan(texel_horizon_tangent(texel, block, i, core.k, reach, along.curvature));
-        let down = atan(texel_horizon_tangent(texel, block, i + HORIZON_AZIMUTHS / 2u, core.k, reach, along.curvature));
+        // and the texel step along the opposite azimuth are the same).
+        let step = horizon_step(i, level);
+        let up = atan(texel_horizon_tangent(texel, level, i, step, core.k, reach, along.curvature));
+        let down = atan(texel_horizon_tangent(texel, level, i + HORIZON_AZIMUTHS / 2u, step, core.k, reach, along.curvature));
         let projected = vec2(dot(true_normal, tangent), dot(true_normal, n));
         let gamma = atan2(projected.x, projected.y);
         let hi = max(min(0.5 * PI - up, gamma + 0.5 * PI), 0.0);
@@ -229,7 +234,7 @@ fn texel_occlusion(texel: vec2<i32>, block: i32, core: CoreFrame) -> f32 {
 // its elevation above the core plane against the texel's horizon towards its azimuth (the two
 // nearest azimuths interpolated, each lowered by the core's curvature) — horizon mapping
 // (Max 1988) on the texture-space horizon map.
-fn texel_light_visibility(texel: vec2<i32>, block: i32, core: CoreFrame, to_light: vec3<f32>) -> f32 {
+fn texel_light_visibility(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame, to_light: vec3<f32>) -> f32 {
     let n = core.n;
     let pu = core.pu;
     let pv = core.pv;
@@ -260,8 +265,8 @@ fn texel_light_visibility(texel: vec2<i32>, block: i32, core: CoreFrame, to_ligh
     let i0 = u32((i32(lower) % count + count) % count);
     let i1 = (i0 + 1u) % HORIZON_AZIMUTHS;
     let horizon = mix(
-        texel_horizon_tangent(texel, block, i0, core.k, reach, along.curvature),
-        texel_horizon_tangent(texel, block, i1, core.k, reach, along.curvature),
+        texel_horizon_tangent(texel, level, i0, horizon_step(i0, level), core.k, reach, along.curvature),
+        texel_horizon_tangent(texel, level, i1, horizon_step(i1, level), core.k, reach, along.curvature),
         position - lower);
     // tan of the horizon against tan of the light's elevation.
     return select(0.0, 1.0, sin_l >= horizon * sqrt(t2));
@@ -296,9 +301,9 @@ fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_p
             let texel = horizon_texel(base, vec2<i32>(corner & 1, corner >> 1u), level);
             var visible = 1.0;
             if has_light {
-                visible = texel_light_visibility(texel, block, core, to_light);
+                visible = texel_light_visibility(texel, level, core, to_light);
             }
-            corners[corner] = vec2(texel_occlusion(texel, block, core), visible);
+            corners[corner] = vec2(texel_occlusion(texel, level, core), visible);
         }
         // Nested mixes: four equal corners give exactly their value (an open, lit flat map
         // stays exactly 1).
@@ -312,9 +317,9 @@ fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_p
             let texel = horizon_texel(vec2<i32>(tap_uv * vec2<f32>(level)), vec2(0), level);
             var visible = 1.0;
             if has_light {
-                visible = texel_light_visibility(texel, block, core, to_light);
+                visible = texel_light_visibility(texel, level, core, to_light);
             }
-            minified_terms += 0.25 * vec2(texel_occlusion(texel, block, core), visible);
+            minified_terms += 0.25 * vec2(texel_occlusion(texel, level, core), visible);
         }
     }
     return mix(magnified_terms, minified_terms, minified);
