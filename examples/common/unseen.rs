@@ -822,13 +822,12 @@ pub fn run_scene(
     }
     if let Some(dir) = std::env::var_os("UNSEEN_DUMP") {
         // Micro-shadow confusion map: true positive green, false positive red, false negative
-        // blue, agreeing lit grey (only light-facing pixels with a lit core are coloured).
-        let mut image = image::RgbImage::new(size / step, size / step);
-        let mut k = 0;
-        for (&(x, y), t) in pixels.iter().zip(&truths) {
-            let Some(t) = t else { continue };
-            let e = estimates[k];
-            k += 1;
+        // blue, agreeing lit grey (only light-facing pixels with a lit core are coloured); AO
+        // error map: red where the method is too open, blue where too dark (full at ±0.25).
+        let mut shadows = image::RgbImage::new(size / step, size / step);
+        let mut ao = image::RgbImage::new(size / step, size / step);
+        let scored = pixels.iter().zip(&truths).filter_map(|(p, t)| Some((p, t.as_ref()?)));
+        for ((&(x, y), t), e) in scored.zip(&estimates) {
             let colour = if !t.facing || t.core_shadowed {
                 [0, 0, 0]
             } else {
@@ -839,22 +838,15 @@ pub fn run_scene(
                     _ => [128, 128, 128],
                 }
             };
-            image.put_pixel(x / step, y / step, image::Rgb(colour));
-        }
-        let path = std::path::Path::new(&dir).join(format!("{}.png", scene.name.replace('/', "_")));
-        image.save(&path).expect("cannot write the dump");
-        // AO error map: red where the method is too open, blue where too dark (full at ±0.25).
-        let mut image = image::RgbImage::new(size / step, size / step);
-        let mut k = 0;
-        for (&(x, y), t) in pixels.iter().zip(&truths) {
-            let Some(t) = t else { continue };
-            let error = ((estimates[k].ao - t.ao) / 0.25).clamp(-1.0, 1.0);
-            k += 1;
+            shadows.put_pixel(x / step, y / step, image::Rgb(colour));
+            let error = ((e.ao - t.ao) / 0.25).clamp(-1.0, 1.0);
             let fade = |e: f32| (255.0 * (1.0 - e.max(0.0))) as u8;
-            image.put_pixel(x / step, y / step, image::Rgb([fade(-error), fade(error.abs()), fade(error)]));
+            ao.put_pixel(x / step, y / step, image::Rgb([fade(-error), fade(error.abs()), fade(error)]));
         }
-        let path = std::path::Path::new(&dir).join(format!("{}_ao.png", scene.name.replace('/', "_")));
-        image.save(&path).expect("cannot write the dump");
+        let name = scene.name.replace('/', "_");
+        for (image, file) in [(shadows, format!("{name}.png")), (ao, format!("{name}_ao.png"))] {
+            image.save(Path::new(&dir).join(file)).expect("cannot write the dump");
+        }
     }
     texels.sort_by(f32::total_cmp);
     let tpp = texels.get(texels.len() / 2).copied().unwrap_or(0.0);
