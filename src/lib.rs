@@ -55,7 +55,8 @@
 //! ## Bad input
 //! Missing or still-loading height maps, unsupported formats, meshes without UVs or normals,
 //! scales that are not finite and positive, MSAA on the camera, zero-sized viewports: each gets
-//! one warning, and the mesh or camera renders as it would without the plugin.
+//! one warning, and the mesh or camera renders as it would without the plugin. The causes
+//! reported so far are listed by the [`MesostructureWarnings`] resource.
 //!
 //! ## Settings
 //! [`Mesostructure::quality`] sets what trades cost for accuracy ([`MesostructureQuality`]:
@@ -87,7 +88,7 @@ mod render;
 pub mod settings;
 mod warn_once;
 
-pub use warn_once::WarnedOnce;
+pub use warn_once::MesostructureWarnings;
 
 use bevy::{
     prelude::*,
@@ -120,13 +121,19 @@ pub struct MesostructurePlugin;
 
 impl Plugin for MesostructurePlugin {
     fn build(&self, app: &mut App) {
+        // One set of warning causes for both worlds, readable as `MesostructureWarnings`.
+        let warned = warn_once::WarnedOnce::default();
+        app.insert_resource(warn_once::MesostructureWarnings::of(&warned))
+            .insert_resource(warned.clone());
+        if let Some(render_app) = app.get_sub_app_mut(bevy::render::RenderApp) {
+            render_app.insert_resource(warned);
+        }
         app.register_type::<Mesostructure>()
             .register_type::<MesostructureQuality>()
             .register_type::<MesostructureCost>()
             .register_type::<MesostructureDebugView>()
             .register_type::<HorizonSearchBaseline>()
             .register_type::<MesostructureMaterial>()
-            .init_resource::<warn_once::WarnedOnce>()
             .init_resource::<material::HeightMapMips>()
             .init_resource::<material::AdaptedMaterials>()
             .add_plugins((

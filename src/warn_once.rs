@@ -1,29 +1,63 @@
 //! One-time warnings: bad input is reported once per cause, then handled quietly.
 
+use std::sync::{Arc, Mutex, PoisonError};
+
 use bevy::{platform::collections::HashSet, prelude::*};
 
-/// Keys of the warnings already given (main world and render world each have one).
-#[derive(Resource, Default)]
-pub struct WarnedOnce(HashSet<String>);
+/// The causes reported so far, shared by the main and the render world.
+type Causes = Arc<Mutex<HashSet<String>>>;
+
+/// Gives each warning once per cause (main world and render world each hold one handle on the
+/// same set of causes).
+#[derive(Resource, Default, Clone)]
+pub(crate) struct WarnedOnce(Causes);
 
 impl WarnedOnce {
     /// Logs `message` as a warning the first time `key` is seen; returns whether it did.
     pub fn warn(&mut self, key: impl Into<String>, message: impl FnOnce() -> String) -> bool {
-        if self.0.insert(key.into()) {
+        let new = self
+            .0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .insert(key.into());
+        if new {
             warn!("bevy_mesostructure: {}", message());
-            true
-        } else {
-            false
         }
-    }
-
-    /// The keys of the warnings given so far (for tests: each names its cause).
-    pub fn keys(&self) -> impl Iterator<Item = String> + '_ {
-        self.0.iter().cloned()
+        new
     }
 
     /// Forgets `key`, so that the cause is reported again if it comes back.
     pub fn forget(&mut self, key: &str) {
-        self.0.remove(key);
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .remove(key);
+    }
+}
+
+/// The causes of the plugin's one-time warnings given so far (bad settings, unusable height
+/// maps or meshes, cameras the effect cannot run on), main and render world together: each is
+/// a short key naming the cause and the entity or asset, e.g. `"msaa 12v0"`. A cause that goes
+/// away (the camera's MSAA turned off) is forgotten, so that it is reported again if it comes
+/// back. For a debug overlay, or a test that bad input was reported.
+#[derive(Resource, Clone)]
+pub struct MesostructureWarnings(Causes);
+
+impl MesostructureWarnings {
+    pub(crate) fn of(warned: &WarnedOnce) -> Self {
+        Self(warned.0.clone())
+    }
+
+    /// The causes reported so far and not forgotten, sorted.
+    pub fn causes(&self) -> Vec<String> {
+        let mut causes: Vec<String> = self
+            .0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .iter()
+            .cloned()
+            .collect();
+        causes.sort();
+        causes
     }
 }

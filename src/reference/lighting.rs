@@ -39,12 +39,151 @@ pub fn sector_horizons(
     let point = surface_point(mhm, normals, view, x, y);
     let normal = mesostructure_normal(mhm, mhgm, normals, view, (x, y));
     let (sin_h, apex) = horizons_about(mhm, normals, view, set, (x, y), point, normal);
-    Some(SectorHorizons {
-        point,
-        normal,
-        sin_h,
-        apex,
-    })
+    // The lighting and bleeding passes read them from the occlusion pass's sector record.
+    Some(
+        SectorHorizons {
+            point,
+            normal,
+            sin_h,
+            apex,
+        }
+        .as_stored(),
+    )
+}
+
+impl SectorHorizons {
+    /// These horizons as the lighting and bleeding passes read them back from the sector record
+    /// ([`sector_record`]): sines and N' quantised; a sector whose sine rounds to 0 is open
+    /// (no apex).
+    pub fn as_stored(&self) -> Self {
+        let index = std::array::from_fn(|s| s as u32);
+        let (sin_h, normal, _) =
+            sector_record::unpack(sector_record::pack(&self.sin_h, self.normal, &index));
+        Self {
+            point: self.point,
+            normal,
+            sin_h,
+            apex: std::array::from_fn(|s| self.apex[s].filter(|_| sin_h[s] > 0.0)),
+        }
+    }
+}
+
+/// The sector record the occlusion pass stores per pixel for the lighting and bleeding passes
+/// (one `Rgba32Uint` texel; `surface.wgsl` packs and reads it), so that each pixel's horizons
+/// and N' are found once rather than once per pass: words 0 and 1 the sine of each sector's
+/// horizon as 8-bit unorm (sectors 0–3, 4–7); word 2 bits 0–21 N' in octahedral form (two
+/// 11-bit unorm); word 2 bits 22–31 and word 3 bits 0–29 the index in the apex set of the apex
+/// that sets each sector's horizon (5 bits each: sectors 0–1, then 2–7). 8 bits of sine are
+/// 0.002 at most, a quarter of a degree of elevation; 11 bits of octahedral normal about 0.1°.
+pub mod sector_record {
+    use super::OCCLUSION_SECTORS;
+    use bevy::math::{Vec2, Vec2Swizzles, Vec3, Vec3Swizzles};
+
+    /// Levels of a stored sine.
+    pub const SINE_LEVELS: f32 = 255.0;
+    /// Bits of each octahedral coordinate of N'.
+    pub const NORMAL_BITS: u32 = 11;
+    /// Bits of a sector's apex index (an apex set holds at most 17 apexes).
+    pub const APEX_INDEX_BITS: u32 = 5;
+
+    fn quantize_unorm(v: f32, levels: f32) -> u32 {
+        (0.5 + levels * v.clamp(0.0, 1.0)).floor() as u32
+    }
+
+    fn bits(word: u32, offset: u32, count: u32) -> u32 {
+        (word >> offset) & ((1 << count) - 1)
+    }
+
+    /// The unit vector `n` as a point of the octahedron unfolded onto [-1, 1]².
+    pub fn octahedral_encode(n: Vec3) -> Vec2 {
+        let p = n.xy() / (n.x.abs() + n.y.abs() + n.z.abs());
+        if n.z >= 0.0 {
+            return p;
+        }
+        let sign = Vec2::new(
+            if p.x >= 0.0 { 1.0 } else { -1.0 },
+            if p.y >= 0.0 { 1.0 } else { -1.0 },
+        );
+        (Vec2::ONE - p.yx().abs()) * sign
+    }
+
+    /// The unit vector of an octahedral point.
+    pub fn octahedral_decode(e: Vec2) -> Vec3 {
+        let mut n = Vec3::new(e.x, e.y, 1.0 - e.x.abs() - e.y.abs());
+        let fold = (-n.z).max(0.0);
+        n.x += if n.x >= 0.0 { -fold } else { fold };
+        n.y += if n.y >= 0.0 { -fold } else { fold };
+        n.normalize()
+    }
+
+    /// Word and first bit of a sector's apex index.
+    fn apex_index_field(sector: usize) -> (usize, u32) {
+        if sector < 2 {
+            (2, 2 * NORMAL_BITS + sector as u32 * APEX_INDEX_BITS)
+        } else {
+            (3, (sector as u32 - 2) * APEX_INDEX_BITS)
+        }
+    }
+
+    /// Packs the sines of the sector horizons, N' and each sector's apex index.
+    pub fn pack(
+        sin_h: &[f32; OCCLUSION_SECTORS],
+        normal: Vec3,
+        apex_index: &[u32; OCCLUSION_SECTORS],
+    ) -> [u32; 4] {
+        let mut r = [0u32; 4];
+        for (s, &sine) in sin_h.iter().enumerate() {
+            r[s / 4] |= quantize_unorm(sine, SINE_LEVELS) << ((s % 4) * 8);
+            let (word, offset) = apex_index_field(s);
+            r[word] |= (apex_index[s] & ((1 << APEX_INDEX_BITS) - 1)) << offset;
+        }
+        let levels = ((1u32 << NORMAL_BITS) - 1) as f32;
+        let e = octahedral_encode(normal) * 0.5 + 0.5;
+        r[2] |= quantize_unorm(e.x, levels) | quantize_unorm(e.y, levels) << NORMAL_BITS;
+        r
+    }
+
+    /// The sines, N' and apex indices of a record.
+    pub fn unpack(r: [u32; 4]) -> ([f32; OCCLUSION_SECTORS], Vec3, [u32; OCCLUSION_SECTORS]) {
+        let sin_h = std::array::from_fn(|s| bits(r[s / 4], (s % 4) as u32 * 8, 8) as f32 / SINE_LEVELS);
+        let index = std::array::from_fn(|s| {
+            let (word, offset) = apex_index_field(s);
+            bits(r[word], offset, APEX_INDEX_BITS)
+        });
+        let levels = ((1u32 << NORMAL_BITS) - 1) as f32;
+        let e = Vec2::new(
+            bits(r[2], 0, NORMAL_BITS) as f32,
+            bits(r[2], NORMAL_BITS, NORMAL_BITS) as f32,
+        ) / levels;
+        (sin_h, octahedral_decode(e * 2.0 - 1.0), index)
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+
+        #[test]
+        fn records_round_trip_within_their_quantisation() {
+            let mut worst_angle = 0.0f32;
+            for i in 0..2000 {
+                // Directions over the whole sphere (a Fibonacci spiral), both hemispheres.
+                let z = 1.0 - 2.0 * (i as f32 + 0.5) / 2000.0;
+                let a = i as f32 * 2.399_963;
+                let r = (1.0 - z * z).sqrt();
+                let n = Vec3::new(r * a.cos(), r * a.sin(), z);
+                let sin_h = std::array::from_fn(|s| ((i * 7 + s * 13) % 101) as f32 / 100.0);
+                let index = std::array::from_fn(|s| ((i + s * 5) % 17) as u32);
+                let (sines, normal, indices) = unpack(pack(&sin_h, n, &index));
+                assert_eq!(indices, index);
+                for s in 0..OCCLUSION_SECTORS {
+                    assert!((sines[s] - sin_h[s]).abs() <= 0.5 / SINE_LEVELS + 1e-6);
+                }
+                worst_angle = worst_angle.max(normal.dot(n).clamp(-1.0, 1.0).acos().to_degrees());
+            }
+            // 11 bits per octahedral coordinate: about 0.1° at worst.
+            assert!(worst_angle < 0.15, "worst N' error {worst_angle}°");
+        }
+    }
 }
 
 /// Per azimuth sector, the highest horizon of the apexes of `set` seen from `point` above the

@@ -43,13 +43,30 @@ const APEX_MIN_RISE: f32 = 1.0e-6;
 // Position of the searched pixel inside its block (x in bits 25–26, y in 27–28).
 const APEX_ORIGIN_SHIFT: u32 = 25u;
 
-// The 8 neighbours in the order of the connectivity bits (y down).
+// The 8 neighbours in the order of the connectivity bits (y down): (1, 0), (1, 1), (0, 1),
+// (−1, 1), (−1, 0), (−1, −1), (0, −1), (1, −1). By arithmetic, not a table: a variable index
+// into a private array costs local memory on some GPUs, in the apex search's hot loops.
 fn neighbour_offset(dir: u32) -> vec2<i32> {
-    var offsets = array<vec2<i32>, 8>(
-        vec2(1, 0), vec2(1, 1), vec2(0, 1), vec2(-1, 1),
-        vec2(-1, 0), vec2(-1, -1), vec2(0, -1), vec2(1, -1),
+    return vec2<i32>(
+        i32(dir == 0u || dir == 1u || dir == 7u) - i32(dir >= 3u && dir <= 5u),
+        i32(dir >= 1u && dir <= 3u) - i32(dir >= 5u && dir <= 7u),
     );
-    return offsets[dir];
+}
+
+// The inverse, by the step's place (y + 1) · 3 + x + 1 in the 3×3 block: its neighbour index,
+// a nibble each for places 0–7 (place 8, the step (1, 1), is neighbour 1); 8 for (0, 0) and for
+// steps that are not a neighbour's.
+const NEIGHBOUR_OF_PLACE: u32 = 0x23084765u;
+
+fn neighbour_index(step: vec2<i32>) -> u32 {
+    if any(abs(step) > vec2(1)) {
+        return 8u;
+    }
+    let place = u32((step.y + 1) * 3 + step.x + 1);
+    if place == 8u {
+        return 1u;
+    }
+    return extractBits(NEIGHBOUR_OF_PLACE, place * 4u, 4u);
 }
 
 fn on_screen(p: vec2<i32>, size: vec2<i32>) -> bool {

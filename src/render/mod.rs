@@ -62,6 +62,9 @@ pub const BUMP_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 pub const MHGM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
 /// Mesostructure ambient occlusion (1 = open).
 pub const OCCLUSION_FORMAT: TextureFormat = TextureFormat::R32Float;
+/// Sector record per pixel: horizons about N', N' and the apexes that set the horizons
+/// (`surface.wgsl`), stored by the occlusion pass for the lighting and bleeding passes.
+pub const SECTOR_HORIZONS_FORMAT: TextureFormat = TextureFormat::Rgba32Uint;
 /// Micro-shadow visibility, the lowest over the lights (1 = lit).
 pub const MICRO_SHADOW_FORMAT: TextureFormat = TextureFormat::R32Float;
 /// One-bounce bleeding radiance added to the view (λd · ρ / π · E).
@@ -80,6 +83,8 @@ pub struct ViewMesostructureTextures {
     pub mhgm: CachedTexture,
     /// Ambient occlusion.
     pub occlusion: CachedTexture,
+    /// Sector records (written by the occlusion pass).
+    pub sector_horizons: CachedTexture,
     /// Micro-shadow visibility (written by the lighting pass).
     pub micro_shadow: CachedTexture,
     /// Bleeding radiance.
@@ -193,7 +198,6 @@ pub(crate) fn build(app: &mut App) {
     render_app
         .insert_resource(captures)
         .init_resource::<capture::PendingCaptures>()
-        .init_resource::<WarnedOnce>()
         .init_resource::<MesostructureUniforms>()
         .init_resource::<height::HeightMaterialBindGroups>()
         .init_resource::<SpecializedMeshPipelines<height::HeightPassPipeline>>()
@@ -467,6 +471,14 @@ fn prepare_view_textures(
                 | TextureUsages::TEXTURE_BINDING
                 | TextureUsages::COPY_SRC,
         );
+        let sector_horizons = texture(
+            &mut texture_cache,
+            "mesostructure_sector_horizons",
+            SECTOR_HORIZONS_FORMAT,
+            TextureUsages::STORAGE_BINDING
+                | TextureUsages::TEXTURE_BINDING
+                | TextureUsages::COPY_SRC,
+        );
         let micro_shadow = texture(
             &mut texture_cache,
             "mesostructure_micro_shadow",
@@ -508,6 +520,7 @@ fn prepare_view_textures(
             bump_normal,
             mhgm,
             occlusion,
+            sector_horizons,
             micro_shadow,
             bleeding,
             apex_sets,
@@ -595,6 +608,7 @@ fn prepare_view_bind_groups(
                 &t.mhgm.default_view,
                 depth,
                 &t.bump_normal.default_view,
+                &t.sector_horizons.default_view,
             )),
         );
         let debug_view = device.create_bind_group(

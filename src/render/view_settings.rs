@@ -135,6 +135,17 @@ impl ViewSettings {
         self.needs_apex_sets() || self.occlusion
     }
 
+    /// Whether the lighting (micro-shadows) or the bleeding pass reads the sector records,
+    /// which the occlusion pass then stores.
+    pub fn needs_sector_horizons(&self) -> bool {
+        self.micro_shadows || self.bleeding_runs()
+    }
+
+    /// Whether the occlusion pass runs: for the ambient occlusion or the sector records.
+    pub fn occlusion_pass_runs(&self) -> bool {
+        self.occlusion || self.needs_sector_horizons()
+    }
+
     /// Whether the settings ask for bleeding at all (a zero weight costs nothing either).
     pub fn bleeding_runs(&self) -> bool {
         self.bleeding && self.bleeding_weight > 0.0

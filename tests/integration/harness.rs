@@ -149,20 +149,9 @@ pub fn screenshot(app: &mut App, target: &Handle<Image>) -> Image {
 
 /// Keys of the one-time warnings given so far, main and render world together.
 pub fn warnings(app: &App) -> Vec<String> {
-    let mut keys: Vec<String> = app
-        .world()
-        .resource::<bevy_mesostructure::WarnedOnce>()
-        .keys()
-        .collect();
-    if let Some(render) = app.get_sub_app(RenderApp) {
-        keys.extend(
-            render
-                .world()
-                .resource::<bevy_mesostructure::WarnedOnce>()
-                .keys(),
-        );
-    }
-    keys
+    app.world()
+        .resource::<bevy_mesostructure::MesostructureWarnings>()
+        .causes()
 }
 
 /// A flat-shaded (unlit) material of one colour.

@@ -9,7 +9,7 @@
 
 #import bevy_mesostructure::common::{
     MesostructureUniform, FLAG_VALID, APEX_DIRECT_PRESENT, APEX_TRUNCATED, APEX_BOUNDARY_SHIFT,
-    APEX_MIN_RISE, APEX_ORIGIN_SHIFT, neighbour_offset, on_screen, is_connected, pack_offset,
+    APEX_MIN_RISE, APEX_ORIGIN_SHIFT, neighbour_offset, neighbour_index, on_screen, is_connected, pack_offset,
     sample_direction, apex_base,
 }
 
@@ -42,12 +42,7 @@ fn quantize_direction(g: vec2<f32>) -> u32 {
         select(0, i32(sign(g.x)), a.x > TAN_22_5 * a.y),
         select(0, i32(sign(g.y)), a.y > TAN_22_5 * a.x),
     );
-    for (var dir = 0u; dir < 8u; dir++) {
-        if all(neighbour_offset(dir) == s) {
-            return dir;
-        }
-    }
-    return 8u;
+    return neighbour_index(s);
 }
 
 fn ascend(start: vec2<i32>) -> Ascent {
@@ -89,15 +84,6 @@ fn ascend(start: vec2<i32>) -> Ascent {
 
 fn line_point(p: vec2<i32>, d: vec2<f32>, t: u32) -> vec2<i32> {
     return p + vec2<i32>(floor(f32(t) * d + 0.5));
-}
-
-fn neighbour_index(step: vec2<i32>) -> u32 {
-    for (var n = 0u; n < 8u; n++) {
-        if all(neighbour_offset(n) == step) {
-            return n;
-        }
-    }
-    return 8u;
 }
 
 // Start of the indirect sample of direction d: walk from P while the height does not rise,

@@ -15,7 +15,7 @@
     MesostructureUniform, on_screen, unpack_offset, apex_base, apex_set_of,
 }
 #import bevy_mesostructure::surface
-#import bevy_mesostructure::surface::{SECTORS, TAU, sector_of}
+#import bevy_mesostructure::surface::{SECTORS, TAU, sector_sine, sector_apex, sector_normal}
 
 @group(0) @binding(0) var lit: texture_2d<f32>;
 @group(0) @binding(1) var mhm: texture_2d<f32>;
@@ -26,7 +26,9 @@
 @group(0) @binding(6) var bleeding_out: texture_storage_2d<rgba16float, write>;
 @group(0) @binding(7) var<uniform> settings: MesostructureUniform;
 @group(0) @binding(8) var<uniform> view: View;
-@group(0) @binding(9) var mhgm: texture_2d<f32>;
+// The occlusion pass's sector record of each pixel (`surface.wgsl`): N', each sector's horizon
+// and the apex that sets it.
+@group(0) @binding(9) var sector_horizons: texture_2d<u32>;
 
 const PI: f32 = 3.141592653589793;
 
@@ -70,36 +72,20 @@ fn bleeding(@builtin(global_invocation_id) id: vec3<u32>) {
     let base = apex_base(settings, p, size);
     let apexes = apex_set_of(mhm, settings, p, apex_sets[base], base);
     let sp = surface_point(p);
-    let n = surface::mesostructure_normal(
-        mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, sp,
-        textureLoad(core_normal, p, 0).xyz);
-    // Per sector, the apex with the highest horizon (as the occlusion pass takes it).
-    var sin_h = array<f32, 8>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    var apex = array<vec2<i32>, 8>();
-    for (var i = 0u; i < apexes.count; i++) {
-        let o = unpack_offset(apex_sets[apexes.first + i]) + apexes.shift;
-        let d = surface_point(p + o) - sp;
-        let len = length(d);
-        if len <= 0.0 {
-            continue;
-        }
-        let s = dot(d, n) / len;
-        let sector = sector_of(o);
-        if s > sin_h[sector] {
-            sin_h[sector] = s;
-            apex[sector] = o;
-        }
-    }
+    // Per sector, the apex with the highest horizon (as the occlusion pass found it).
+    let record = textureLoad(sector_horizons, p, 0);
+    let n = sector_normal(record);
     var irradiance = vec3(0.0);
     // Σ (sin² e_j − sin² e_{j−1}) / 2 over the visible samples: the cosine-weighted solid angle
     // the gather covered, per unit of Δθ.
     var covered = 0.0;
     let samples = max(settings.bleeding_samples, 1u);
     for (var sector = 0u; sector < SECTORS; sector++) {
-        if sin_h[sector] <= 0.0 || all(albedo == vec3(0.0)) {
+        if sector_sine(record, sector) <= 0.0 || all(albedo == vec3(0.0)) {
             continue;
         }
-        let o = vec2<f32>(apex[sector]);
+        let index = sector_apex(record, sector);
+        let o = vec2<f32>(unpack_offset(apex_sets[apexes.first + index]) + apexes.shift);
         var seen = 0.0; // sine of the highest elevation so far: what lies below is hidden
         var last = vec2(0);
         for (var j = 1u; j <= samples; j++) {

@@ -32,7 +32,7 @@ pub(super) fn embed_shaders(app: &mut App) {
 #[derive(Resource)]
 pub struct BleedingPipeline {
     /// Lit image, MHM, core normals, bump normals, apex sets, G-buffer, bleeding (storage),
-    /// settings, view, MHGM.
+    /// settings, view, sector records.
     pub gather_layout: BindGroupLayoutDescriptor,
     /// The gather pipeline.
     pub gather: CachedComputePipelineId,
@@ -64,7 +64,7 @@ pub fn init_bleeding_pipeline(
                 texture_storage_2d(BLEEDING_FORMAT, StorageTextureAccess::WriteOnly),
                 uniform_buffer::<MesostructureUniform>(true),
                 uniform_buffer::<ViewUniform>(true),
-                float(),
+                texture_2d(TextureSampleType::Uint),
             ),
         ),
     );
@@ -160,6 +160,7 @@ pub fn bleeding_pass(
         &ViewUniformOffset,
         &ViewBleedingPipeline,
         Option<&super::capture::ExtractedCapture>,
+        Option<&super::occlusion::ViewOcclusionPipeline>,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     pipeline: Res<BleedingPipeline>,
@@ -169,9 +170,12 @@ pub fn bleeding_pass(
     mut pending: ResMut<super::capture::PendingCaptures>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, target, prepass, textures, offset, view_offset, composite, capture) =
+    let (extracted_view, target, prepass, textures, offset, view_offset, composite, capture, occlusion) =
         view.into_inner();
-    if !view_has_mesostructure(&phases, extracted_view) {
+    // The gather reads the sector records the occlusion pass stored this frame.
+    let records_stored =
+        occlusion.is_some_and(|p| pipeline_cache.get_compute_pipeline(p.0).is_some());
+    if !view_has_mesostructure(&phases, extracted_view) || !records_stored {
         return;
     }
     let (Some(gather), Some(_), Some(settings), Some(view_binding), Some(gbuffer)) = (
@@ -197,7 +201,7 @@ pub fn bleeding_pass(
             &textures.bleeding.default_view,
             settings,
             view_binding,
-            &textures.mhgm.default_view,
+            &textures.sector_horizons.default_view,
         )),
     );
     dispatch_per_pixel(
@@ -223,14 +227,18 @@ pub fn bleeding_composite_pass(
         &ViewTarget,
         &ViewMesostructureTextures,
         &ViewBleedingPipeline,
+        Option<&super::occlusion::ViewOcclusionPipeline>,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     pipeline: Res<BleedingPipeline>,
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, target, textures, composite) = view.into_inner();
-    if !view_has_mesostructure(&phases, extracted_view) {
+    let (extracted_view, target, textures, composite, occlusion) = view.into_inner();
+    // As the gather: nothing to add before the sector records exist.
+    let records_stored =
+        occlusion.is_some_and(|p| pipeline_cache.get_compute_pipeline(p.0).is_some());
+    if !view_has_mesostructure(&phases, extracted_view) || !records_stored {
         return;
     }
     let (Some(composite), Some(_)) = (

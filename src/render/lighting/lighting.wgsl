@@ -20,9 +20,9 @@
     shadows,
     ssao_utils::ssao_multibounce,
 }
-#import bevy_mesostructure::common::{MesostructureUniform, unpack_offset, apex_base, apex_set_of}
+#import bevy_mesostructure::common::MesostructureUniform
 #import bevy_mesostructure::surface
-#import bevy_mesostructure::surface::{SECTORS, sector_of, sector_position, wrap_sector}
+#import bevy_mesostructure::surface::{SECTORS, sector_position, wrap_sector, sector_sine}
 
 #ifdef SCREEN_SPACE_AMBIENT_OCCLUSION
 #import bevy_pbr::mesh_view_bindings::screen_space_ambient_occlusion_texture
@@ -31,23 +31,19 @@
 @group(2) @binding(0) var mesostructure_occlusion: texture_2d<f32>;
 @group(2) @binding(1) var mhm: texture_2d<f32>;
 @group(2) @binding(2) var core_normal: texture_2d<f32>;
-@group(2) @binding(3) var mhgm: texture_2d<f32>;
-@group(2) @binding(4) var<storage, read> apex_sets: array<u32>;
-@group(2) @binding(5) var<uniform> settings: MesostructureUniform;
-@group(2) @binding(6) var bump_normal: texture_2d<f32>;
-@group(2) @binding(7) var micro_shadow_out: texture_storage_2d<r32float, write>;
+// The occlusion pass's sector record of each pixel (`surface.wgsl`).
+@group(2) @binding(3) var sector_horizons: texture_2d<u32>;
+@group(2) @binding(4) var<uniform> settings: MesostructureUniform;
+@group(2) @binding(5) var bump_normal: texture_2d<f32>;
+@group(2) @binding(6) var micro_shadow_out: texture_storage_2d<r32float, write>;
 
-fn surface_point(p: vec2<i32>) -> vec3<f32> {
-    return surface::surface_point(mhm, core_normal, view.world_from_clip, view.viewport, p);
-}
-
-// What the micro-shadow test needs of a pixel, whatever the light: its surface point, the
-// normal N' and the horizon of each azimuth sector (the profiles through P and its apexes).
+// What the micro-shadow test needs of a pixel, whatever the light: its surface point, and the
+// normal N' with the horizon of each azimuth sector, as the occlusion pass stored them.
 struct Horizons {
     valid: bool,
     sp: vec3<f32>,
     n: vec3<f32>,
-    sin_h: array<f32, 8>,
+    record: vec4<u32>,
 }
 
 fn horizons(p: vec2<i32>) -> Horizons {
@@ -56,23 +52,12 @@ fn horizons(p: vec2<i32>) -> Horizons {
     if !h.valid {
         return h;
     }
-    let size = vec2<i32>(textureDimensions(mhm));
-    let base = apex_base(settings, p, size);
-    let apexes = apex_set_of(mhm, settings, p, apex_sets[base], base);
-    h.sp = surface_point(p);
-    h.n = surface::mesostructure_normal(
-        mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, h.sp,
-        textureLoad(core_normal, p, 0).xyz);
-    for (var i = 0u; i < apexes.count; i++) {
-        let o = unpack_offset(apex_sets[apexes.first + i]) + apexes.shift;
-        let d = surface_point(p + o) - h.sp;
-        let len = length(d);
-        if len <= 0.0 {
-            continue;
-        }
-        let sector = sector_of(o);
-        h.sin_h[sector] = max(h.sin_h[sector], clamp(dot(d, h.n) / len, 0.0, 1.0));
-    }
+    h.sp = surface::surface_point(mhm, core_normal, view.world_from_clip, view.viewport, p);
+    // Clamped: frames whose occlusion pass has not run bind a 1×1 record with every sector
+    // open (no micro-shadow).
+    let record_size = vec2<i32>(textureDimensions(sector_horizons));
+    h.record = textureLoad(sector_horizons, min(p, record_size - 1), 0);
+    h.n = surface::sector_normal(h.record);
     return h;
 }
 
@@ -98,7 +83,7 @@ fn micro_shadow(h: Horizons, to_light: vec3<f32>) -> f32 {
     let a = sector_position(s);
     let lower = floor(a);
     let i0 = wrap_sector(i32(lower));
-    let horizon = mix(h.sin_h[i0], h.sin_h[(i0 + 1u) % SECTORS], a - lower);
+    let horizon = mix(sector_sine(h.record, i0), sector_sine(h.record, (i0 + 1u) % SECTORS), a - lower);
     // The soft edge is never wider than the horizon itself: an open profile (horizon 0)
     // leaves every light above the tangent plane unshadowed.
     let w = min(settings.micro_shadow_softness, horizon);

@@ -34,15 +34,16 @@ pub(super) fn embed_shaders(app: &mut App) {
 /// The deferred lighting pass id of mesostructure materials (Bevy's own is 1; 0 = no geometry).
 pub const MESOSTRUCTURE_LIGHTING_PASS_ID: u8 = 2;
 
-/// Our group 2, the shader, a 1×1 "open" occlusion image for frames without an occlusion pass,
-/// and the pipelines made so far, by view key.
+/// Our group 2, the shader, 1×1 "open" occlusion and sector-record images for frames without an
+/// occlusion pass, and the pipelines made so far, by view key.
 #[derive(Resource)]
 pub struct LightingPipeline {
-    /// Group 2: occlusion, MHM, core normals, MHGM, apex sets, settings, bump normals,
+    /// Group 2: occlusion, MHM, core normals, sector records, settings, bump normals,
     /// micro-shadow visibility (written).
     pub layout: BindGroupLayoutDescriptor,
     shader: Handle<Shader>,
     open: TextureView,
+    open_horizons: TextureView,
     empty: TextureView,
     pipelines: HashMap<bevy::pbr::MeshPipelineKey, CachedRenderPipelineId>,
 }
@@ -62,8 +63,7 @@ pub fn init_lighting_pipeline(
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_2d(TextureSampleType::Float { filterable: false }),
-                storage_buffer_read_only_sized(false, None),
+                texture_2d(TextureSampleType::Uint),
                 uniform_buffer::<crate::render::view_settings::MesostructureUniform>(true),
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 texture_storage_2d(super::MICRO_SHADOW_FORMAT, StorageTextureAccess::WriteOnly),
@@ -101,10 +101,17 @@ pub fn init_lighting_pipeline(
         super::OCCLUSION_FORMAT,
         &1.0f32.to_le_bytes(),
     );
+    // Every sector's horizon at 0: no micro-shadow.
+    let open_horizons = texel(
+        "mesostructure_open_sector_horizons",
+        super::SECTOR_HORIZONS_FORMAT,
+        &[0u8; 16],
+    );
     commands.insert_resource(LightingPipeline {
         layout,
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "lighting.wgsl"),
         open,
+        open_horizons,
         empty,
         pipelines: HashMap::default(),
     });
@@ -215,26 +222,25 @@ pub fn lighting_pass(
     let (gradient, apex) = &occlusion_inputs;
     let occlusion_ran = occlusion_pipeline.is_some_and(|p| compiled(p.0))
         && compiled(gradient.pipeline)
-        && (settings.0.horizon_search_steps > 0 || compiled(apex.pipeline));
+        && (!settings.0.needs_apex_sets() || compiled(apex.pipeline));
     let occlusion = if settings.0.occlusion && current && occlusion_ran {
         &textures.occlusion.default_view
     } else {
         &lighting.open
     };
-    let (mhm, core_normal, mhgm, bump_normal) = if current {
+    let sector_horizons = if settings.0.needs_sector_horizons() && current && occlusion_ran {
+        &textures.sector_horizons.default_view
+    } else {
+        &lighting.open_horizons
+    };
+    let (mhm, core_normal, bump_normal) = if current {
         (
             &textures.mhm.default_view,
             &textures.core_normal.default_view,
-            &textures.mhgm.default_view,
             &textures.bump_normal.default_view,
         )
     } else {
-        (
-            &lighting.empty,
-            &lighting.empty,
-            &lighting.empty,
-            &lighting.empty,
-        )
+        (&lighting.empty, &lighting.empty, &lighting.empty)
     };
     let group_2 = ctx.render_device().create_bind_group(
         "mesostructure_lighting_bind_group",
@@ -243,8 +249,7 @@ pub fn lighting_pass(
             occlusion,
             mhm,
             core_normal,
-            mhgm,
-            textures.apex_sets.as_entire_binding(),
+            sector_horizons,
             settings_binding,
             bump_normal,
             &textures.micro_shadow.default_view,

@@ -1,5 +1,7 @@
 //! Occlusion pass (compute): apex sets → mesostructure ambient occlusion (paper §3.1), times a
-//! coarse horizon-based AO of the depth buffer with the apex sets' adaptive step.
+//! coarse horizon-based AO of the depth buffer with the apex sets' adaptive step; and each
+//! pixel's sector record (its horizons about N', N' and the apex setting each horizon,
+//! `surface.wgsl`), which the lighting and bleeding passes read instead of rebuilding it.
 
 use bevy::{
     prelude::*,
@@ -13,7 +15,7 @@ use bevy::{
 };
 
 use super::{
-    OCCLUSION_FORMAT, ViewMesostructureBindGroups, ViewMesostructureTextures,
+    OCCLUSION_FORMAT, SECTOR_HORIZONS_FORMAT, ViewMesostructureBindGroups, ViewMesostructureTextures,
     ViewMesostructureUniformOffset, dispatch_per_pixel, height::HeightPhaseItem,
     view_has_mesostructure,
 };
@@ -32,7 +34,8 @@ pub(super) fn embed_shaders(app: &mut App) {
 #[derive(Resource)]
 pub struct OcclusionPipeline {
     /// MHM, core normals, apex sets, occlusion (storage), settings, view, MHGM, prepass depth,
-    /// bump normals (whose `w` carries the height pass's texture-space occlusion).
+    /// bump normals (whose `w` carries the height pass's texture-space occlusion), sector
+    /// records (storage).
     pub layout: BindGroupLayoutDescriptor,
     shader: Handle<Shader>,
 }
@@ -41,6 +44,10 @@ pub struct OcclusionPipeline {
 /// uniforms).
 #[derive(Clone, Copy, PartialEq, Eq, Hash)]
 pub struct OcclusionPipelineKey {
+    /// The ambient occlusion is wanted (`AMBIENT_OCCLUSION`).
+    pub ambient_occlusion: bool,
+    /// The sector records are stored for the lighting and bleeding passes (`SECTOR_HORIZONS`).
+    pub sector_horizons: bool,
     /// The integral (`OCCLUSION_FORM_PAPER` for eq. (6)).
     pub form: OcclusionForm,
     /// The coarse depth-buffer term multiplies (`COARSE_OCCLUSION`).
@@ -56,6 +63,8 @@ impl OcclusionPipelineKey {
     /// The key of a view's settings.
     pub fn of(settings: &crate::render::view_settings::ViewSettings) -> Self {
         Self {
+            ambient_occlusion: settings.occlusion,
+            sector_horizons: settings.needs_sector_horizons(),
             form: settings.occlusion_form,
             coarse: settings.coarse_occlusion,
             // The baseline stays the baseline: it never takes the texture-space occlusion.
@@ -72,6 +81,8 @@ impl SpecializedComputePipeline for OcclusionPipeline {
     fn specialize(&self, key: OcclusionPipelineKey) -> ComputePipelineDescriptor {
         let mut shader_defs: Vec<ShaderDefVal> = vec![];
         for (on, def) in [
+            (key.ambient_occlusion, "AMBIENT_OCCLUSION"),
+            (key.sector_horizons, "SECTOR_HORIZONS"),
             (key.form == OcclusionForm::Paper, "OCCLUSION_FORM_PAPER"),
             (key.coarse, "COARSE_OCCLUSION"),
             (key.texture_space_horizons, "TEXTURE_SPACE_HORIZONS"),
@@ -112,6 +123,7 @@ pub fn init_occlusion_pipeline(mut commands: Commands, asset_server: Res<AssetSe
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 texture_depth_2d(),
                 texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_storage_2d(SECTOR_HORIZONS_FORMAT, StorageTextureAccess::WriteOnly),
             ),
         ),
     );
@@ -135,8 +147,8 @@ pub fn prepare_occlusion_pipelines(
     }
 }
 
-/// Core3d system: computes the occlusion of the current view, timed as
-/// `mesostructure/occlusion`; skipped when `Mesostructure::occlusion` is off.
+/// Core3d system: computes the occlusion and the sector records of the current view, timed as
+/// `mesostructure/occlusion`; skipped when neither is wanted.
 pub fn occlusion_pass(
     view: ViewQuery<(
         &ExtractedView,
@@ -153,7 +165,7 @@ pub fn occlusion_pass(
 ) {
     let (extracted_view, settings, textures, bind_groups, offset, view_offset, pipeline) =
         view.into_inner();
-    if !settings.0.occlusion || !view_has_mesostructure(&phases, extracted_view) {
+    if !settings.0.occlusion_pass_runs() || !view_has_mesostructure(&phases, extracted_view) {
         return;
     }
     let Some(compute) = pipeline_cache.get_compute_pipeline(pipeline.0) else {

@@ -4,6 +4,9 @@
 // Mirrors `reference::occlusion`. Multiplied by a coarse horizon-based AO on the depth buffer
 // (Bavoil et al. 2008) whose step is the adaptive (min + max) / 2 of the apex distances (§3.1):
 // the depth buffer holds only the core geometry, so the two do not count the same occluder.
+// Where micro-shadows or bleeding are on, it also stores each pixel's sector record (horizons
+// about N', N', the apex setting each horizon; `surface.wgsl`), so that the lighting and
+// bleeding passes read them instead of walking the apex set again.
 
 #import bevy_render::view::View
 #import bevy_mesostructure::common::{
@@ -22,6 +25,8 @@
 @group(0) @binding(7) var depth: texture_depth_2d;
 // w: the height pass's texture-space occlusion (−1 where it has none).
 @group(0) @binding(8) var bump_normal: texture_2d<f32>;
+// The sector record of each pixel (`surface.wgsl`) for the lighting and bleeding passes.
+@group(0) @binding(9) var sector_horizons_out: texture_storage_2d<rgba32uint, write>;
 
 const COARSE_DIRECTIONS: u32 = 8u;
 const COARSE_STEPS: u32 = 4u;
@@ -119,7 +124,12 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     if textureLoad(mhm, p, 0).z == 0.0 {
+#ifdef AMBIENT_OCCLUSION
         textureStore(occlusion_out, p, vec4<f32>(1.0));
+#endif
+#ifdef SECTOR_HORIZONS
+        textureStore(sector_horizons_out, p, vec4<u32>(0u));
+#endif
         return;
     }
     let base = apex_base(settings, p, size);
@@ -128,37 +138,62 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     let n0 = textureLoad(core_normal, p, 0).xyz;
     // The texture-space occlusion of the true surface (the mean over the pixel's footprint
     // where the map is minified; see height.wgsl) takes over from the apex horizons where the
-    // height pass computed it; then only the apexes' distances are needed (the coarse term's
-    // step), not their horizons nor N'.
+    // height pass computed it; then the AO needs only the apexes' distances (the coarse term's
+    // step), not their horizons nor N' — unless the record for the lighting and bleeding
+    // passes wants them.
     let texture_space = textureLoad(bump_normal, p, 0).w;
 #ifdef TEXTURE_SPACE_HORIZONS
     let from_texture_space = texture_space >= 0.0;
 #else
     let from_texture_space = false;
 #endif
-    // The paper's eq. (6) measures from the core plane; the cosine-weighted form from the
-    // tangent plane of the mesostructure surface.
+    // Which horizons this variant finds: about N' for the record (lighting and bleeding) and
+    // the cosine-weighted AO, about n0 for eq. (6); none for the brute-force baseline alone
+    // (the apex sets may not even exist then).
+#ifdef SECTOR_HORIZONS
+    let horizons_wanted = true;
+#else
+#ifdef HORIZON_SEARCH
+    let horizons_wanted = false;
+#else
+    let horizons_wanted = !from_texture_space;
+#endif
+#endif
     var n = n0;
-#ifndef OCCLUSION_FORM_PAPER
-    if !from_texture_space {
+#ifdef OCCLUSION_FORM_PAPER
+#ifdef SECTOR_HORIZONS
+    n = surface::mesostructure_normal(
+        mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, sp, n0);
+#endif
+    // Eq. (6) measures from the core plane.
+    let n_form = n0;
+#else
+    if horizons_wanted || !from_texture_space {
         n = surface::mesostructure_normal(
             mhm, core_normal, mhgm, view.world_from_clip, view.viewport, p, sp, n0);
     }
+    let n_form = n;
+#endif
+    var maxima: surface::SectorMaxima;
+#ifdef OCCLUSION_FORM_PAPER
+    var sin_h_core: array<vec4<f32>, 2>;
 #endif
 #ifdef HORIZON_SEARCH
-    textureStore(occlusion_out, p, vec4<f32>(horizon_search(p, size, sp, n)));
+    // The baseline's AO needs no apex distances either.
+    let apex_count = select(0u, apexes.count, horizons_wanted);
 #else
-    var sin_h = array<f32, 8>(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let apex_count = apexes.count;
+#endif
     var nearest = 1.0e9;
     var farthest = 0.0;
-    for (var i = 0u; i < apexes.count; i++) {
+    for (var i = 0u; i < apex_count; i++) {
         let o = unpack_offset(apex_sets[apexes.first + i]) + apexes.shift;
         let distance = length(vec2<f32>(o));
         if distance > 0.0 {
             nearest = min(nearest, distance);
             farthest = max(farthest, distance);
         }
-        if from_texture_space {
+        if !horizons_wanted {
             continue;
         }
         let d = surface_point(p + o) - sp;
@@ -166,19 +201,24 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
         if len <= 0.0 {
             continue;
         }
-        let s = clamp(dot(d, n) / len, 0.0, 1.0);
         let sector = sector_of(o);
-        sin_h[sector] = max(sin_h[sector], s);
-    }
-    var visibility = 0.0;
-    for (var s = 0u; s < SECTORS; s++) {
+        surface::raise_sector_horizon(&maxima, sector, clamp(dot(d, n) / len, 0.0, 1.0), i);
 #ifdef OCCLUSION_FORM_PAPER
-        visibility += 1.0 - sin_h[s];
-#else
-        visibility += 1.0 - sin_h[s] * sin_h[s];
+        surface::raise_sector_maximum(&sin_h_core, sector, clamp(dot(d, n0) / len, 0.0, 1.0));
 #endif
     }
-    visibility /= f32(SECTORS);
+#ifdef SECTOR_HORIZONS
+    textureStore(sector_horizons_out, p, surface::pack_sector_record(maxima, n));
+#endif
+#ifdef AMBIENT_OCCLUSION
+#ifdef HORIZON_SEARCH
+    textureStore(occlusion_out, p, vec4<f32>(horizon_search(p, size, sp, n_form)));
+#else
+#ifdef OCCLUSION_FORM_PAPER
+    var visibility = surface::sectors_visibility(sin_h_core, true);
+#else
+    var visibility = surface::sectors_visibility(maxima.sin_h, false);
+#endif
     if from_texture_space {
         visibility = texture_space;
     }
@@ -189,5 +229,6 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     }
 #endif
     textureStore(occlusion_out, p, vec4<f32>(visibility));
+#endif
 #endif
 }
