@@ -15,8 +15,12 @@ use bevy::{
 };
 
 use super::{
-    BLEEDING_FORMAT, CORE_NORMAL_FORMAT, MHGM_FORMAT, MHM_FORMAT, MICRO_SHADOW_FORMAT,
-    OCCLUSION_FORMAT, ViewMesostructureTextures,
+    apex::ViewApexSets,
+    bleeding::BLEEDING_FORMAT,
+    gradient::{MHGM_FORMAT, ViewGradientMap},
+    height::{BUMP_NORMAL_FORMAT, CORE_NORMAL_FORMAT, MHM_FORMAT, ViewHeightTextures},
+    lighting::{MICRO_SHADOW_FORMAT, ViewMicroShadowTexture},
+    occlusion::{OCCLUSION_FORMAT, ViewOcclusionTextures},
 };
 use crate::reference::{
     ApexSet, FLAG_VALID, GradientMap, ScreenHeightMap, ViewGeometry, unpack_apex_set,
@@ -253,7 +257,7 @@ fn copy_buffer(ctx: &mut RenderContext, device: &RenderDevice, source: &Buffer) 
 /// Views without a mesostructure surface this frame are not captured (their images are stale).
 pub fn copy_capture(
     view: ViewQuery<(
-        &ViewMesostructureTextures,
+        (&ViewHeightTextures, &ViewGradientMap, &ViewApexSets, &ViewOcclusionTextures),
         &ExtractedCapture,
         &bevy::render::view::ExtractedView,
         &crate::render::view_settings::ExtractedMesostructure,
@@ -263,36 +267,26 @@ pub fn copy_capture(
     mut pending: ResMut<PendingCaptures>,
     mut ctx: RenderContext,
 ) {
-    let (t, capture, extracted_view, settings) = view.into_inner();
+    let ((height, mhgm, apex, occlusion), capture, extracted_view, settings) = view.into_inner();
     if !settings.0.needs_gradient_map() || !super::view_has_mesostructure(&phases, extracted_view) {
         return;
     }
     let readbacks = vec![
-        copy_texture(&mut ctx, &device, &t.mhm.texture, MHM_FORMAT),
-        copy_texture(
-            &mut ctx,
-            &device,
-            &t.core_normal.texture,
-            CORE_NORMAL_FORMAT,
-        ),
-        copy_texture(&mut ctx, &device, &t.mhgm.texture, MHGM_FORMAT),
-        copy_buffer(&mut ctx, &device, &t.apex_sets),
-        copy_buffer(&mut ctx, &device, &t.apex_stats),
-        copy_texture(&mut ctx, &device, &t.occlusion.texture, OCCLUSION_FORMAT),
-        copy_texture(
-            &mut ctx,
-            &device,
-            &t.bump_normal.texture,
-            super::BUMP_NORMAL_FORMAT,
-        ),
+        copy_texture(&mut ctx, &device, &height.mhm.texture, MHM_FORMAT),
+        copy_texture(&mut ctx, &device, &height.core_normal.texture, CORE_NORMAL_FORMAT),
+        copy_texture(&mut ctx, &device, &mhgm.0.texture, MHGM_FORMAT),
+        copy_buffer(&mut ctx, &device, &apex.sets),
+        copy_buffer(&mut ctx, &device, &apex.stats),
+        copy_texture(&mut ctx, &device, &occlusion.occlusion.texture, OCCLUSION_FORMAT),
+        copy_texture(&mut ctx, &device, &height.bump_normal.texture, BUMP_NORMAL_FORMAT),
     ];
     let world_from_clip =
         extracted_view.world_from_view.to_matrix() * extracted_view.clip_from_view.inverse();
     pending.0.push(PendingCapture {
         camera: capture.0,
-        size: t.size,
-        apex_stride: t.apex_stride,
-        apex_block: t.apex_block,
+        size: height.size,
+        apex_stride: apex.stride,
+        apex_block: apex.block,
         view: ViewGeometry {
             world_from_clip,
             viewport: extracted_view.viewport.as_vec4(),
@@ -308,7 +302,7 @@ pub fn copy_capture(
 /// opaque image of views whose working images were captured this frame.
 pub fn copy_lighting_capture(
     view: ViewQuery<(
-        &ViewMesostructureTextures,
+        &ViewMicroShadowTexture,
         &ExtractedCapture,
         &bevy::render::view::ViewTarget,
     )>,
@@ -316,7 +310,7 @@ pub fn copy_lighting_capture(
     mut pending: ResMut<PendingCaptures>,
     mut ctx: RenderContext,
 ) {
-    let (t, capture, target) = view.into_inner();
+    let (micro_shadow, capture, target) = view.into_inner();
     let Some(entry) = pending.0.iter_mut().rev().find(|p| p.camera == capture.0) else {
         return;
     };
@@ -326,7 +320,7 @@ pub fn copy_lighting_capture(
     entry.micro_shadow = Some(copy_texture(
         &mut ctx,
         &device,
-        &t.micro_shadow.texture,
+        &micro_shadow.0.texture,
         MICRO_SHADOW_FORMAT,
     ));
     let format = target.main_texture_format();
@@ -347,15 +341,10 @@ pub(crate) fn copy_bleeding(
     device: &RenderDevice,
     pending: &mut PendingCaptures,
     capture: &ExtractedCapture,
-    t: &ViewMesostructureTextures,
+    bleeding: &bevy::render::texture::CachedTexture,
 ) {
     if let Some(entry) = pending.0.iter_mut().rev().find(|p| p.camera == capture.0) {
-        entry.bleeding = Some(copy_texture(
-            ctx,
-            device,
-            &t.bleeding.texture,
-            BLEEDING_FORMAT,
-        ));
+        entry.bleeding = Some(copy_texture(ctx, device, &bleeding.texture, BLEEDING_FORMAT));
     }
 }
 

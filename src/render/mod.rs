@@ -5,6 +5,11 @@
 //! [`occlusion`] (compute); in the main pass, [`lighting`] before Bevy's deferred lighting and
 //! [`bleeding`] between the opaque and transparent passes; the [`debug_view`] pass draws over
 //! the output after tonemapping when a debug view is chosen.
+//!
+//! Each pass's folder owns its pipeline, the images it writes (a component per view, e.g.
+//! [`height::ViewHeightTextures`], [`occlusion::ViewOcclusionTextures`]), its bind group and its
+//! system; this module keeps what they share: the settings uniform, the per-pixel dispatch, the
+//! image helper and the order of the passes.
 
 pub mod apex;
 pub mod bleeding;
@@ -52,67 +57,39 @@ use crate::{
     warn_once::WarnedOnce,
 };
 
-/// MHM: (height·k, NDC depth, object id, dis).
-pub const MHM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
-/// Core normal n0 (world space).
-pub const CORE_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
-/// Shading normal by Blinn bump mapping (world space; 0 where the material has a normal map).
-pub const BUMP_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
-/// MHGM: (∂h/∂x, ∂h/∂y, h, flags).
-pub const MHGM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
-/// Mesostructure ambient occlusion (1 = open).
-pub const OCCLUSION_FORMAT: TextureFormat = TextureFormat::R32Float;
-/// Sector record per pixel: horizons about N', N' and the apexes that set the horizons
-/// (`surface.wgsl`), stored by the occlusion pass for the lighting and bleeding passes.
-pub const SECTOR_HORIZONS_FORMAT: TextureFormat = TextureFormat::Rgba32Uint;
-/// Micro-shadow visibility, the lowest over the lights (1 = lit).
-pub const MICRO_SHADOW_FORMAT: TextureFormat = TextureFormat::R32Float;
-/// One-bounce bleeding radiance added to the view (λd · ρ / π · E).
-pub const BLEEDING_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
-
-/// The working images of one view.
-#[derive(Component)]
-pub struct ViewMesostructureTextures {
-    /// Screen-space height map.
-    pub mhm: CachedTexture,
-    /// Core normals.
-    pub core_normal: CachedTexture,
-    /// Bump-mapped shading normals.
-    pub bump_normal: CachedTexture,
-    /// Gradient map.
-    pub mhgm: CachedTexture,
-    /// Ambient occlusion.
-    pub occlusion: CachedTexture,
-    /// Sector records (written by the occlusion pass).
-    pub sector_horizons: CachedTexture,
-    /// Micro-shadow visibility (written by the lighting pass).
-    pub micro_shadow: CachedTexture,
-    /// Bleeding radiance.
-    pub bleeding: CachedTexture,
-    /// Apex sets, `apex_stride` words per `apex_block`² block of pixels (see `reference::packed`).
-    pub apex_sets: Buffer,
-    /// Apex-pass counters: mesostructure pixels, pixels that hit the step bound, ascent steps.
-    pub apex_stats: Buffer,
-    /// Size in pixels (the render target's).
-    pub size: UVec2,
-    /// Words per apex set in `apex_sets`.
-    pub apex_stride: u32,
-    /// Side of the pixel block that shares one apex set (the working resolution).
-    pub apex_block: u32,
+/// Size of a view's working images (its render target's); `None` where it has none.
+pub(crate) fn working_size(camera: &ExtractedCamera) -> Option<UVec2> {
+    camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0)
 }
 
-/// Bind groups of the compute passes and the debug view of one view.
-#[derive(Component)]
-pub struct ViewMesostructureBindGroups {
-    /// Gradient pass.
-    pub gradient: BindGroup,
-    /// Apex pass.
-    pub apex: BindGroup,
-    /// Occlusion pass.
-    pub occlusion: BindGroup,
-    /// Debug view.
-    pub debug_view: BindGroup,
+/// One of a view's per-pixel working images (each pass creates its own outputs).
+pub(crate) fn view_texture(
+    cache: &mut TextureCache,
+    device: &RenderDevice,
+    label: &'static str,
+    format: TextureFormat,
+    usage: TextureUsages,
+    size: UVec2,
+) -> CachedTexture {
+    cache.get(
+        device,
+        TextureDescriptor {
+            label: Some(label),
+            size: size.to_extents(),
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        },
+    )
 }
+
+/// Usage of an image a compute pass writes and later passes (and captures) read.
+pub(crate) const STORAGE_IMAGE: TextureUsages = TextureUsages::STORAGE_BINDING
+    .union(TextureUsages::TEXTURE_BINDING)
+    .union(TextureUsages::COPY_SRC);
 
 /// Offset of this view's [`MesostructureUniform`] in [`MesostructureUniforms`].
 #[derive(Component, Clone, Copy)]
@@ -236,12 +213,26 @@ pub(crate) fn build(app: &mut App) {
                 lighting::prepare_lighting_pipelines.in_set(RenderSystems::Prepare),
                 bleeding::prepare_bleeding_pipelines.in_set(RenderSystems::Prepare),
                 occlusion::prepare_occlusion_pipelines.in_set(RenderSystems::Prepare),
-                (prepare_view_textures, prepare_view_uniforms)
+                (
+                    prepare_view_uniforms,
+                    height::prepare_height_textures,
+                    gradient::prepare_gradient_map,
+                    apex::prepare_apex_sets,
+                    occlusion::prepare_occlusion_textures,
+                    lighting::prepare_micro_shadow_texture,
+                    bleeding::prepare_bleeding_texture,
+                )
                     .in_set(RenderSystems::PrepareResources),
                 height::prepare_height_material_bind_groups
                     .in_set(RenderSystems::Queue)
                     .before(height::queue_height_phase),
-                prepare_view_bind_groups.in_set(RenderSystems::PrepareBindGroups),
+                (
+                    gradient::prepare_gradient_bind_group,
+                    apex::prepare_apex_bind_group,
+                    occlusion::prepare_occlusion_bind_group,
+                    debug_view::prepare_debug_view_bind_group,
+                )
+                    .in_set(RenderSystems::PrepareBindGroups),
                 capture::map_captures
                     .after(RenderSystems::Render)
                     .before(RenderSystems::Cleanup),
@@ -383,155 +374,6 @@ pub fn extract_height_phases(
     phases.retain(|view, _| live.contains(view));
 }
 
-fn prepare_view_textures(
-    mut commands: Commands,
-    mut texture_cache: ResMut<TextureCache>,
-    device: Res<RenderDevice>,
-    views: Query<(
-        Entity,
-        &ExtractedCamera,
-        &ExtractedMesostructure,
-        Option<&ViewMesostructureTextures>,
-    )>,
-    mut warned: ResMut<WarnedOnce>,
-) {
-    for (entity, camera, settings, previous) in &views {
-        let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0) else {
-            commands
-                .entity(entity)
-                .remove::<ViewMesostructureTextures>();
-            continue;
-        };
-        let apex_stride = crate::reference::packed::stride(settings.0.apex_directions);
-        let apex_block = settings.0.working_resolution.block();
-        let blocks = (size + apex_block - 1) / apex_block;
-        let apex_bytes = blocks.x as u64 * blocks.y as u64 * apex_stride as u64 * 4;
-        if apex_bytes > device.limits().max_storage_buffer_binding_size as u64 {
-            warned.warn(format!("apex buffer {entity} {size}"), || {
-                format!(
-                    "camera {entity}: {size} with {} apex directions needs a {apex_bytes}-byte apex \
-                     buffer, more than this GPU binds; the effect is off (use fewer directions)",
-                    settings.0.apex_directions
-                )
-            });
-            commands
-                .entity(entity)
-                .remove::<ViewMesostructureTextures>();
-            continue;
-        }
-        let texture = |cache: &mut TextureCache, label, format, usage| {
-            cache.get(
-                &device,
-                TextureDescriptor {
-                    label: Some(label),
-                    size: size.to_extents(),
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: TextureDimension::D2,
-                    format,
-                    usage,
-                    view_formats: &[],
-                },
-            )
-        };
-        let attachment = TextureUsages::RENDER_ATTACHMENT
-            | TextureUsages::TEXTURE_BINDING
-            | TextureUsages::COPY_SRC;
-        let mhm = texture(
-            &mut texture_cache,
-            "mesostructure_mhm",
-            MHM_FORMAT,
-            attachment,
-        );
-        let core_normal = texture(
-            &mut texture_cache,
-            "mesostructure_core_normal",
-            CORE_NORMAL_FORMAT,
-            attachment,
-        );
-        let bump_normal = texture(
-            &mut texture_cache,
-            "mesostructure_bump_normal",
-            BUMP_NORMAL_FORMAT,
-            attachment,
-        );
-        let mhgm = texture(
-            &mut texture_cache,
-            "mesostructure_mhgm",
-            MHGM_FORMAT,
-            TextureUsages::STORAGE_BINDING
-                | TextureUsages::TEXTURE_BINDING
-                | TextureUsages::COPY_SRC,
-        );
-        let occlusion = texture(
-            &mut texture_cache,
-            "mesostructure_occlusion",
-            OCCLUSION_FORMAT,
-            TextureUsages::STORAGE_BINDING
-                | TextureUsages::TEXTURE_BINDING
-                | TextureUsages::COPY_SRC,
-        );
-        let sector_horizons = texture(
-            &mut texture_cache,
-            "mesostructure_sector_horizons",
-            SECTOR_HORIZONS_FORMAT,
-            TextureUsages::STORAGE_BINDING
-                | TextureUsages::TEXTURE_BINDING
-                | TextureUsages::COPY_SRC,
-        );
-        let micro_shadow = texture(
-            &mut texture_cache,
-            "mesostructure_micro_shadow",
-            MICRO_SHADOW_FORMAT,
-            TextureUsages::STORAGE_BINDING
-                | TextureUsages::TEXTURE_BINDING
-                | TextureUsages::COPY_SRC,
-        );
-        let bleeding = texture(
-            &mut texture_cache,
-            "mesostructure_bleeding",
-            BLEEDING_FORMAT,
-            TextureUsages::STORAGE_BINDING
-                | TextureUsages::TEXTURE_BINDING
-                | TextureUsages::COPY_SRC,
-        );
-        let (apex_sets, apex_stats) = match previous {
-            Some(p) if p.apex_sets.size() == apex_bytes => {
-                (p.apex_sets.clone(), p.apex_stats.clone())
-            }
-            _ => (
-                device.create_buffer(&BufferDescriptor {
-                    label: Some("mesostructure_apex_sets"),
-                    size: apex_bytes,
-                    usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC,
-                    mapped_at_creation: false,
-                }),
-                device.create_buffer(&BufferDescriptor {
-                    label: Some("mesostructure_apex_stats"),
-                    size: 16,
-                    usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC | BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                }),
-            ),
-        };
-        commands.entity(entity).insert(ViewMesostructureTextures {
-            mhm,
-            core_normal,
-            bump_normal,
-            mhgm,
-            occlusion,
-            sector_horizons,
-            micro_shadow,
-            bleeding,
-            apex_sets,
-            apex_stats,
-            size,
-            apex_stride,
-            apex_block,
-        });
-    }
-}
-
 fn prepare_view_uniforms(
     mut commands: Commands,
     mut uniforms: ResMut<MesostructureUniforms>,
@@ -547,88 +389,5 @@ fn prepare_view_uniforms(
         commands
             .entity(entity)
             .insert(ViewMesostructureUniformOffset(offset));
-    }
-}
-
-fn prepare_view_bind_groups(
-    mut commands: Commands,
-    device: Res<RenderDevice>,
-    pipeline_cache: Res<PipelineCache>,
-    uniforms: Res<MesostructureUniforms>,
-    gradient: Res<gradient::GradientPipeline>,
-    apex: Res<apex::ApexPipeline>,
-    debug: Res<debug_view::DebugViewPipeline>,
-    occlusion: Res<occlusion::OcclusionPipeline>,
-    view_uniforms: Res<bevy::render::view::ViewUniforms>,
-    views: Query<(
-        Entity,
-        &ViewMesostructureTextures,
-        &bevy::core_pipeline::prepass::ViewPrepassTextures,
-    )>,
-) {
-    let (Some(settings), Some(view_binding)) =
-        (uniforms.0.binding(), view_uniforms.uniforms.binding())
-    else {
-        return;
-    };
-    for (entity, t, prepass) in &views {
-        let Some(depth) = prepass.depth_view() else {
-            continue;
-        };
-        let gradient = device.create_bind_group(
-            "mesostructure_gradient_bind_group",
-            &pipeline_cache.get_bind_group_layout(&gradient.layout),
-            &BindGroupEntries::sequential((
-                &t.mhm.default_view,
-                &t.mhgm.default_view,
-                settings.clone(),
-            )),
-        );
-        let apex = device.create_bind_group(
-            "mesostructure_apex_bind_group",
-            &pipeline_cache.get_bind_group_layout(&apex.layout),
-            &BindGroupEntries::sequential((
-                &t.mhm.default_view,
-                &t.mhgm.default_view,
-                t.apex_sets.as_entire_binding(),
-                t.apex_stats.as_entire_binding(),
-                settings.clone(),
-            )),
-        );
-        let occlusion = device.create_bind_group(
-            "mesostructure_occlusion_bind_group",
-            &pipeline_cache.get_bind_group_layout(&occlusion.layout),
-            &BindGroupEntries::sequential((
-                &t.mhm.default_view,
-                &t.core_normal.default_view,
-                t.apex_sets.as_entire_binding(),
-                &t.occlusion.default_view,
-                settings.clone(),
-                view_binding.clone(),
-                &t.mhgm.default_view,
-                depth,
-                &t.bump_normal.default_view,
-                &t.sector_horizons.default_view,
-            )),
-        );
-        let debug_view = device.create_bind_group(
-            "mesostructure_debug_view_bind_group",
-            &pipeline_cache.get_bind_group_layout(&debug.layout),
-            &BindGroupEntries::sequential((
-                &t.mhm.default_view,
-                &t.mhgm.default_view,
-                t.apex_sets.as_entire_binding(),
-                settings.clone(),
-                &t.occlusion.default_view,
-                &t.micro_shadow.default_view,
-                &t.bleeding.default_view,
-            )),
-        );
-        commands.entity(entity).insert(ViewMesostructureBindGroups {
-            gradient,
-            apex,
-            occlusion,
-            debug_view,
-        });
     }
 }

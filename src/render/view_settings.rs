@@ -254,11 +254,26 @@ impl From<&ViewSettings> for MesostructureUniform {
 impl bevy::render::sync_component::SyncComponent for Mesostructure {
     type Target = (
         ExtractedMesostructure,
-        crate::render::ViewMesostructureTextures,
-        crate::render::ViewMesostructureBindGroups,
         crate::render::ViewMesostructureUniformOffset,
         crate::render::capture::ExtractedCapture,
         crate::render::lighting::ViewLightingPipeline,
+        // Each pass's images and bind groups.
+        crate::render::height::ViewHeightTextures,
+        (
+            crate::render::gradient::ViewGradientMap,
+            crate::render::gradient::ViewGradientBindGroup,
+        ),
+        (
+            crate::render::apex::ViewApexSets,
+            crate::render::apex::ViewApexBindGroup,
+        ),
+        (
+            crate::render::occlusion::ViewOcclusionTextures,
+            crate::render::occlusion::ViewOcclusionBindGroup,
+        ),
+        crate::render::lighting::ViewMicroShadowTexture,
+        crate::render::bleeding::ViewBleedingTexture,
+        crate::render::debug_view::ViewDebugViewBindGroup,
     );
 }
 

@@ -307,3 +307,55 @@ fn msaa_and_nan_settings_do_not_panic() {
         );
     }
 }
+
+#[test]
+fn an_apex_buffer_too_large_for_the_gpu_leaves_the_surface_lit_without_the_terms() {
+    if !gpu_or_skip() {
+        return;
+    }
+    // A GPU that binds at most 1 MiB of storage buffer: a 128² view at `ultra` needs
+    // 128² × 18 words (1.2 MB) of apex sets.
+    let mut app = app_with_limits(bevy::render::settings::WgpuLimits {
+        max_storage_buffer_binding_size: 1 << 20,
+        ..default()
+    });
+    let map = image(&mut app, HeightMap::bricks(128, 4, 0.15).to_image());
+    let grey = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(Color::srgb(0.5, 0.5, 0.5));
+    mesostructure_plane(&mut app, MeshMaterial3d(grey), map, 0.1);
+    app.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 10_000.0,
+            ..default()
+        },
+        Transform::from_xyz(1.0, 3.0, 2.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    let t = target(&mut app, 128, 128);
+    camera(
+        &mut app,
+        &t,
+        top_down(),
+        Mesostructure {
+            quality: MesostructureQuality::Ultra,
+            ..default()
+        },
+    );
+    run(&mut app, 5);
+    let shot = screenshot(&mut app, &t);
+    let data = shot.data.as_ref().unwrap();
+    // The plane is lit by Bevy's terms through the plugin's lighting pass (210 measured), not
+    // left at the clear colour (43) as when the lighting pass skipped such a view.
+    let centre = ((64 * 128 + 64) * 4) as usize;
+    assert!(
+        data[centre..centre + 3].iter().all(|&c| c > 150),
+        "the plane is lit: {:?}",
+        &data[centre..centre + 3]
+    );
+    let w = warnings(&app);
+    assert!(
+        w.iter().any(|k| k.starts_with("apex buffer")),
+        "a warning about the apex buffer: {w:?}"
+    );
+}

@@ -57,10 +57,34 @@ pub fn bare_app() -> App {
     build_app(false, |_| {})
 }
 
+/// [`app`] on a device created with `limits` as the upper bound of its limits (a smaller GPU).
+pub fn app_with_limits(limits: bevy::render::settings::WgpuLimits) -> App {
+    build_app_with(
+        true,
+        headless::headless_plugins().set(bevy::render::RenderPlugin {
+            render_creation: bevy::render::settings::WgpuSettings {
+                constrained_limits: Some(limits),
+                ..default()
+            }
+            .into(),
+            synchronous_pipeline_compilation: true,
+            ..default()
+        }),
+        |_| {},
+    )
+}
+
 fn build_app(plugin: bool, more: impl FnOnce(&mut App)) -> App {
+    build_app_with(plugin, headless::headless_plugins(), more)
+}
+
+fn build_app_with(
+    plugin: bool,
+    plugins: bevy::app::PluginGroupBuilder,
+    more: impl FnOnce(&mut App),
+) -> App {
     let mut app = App::new();
     // The examples' headless plugin set: no event loop (their window support is compiled in).
-    let plugins = headless::headless_plugins();
     if std::env::var_os("MESOSTRUCTURE_TEST_LOG").is_some() {
         app.add_plugins(plugins);
     } else {

@@ -10,16 +10,55 @@ use bevy::{
         diagnostic::RecordDiagnostics,
         render_phase::ViewSortedRenderPhases,
         render_resource::{binding_types::*, *},
-        renderer::{RenderContext, ViewQuery},
+        renderer::{RenderContext, RenderDevice, ViewQuery},
+        texture::{CachedTexture, TextureCache},
         view::{ExtractedView, ViewTarget, ViewUniform, ViewUniformOffset, ViewUniforms},
     },
 };
 
 use super::{
-    BLEEDING_FORMAT, MesostructureUniforms, ViewMesostructureTextures,
-    ViewMesostructureUniformOffset, dispatch_per_pixel, height::HeightPhaseItem,
-    view_has_mesostructure,
+    MesostructureUniforms, STORAGE_IMAGE, ViewMesostructureUniformOffset, apex::ViewApexSets,
+    dispatch_per_pixel,
+    height::{HeightPhaseItem, ViewHeightTextures},
+    occlusion::{ViewOcclusionBindGroup, ViewOcclusionPipeline, ViewOcclusionTextures},
+    view_has_mesostructure, view_texture,
 };
+
+/// One-bounce bleeding radiance added to the view (λd · ρ / π · E).
+pub const BLEEDING_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
+
+/// The bleeding gather's output image of one view.
+#[derive(Component)]
+pub struct ViewBleedingTexture(pub CachedTexture);
+
+/// Creates each view's bleeding image (render `PrepareResources`).
+pub fn prepare_bleeding_texture(
+    mut commands: Commands,
+    mut texture_cache: ResMut<TextureCache>,
+    device: Res<RenderDevice>,
+    views: Query<(Entity, &ViewHeightTextures)>,
+) {
+    for (entity, height) in &views {
+        let texture = view_texture(
+            &mut texture_cache,
+            &device,
+            "mesostructure_bleeding",
+            BLEEDING_FORMAT,
+            STORAGE_IMAGE,
+            height.size,
+        );
+        commands.entity(entity).insert(ViewBleedingTexture(texture));
+    }
+}
+
+/// Whether the occlusion pass stored this frame's sector records, which the gather reads (its
+/// pipeline compiled; its bind group exists where the view has apex sets).
+fn sector_records_stored(
+    pipeline_cache: &PipelineCache,
+    occlusion: Option<(&ViewOcclusionPipeline, &ViewOcclusionBindGroup)>,
+) -> bool {
+    occlusion.is_some_and(|(p, _)| pipeline_cache.get_compute_pipeline(p.0).is_some())
+}
 use super::view_settings::{ExtractedMesostructure, MesostructureUniform};
 
 /// Embeds the pass's shaders (their asset paths follow this folder).
@@ -155,12 +194,12 @@ pub fn bleeding_pass(
         &ExtractedView,
         &ViewTarget,
         &ViewPrepassTextures,
-        &ViewMesostructureTextures,
+        (&ViewHeightTextures, &ViewApexSets, &ViewOcclusionTextures, &ViewBleedingTexture),
         &ViewMesostructureUniformOffset,
         &ViewUniformOffset,
         &ViewBleedingPipeline,
         Option<&super::capture::ExtractedCapture>,
-        Option<&super::occlusion::ViewOcclusionPipeline>,
+        Option<(&ViewOcclusionPipeline, &ViewOcclusionBindGroup)>,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     pipeline: Res<BleedingPipeline>,
@@ -170,12 +209,12 @@ pub fn bleeding_pass(
     mut pending: ResMut<super::capture::PendingCaptures>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, target, prepass, textures, offset, view_offset, composite, capture, occlusion) =
+    let (extracted_view, target, prepass, images, offset, view_offset, composite, capture, occlusion) =
         view.into_inner();
-    // The gather reads the sector records the occlusion pass stored this frame.
-    let records_stored =
-        occlusion.is_some_and(|p| pipeline_cache.get_compute_pipeline(p.0).is_some());
-    if !view_has_mesostructure(&phases, extracted_view) || !records_stored {
+    let (height, apex, occlusion_outputs, bleeding) = images;
+    if !view_has_mesostructure(&phases, extracted_view)
+        || !sector_records_stored(&pipeline_cache, occlusion)
+    {
         return;
     }
     let (Some(gather), Some(_), Some(settings), Some(view_binding), Some(gbuffer)) = (
@@ -193,15 +232,15 @@ pub fn bleeding_pass(
         &pipeline_cache.get_bind_group_layout(&pipeline.gather_layout),
         &BindGroupEntries::sequential((
             target.main_texture_view(),
-            &textures.mhm.default_view,
-            &textures.core_normal.default_view,
-            &textures.bump_normal.default_view,
-            textures.apex_sets.as_entire_binding(),
+            &height.mhm.default_view,
+            &height.core_normal.default_view,
+            &height.bump_normal.default_view,
+            apex.sets.as_entire_binding(),
             gbuffer,
-            &textures.bleeding.default_view,
+            &bleeding.0.default_view,
             settings,
             view_binding,
-            &textures.sector_horizons.default_view,
+            &occlusion_outputs.sector_horizons.default_view,
         )),
     );
     dispatch_per_pixel(
@@ -210,11 +249,11 @@ pub fn bleeding_pass(
         gather,
         &gather_group,
         &[offset.0, view_offset.offset],
-        textures.size,
+        height.size,
         |_| {},
     );
     if let Some(capture) = capture {
-        super::capture::copy_bleeding(&mut ctx, &device, &mut pending, capture, textures);
+        super::capture::copy_bleeding(&mut ctx, &device, &mut pending, capture, &bleeding.0);
     }
 }
 
@@ -225,20 +264,21 @@ pub fn bleeding_composite_pass(
     view: ViewQuery<(
         &ExtractedView,
         &ViewTarget,
-        &ViewMesostructureTextures,
+        &ViewHeightTextures,
+        &ViewBleedingTexture,
         &ViewBleedingPipeline,
-        Option<&super::occlusion::ViewOcclusionPipeline>,
+        Option<(&ViewOcclusionPipeline, &ViewOcclusionBindGroup)>,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     pipeline: Res<BleedingPipeline>,
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, target, textures, composite, occlusion) = view.into_inner();
+    let (extracted_view, target, height, bleeding, composite, occlusion) = view.into_inner();
     // As the gather: nothing to add before the sector records exist.
-    let records_stored =
-        occlusion.is_some_and(|p| pipeline_cache.get_compute_pipeline(p.0).is_some());
-    if !view_has_mesostructure(&phases, extracted_view) || !records_stored {
+    if !view_has_mesostructure(&phases, extracted_view)
+        || !sector_records_stored(&pipeline_cache, occlusion)
+    {
         return;
     }
     let (Some(composite), Some(_)) = (
@@ -252,8 +292,8 @@ pub fn bleeding_composite_pass(
         "mesostructure_bleeding_composite_bind_group",
         &pipeline_cache.get_bind_group_layout(&pipeline.composite_layout),
         &BindGroupEntries::sequential((
-            &textures.bleeding.default_view,
-            &textures.mhm.default_view,
+            &bleeding.0.default_view,
+            &height.mhm.default_view,
         )),
     );
     let diagnostics = ctx.diagnostic_recorder();

@@ -6,12 +6,16 @@ use bevy::{
     render::{
         diagnostic::RecordDiagnostics,
         render_resource::{binding_types::*, *},
-        renderer::{RenderContext, ViewQuery},
+        renderer::{RenderContext, RenderDevice, ViewQuery},
         view::ViewTarget,
     },
 };
 
-use super::{ViewMesostructureBindGroups, ViewMesostructureUniformOffset};
+use super::{
+    MesostructureUniforms, ViewMesostructureUniformOffset, apex::ViewApexSets,
+    bleeding::ViewBleedingTexture, gradient::ViewGradientMap, height::ViewHeightTextures,
+    lighting::ViewMicroShadowTexture, occlusion::ViewOcclusionTextures,
+};
 use super::view_settings::{ExtractedMesostructure, MesostructureUniform};
 use crate::settings::MesostructureDebugView;
 
@@ -27,6 +31,51 @@ pub struct DebugViewPipeline {
     pub layout: BindGroupLayoutDescriptor,
     fullscreen: FullscreenShader,
     shader: Handle<Shader>,
+}
+
+/// The debug view's bind group of one view.
+#[derive(Component)]
+pub struct ViewDebugViewBindGroup(pub BindGroup);
+
+/// Binds the images each view's debug view draws from (render `PrepareBindGroups`).
+pub fn prepare_debug_view_bind_group(
+    mut commands: Commands,
+    device: Res<RenderDevice>,
+    pipeline_cache: Res<PipelineCache>,
+    pipeline: Res<DebugViewPipeline>,
+    uniforms: Res<MesostructureUniforms>,
+    views: Query<
+        (
+            Entity,
+            &ViewHeightTextures,
+            &ViewGradientMap,
+            &ViewApexSets,
+            &ViewOcclusionTextures,
+            &ViewMicroShadowTexture,
+            &ViewBleedingTexture,
+        ),
+        With<ViewDebugViewPipeline>,
+    >,
+) {
+    let Some(settings) = uniforms.0.binding() else {
+        return;
+    };
+    for (entity, height, mhgm, apex, occlusion, micro_shadow, bleeding) in &views {
+        let bind_group = device.create_bind_group(
+            "mesostructure_debug_view_bind_group",
+            &pipeline_cache.get_bind_group_layout(&pipeline.layout),
+            &BindGroupEntries::sequential((
+                &height.mhm.default_view,
+                &mhgm.0.default_view,
+                apex.sets.as_entire_binding(),
+                settings.clone(),
+                &occlusion.occlusion.default_view,
+                &micro_shadow.0.default_view,
+                &bleeding.0.default_view,
+            )),
+        );
+        commands.entity(entity).insert(ViewDebugViewBindGroup(bind_group));
+    }
 }
 
 /// Creates the debug-view layout (render startup).
@@ -107,7 +156,7 @@ pub fn debug_view_pass(
     view: ViewQuery<(
         &ViewTarget,
         &ViewDebugViewPipeline,
-        &ViewMesostructureBindGroups,
+        &ViewDebugViewBindGroup,
         &ViewMesostructureUniformOffset,
         &bevy::render::camera::ExtractedCamera,
         &bevy::render::view::ExtractedView,
@@ -116,7 +165,7 @@ pub fn debug_view_pass(
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (target, pipeline_id, bind_groups, offset, camera, extracted_view) = view.into_inner();
+    let (target, pipeline_id, bind_group, offset, camera, extracted_view) = view.into_inner();
     if !super::view_has_mesostructure(&phases, extracted_view) {
         return;
     }
@@ -143,7 +192,7 @@ pub fn debug_view_pass(
             pass.set_camera_viewport(viewport);
         }
         pass.set_render_pipeline(pipeline);
-        pass.set_bind_group(0, &bind_groups.debug_view, &[offset.0]);
+        pass.set_bind_group(0, &bind_group.0, &[offset.0]);
         pass.draw(0..3, 0..1);
         span.end(&mut pass);
     }

@@ -5,17 +5,75 @@ use bevy::{
     render::{
         render_phase::ViewSortedRenderPhases,
         render_resource::{binding_types::*, *},
-        renderer::{RenderContext, ViewQuery},
+        renderer::{RenderContext, RenderDevice, ViewQuery},
+        texture::{CachedTexture, TextureCache},
         view::ExtractedView,
     },
 };
 
 use super::{
-    MHGM_FORMAT, ViewMesostructureBindGroups, ViewMesostructureTextures,
-    ViewMesostructureUniformOffset, dispatch_per_pixel, height::HeightPhaseItem,
-    view_has_mesostructure,
+    MesostructureUniforms, STORAGE_IMAGE, ViewMesostructureUniformOffset, dispatch_per_pixel,
+    height::{HeightPhaseItem, ViewHeightTextures},
+    view_has_mesostructure, view_texture,
 };
 use crate::render::view_settings::MesostructureUniform;
+
+/// MHGM: (∂h/∂x, ∂h/∂y, h, flags).
+pub const MHGM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
+
+/// The gradient map of one view.
+#[derive(Component)]
+pub struct ViewGradientMap(pub CachedTexture);
+
+/// The gradient pass's bind group of one view.
+#[derive(Component)]
+pub struct ViewGradientBindGroup(pub BindGroup);
+
+/// Creates each view's gradient map (render `PrepareResources`).
+pub fn prepare_gradient_map(
+    mut commands: Commands,
+    mut texture_cache: ResMut<TextureCache>,
+    device: Res<RenderDevice>,
+    views: Query<(Entity, &ViewHeightTextures)>,
+) {
+    for (entity, height) in &views {
+        let mhgm = view_texture(
+            &mut texture_cache,
+            &device,
+            "mesostructure_mhgm",
+            MHGM_FORMAT,
+            STORAGE_IMAGE,
+            height.size,
+        );
+        commands.entity(entity).insert(ViewGradientMap(mhgm));
+    }
+}
+
+/// Binds each view's MHM and gradient map (render `PrepareBindGroups`).
+pub fn prepare_gradient_bind_group(
+    mut commands: Commands,
+    device: Res<RenderDevice>,
+    pipeline_cache: Res<PipelineCache>,
+    pipeline: Res<GradientPipeline>,
+    uniforms: Res<MesostructureUniforms>,
+    views: Query<(Entity, &ViewHeightTextures, &ViewGradientMap)>,
+) {
+    let Some(settings) = uniforms.0.binding() else {
+        return;
+    };
+    for (entity, height, mhgm) in &views {
+        let bind_group = device.create_bind_group(
+            "mesostructure_gradient_bind_group",
+            &pipeline_cache.get_bind_group_layout(&pipeline.layout),
+            &BindGroupEntries::sequential((
+                &height.mhm.default_view,
+                &mhgm.0.default_view,
+                settings.clone(),
+            )),
+        );
+        commands.entity(entity).insert(ViewGradientBindGroup(bind_group));
+    }
+}
 
 /// Embeds the pass's shaders (their asset paths follow this folder).
 pub(super) fn embed_shaders(app: &mut App) {
@@ -62,8 +120,8 @@ pub fn init_gradient_pipeline(
 pub fn gradient_pass(
     view: ViewQuery<(
         &ExtractedView,
-        &ViewMesostructureTextures,
-        &ViewMesostructureBindGroups,
+        &ViewHeightTextures,
+        &ViewGradientBindGroup,
         &ViewMesostructureUniformOffset,
         &crate::render::view_settings::ExtractedMesostructure,
     )>,
@@ -72,7 +130,7 @@ pub fn gradient_pass(
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, textures, bind_groups, offset, settings) = view.into_inner();
+    let (extracted_view, height, bind_group, offset, settings) = view.into_inner();
     if !settings.0.needs_gradient_map() || !view_has_mesostructure(&phases, extracted_view) {
         return;
     }
@@ -83,9 +141,9 @@ pub fn gradient_pass(
         &mut ctx,
         "mesostructure/gradient",
         compute,
-        &bind_groups.gradient,
+        &bind_group.0,
         &[offset.0],
-        textures.size,
+        height.size,
         |_| {},
     );
 }

@@ -38,13 +38,13 @@ use bevy::{
         render_resource::{binding_types::*, *},
         renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
         sync_world::MainEntity,
-        texture::GpuImage,
+        texture::{CachedTexture, GpuImage, TextureCache},
         view::{ExtractedView, RenderVisibleEntities, ViewDepthTexture},
     },
 };
 use nonmax::NonMaxU32;
 
-use super::{CORE_NORMAL_FORMAT, MHM_FORMAT, ViewMesostructureTextures};
+use super::{view_texture, working_size};
 use crate::{
     material::PreparedMesostructure, render::view_settings::ExtractedMesostructure,
     warn_once::WarnedOnce,
@@ -53,6 +53,55 @@ use crate::{
 /// Embeds the pass's shaders (their asset paths follow this folder).
 pub(super) fn embed_shaders(app: &mut App) {
     bevy::asset::embedded_asset!(app, "height.wgsl");
+}
+
+/// MHM: (height·k, NDC depth, object id, dis).
+pub const MHM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
+/// Core normal n0 (world space); `w` the texture-space visibility of the first directional
+/// light (−1: none).
+pub const CORE_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
+/// Shading normal by Blinn bump mapping (world space; 0 where the material has a normal map);
+/// `w` the texture-space occlusion (−1: none).
+pub const BUMP_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
+
+/// The height pass's images of one view, which every later pass reads.
+#[derive(Component)]
+pub struct ViewHeightTextures {
+    /// Screen-space height map.
+    pub mhm: CachedTexture,
+    /// Core normals.
+    pub core_normal: CachedTexture,
+    /// Bump-mapped shading normals.
+    pub bump_normal: CachedTexture,
+    /// Size in pixels (the render target's), that of every working image of the view.
+    pub size: UVec2,
+}
+
+/// Creates the height pass's images of each view with the effect (render `PrepareResources`).
+pub fn prepare_height_textures(
+    mut commands: Commands,
+    mut texture_cache: ResMut<TextureCache>,
+    device: Res<RenderDevice>,
+    views: Query<(Entity, &ExtractedCamera), With<ExtractedMesostructure>>,
+) {
+    let usage =
+        TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC;
+    for (entity, camera) in &views {
+        let Some(size) = working_size(camera) else {
+            commands.entity(entity).remove::<ViewHeightTextures>();
+            continue;
+        };
+        let mut texture = |label, format| {
+            view_texture(&mut texture_cache, &device, label, format, usage, size)
+        };
+        let textures = ViewHeightTextures {
+            mhm: texture("mesostructure_mhm", MHM_FORMAT),
+            core_normal: texture("mesostructure_core_normal", CORE_NORMAL_FORMAT),
+            bump_normal: texture("mesostructure_bump_normal", BUMP_NORMAL_FORMAT),
+            size,
+        };
+        commands.entity(entity).insert(textures);
+    }
 }
 
 /// One mesostructure mesh to draw into the height map of one view.
@@ -226,7 +275,7 @@ impl SpecializedMeshPipeline for HeightPassPipeline {
                     write_mask: ColorWrites::ALL,
                 }),
                 Some(ColorTargetState {
-                    format: super::BUMP_NORMAL_FORMAT,
+                    format: BUMP_NORMAL_FORMAT,
                     blend: None,
                     write_mask: ColorWrites::ALL,
                 }),
@@ -514,7 +563,7 @@ pub fn height_pass(
         &ExtractedCamera,
         &ExtractedView,
         &ViewDepthTexture,
-        &ViewMesostructureTextures,
+        &ViewHeightTextures,
         Option<&MainPassResolutionOverride>,
         &crate::render::view_settings::ExtractedMesostructure,
     )>,

@@ -18,13 +18,51 @@ use bevy::{
         render_phase::ViewSortedRenderPhases,
         render_resource::{binding_types::*, *},
         renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
+        texture::{CachedTexture, TextureCache},
         view::{ExtractedView, ViewTarget},
     },
     shader::ShaderDefVal,
 };
 
-use super::{ViewMesostructureTextures, height::HeightPhaseItem, view_has_mesostructure};
+use super::{
+    STORAGE_IMAGE,
+    height::{HeightPhaseItem, ViewHeightTextures},
+    occlusion::{ViewOcclusionBindGroup, ViewOcclusionTextures},
+    view_has_mesostructure, view_texture, working_size,
+};
 use crate::render::view_settings::ExtractedMesostructure;
+
+/// Micro-shadow visibility, the lowest over the lights (1 = lit), for the debug view and
+/// captures.
+pub const MICRO_SHADOW_FORMAT: TextureFormat = TextureFormat::R32Float;
+
+/// The lighting pass's micro-shadow image of one view.
+#[derive(Component)]
+pub struct ViewMicroShadowTexture(pub CachedTexture);
+
+/// Creates each view's micro-shadow image (render `PrepareResources`).
+pub fn prepare_micro_shadow_texture(
+    mut commands: Commands,
+    mut texture_cache: ResMut<TextureCache>,
+    device: Res<RenderDevice>,
+    views: Query<(Entity, &bevy::render::camera::ExtractedCamera), With<ExtractedMesostructure>>,
+) {
+    for (entity, camera) in &views {
+        let Some(size) = working_size(camera) else {
+            commands.entity(entity).remove::<ViewMicroShadowTexture>();
+            continue;
+        };
+        let texture = view_texture(
+            &mut texture_cache,
+            &device,
+            "mesostructure_micro_shadow",
+            MICRO_SHADOW_FORMAT,
+            STORAGE_IMAGE,
+            size,
+        );
+        commands.entity(entity).insert(ViewMicroShadowTexture(texture));
+    }
+}
 
 /// Embeds the pass's shaders (their asset paths follow this folder).
 pub(super) fn embed_shaders(app: &mut App) {
@@ -34,8 +72,9 @@ pub(super) fn embed_shaders(app: &mut App) {
 /// The deferred lighting pass id of mesostructure materials (Bevy's own is 1; 0 = no geometry).
 pub const MESOSTRUCTURE_LIGHTING_PASS_ID: u8 = 2;
 
-/// Our group 2, the shader, 1×1 "open" occlusion and sector-record images for frames without an
-/// occlusion pass, and the pipelines made so far, by view key.
+/// Our group 2, the shader, 1×1 stand-ins for frames without the plugin's images ("open"
+/// occlusion and sector records, "no mesostructure here", a micro-shadow image to write to), and
+/// the pipelines made so far, by view key.
 #[derive(Resource)]
 pub struct LightingPipeline {
     /// Group 2: occlusion, MHM, core normals, sector records, settings, bump normals,
@@ -45,6 +84,7 @@ pub struct LightingPipeline {
     open: TextureView,
     open_horizons: TextureView,
     empty: TextureView,
+    no_micro_shadow: TextureView,
     pipelines: HashMap<bevy::pbr::MeshPipelineKey, CachedRenderPipelineId>,
 }
 
@@ -66,11 +106,11 @@ pub fn init_lighting_pipeline(
                 texture_2d(TextureSampleType::Uint),
                 uniform_buffer::<crate::render::view_settings::MesostructureUniform>(true),
                 texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_storage_2d(super::MICRO_SHADOW_FORMAT, StorageTextureAccess::WriteOnly),
+                texture_storage_2d(MICRO_SHADOW_FORMAT, StorageTextureAccess::WriteOnly),
             ),
         ),
     );
-    let texel = |label, format, data: &[u8]| {
+    let texel = |label, format, usage, data: &[u8]| {
         device
             .create_texture_with_data(
                 &queue,
@@ -85,7 +125,7 @@ pub fn init_lighting_pipeline(
                     sample_count: 1,
                     dimension: TextureDimension::D2,
                     format,
-                    usage: TextureUsages::TEXTURE_BINDING,
+                    usage,
                     view_formats: &[],
                 },
                 TextureDataOrder::default(),
@@ -95,16 +135,27 @@ pub fn init_lighting_pipeline(
     };
     // For frames without a height pass: "no mesostructure here" (an MHM texel with object id
     // 0; all zeros also reads as no bump normal) and "open" occlusion.
-    let empty = texel("mesostructure_empty_mhm", super::MHM_FORMAT, &[0u8; 16]);
+    let sampled = TextureUsages::TEXTURE_BINDING;
+    let empty = texel("mesostructure_empty_mhm", super::height::MHM_FORMAT, sampled, &[0u8; 16]);
     let open = texel(
         "mesostructure_open_occlusion",
-        super::OCCLUSION_FORMAT,
+        super::occlusion::OCCLUSION_FORMAT,
+        sampled,
+        &1.0f32.to_le_bytes(),
+    );
+    // Written where the view has no micro-shadow image of its own (stores outside it are
+    // dropped).
+    let no_micro_shadow = texel(
+        "mesostructure_no_micro_shadow",
+        MICRO_SHADOW_FORMAT,
+        TextureUsages::STORAGE_BINDING,
         &1.0f32.to_le_bytes(),
     );
     // Every sector's horizon at 0: no micro-shadow.
     let open_horizons = texel(
         "mesostructure_open_sector_horizons",
-        super::SECTOR_HORIZONS_FORMAT,
+        super::occlusion::SECTOR_HORIZONS_FORMAT,
+        sampled,
         &[0u8; 16],
     );
     commands.insert_resource(LightingPipeline {
@@ -113,6 +164,7 @@ pub fn init_lighting_pipeline(
         open,
         open_horizons,
         empty,
+        no_micro_shadow,
         pipelines: HashMap::default(),
     });
 }
@@ -181,8 +233,10 @@ pub fn lighting_pass(
         &ViewTarget,
         &DeferredLightingIdDepthTexture,
         &ViewLightingPipeline,
-        &ViewMesostructureTextures,
         &super::ViewMesostructureUniformOffset,
+        Option<&ViewHeightTextures>,
+        Option<(&ViewOcclusionTextures, &ViewOcclusionBindGroup)>,
+        Option<&ViewMicroShadowTexture>,
         Option<&super::occlusion::ViewOcclusionPipeline>,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
@@ -202,8 +256,10 @@ pub fn lighting_pass(
         target,
         id_depth,
         pipeline_id,
-        textures,
         offset,
+        height,
+        occlusion_outputs,
+        micro_shadow,
         occlusion_pipeline,
     ) = view.into_inner();
     let (Some(pipeline), Some(settings_binding)) = (
@@ -214,34 +270,37 @@ pub fn lighting_pass(
     };
     // The images are only current when their passes ran this frame; otherwise "open" and
     // "no mesostructure here".
-    let current = view_has_mesostructure(&phases, extracted_view) && settings.0.needs_height_map();
+    let height = height
+        .filter(|_| view_has_mesostructure(&phases, extracted_view) && settings.0.needs_height_map());
     // The occlusion image is this frame's only once its pass and the passes it reads have
     // compiled (in the background, over the first frames); until then "open", never the
     // zero-initialised image (a dark flash at start-up).
     let compiled = |id| pipeline_cache.get_compute_pipeline(id).is_some();
     let (gradient, apex) = &occlusion_inputs;
+    // (A view without apex sets — too large for the GPU — has no occlusion bind group.)
     let occlusion_ran = occlusion_pipeline.is_some_and(|p| compiled(p.0))
         && compiled(gradient.pipeline)
         && (!settings.0.needs_apex_sets() || compiled(apex.pipeline));
-    let occlusion = if settings.0.occlusion && current && occlusion_ran {
-        &textures.occlusion.default_view
-    } else {
-        &lighting.open
+    let outputs = occlusion_outputs
+        .filter(|_| height.is_some() && occlusion_ran)
+        .map(|(textures, _)| textures);
+    let occlusion = match outputs {
+        Some(o) if settings.0.occlusion => &o.occlusion.default_view,
+        _ => &lighting.open,
     };
-    let sector_horizons = if settings.0.needs_sector_horizons() && current && occlusion_ran {
-        &textures.sector_horizons.default_view
-    } else {
-        &lighting.open_horizons
+    let sector_horizons = match outputs {
+        Some(o) if settings.0.needs_sector_horizons() => &o.sector_horizons.default_view,
+        _ => &lighting.open_horizons,
     };
-    let (mhm, core_normal, bump_normal) = if current {
-        (
-            &textures.mhm.default_view,
-            &textures.core_normal.default_view,
-            &textures.bump_normal.default_view,
-        )
-    } else {
-        (&lighting.empty, &lighting.empty, &lighting.empty)
+    let (mhm, core_normal, bump_normal) = match height {
+        Some(h) => (
+            &h.mhm.default_view,
+            &h.core_normal.default_view,
+            &h.bump_normal.default_view,
+        ),
+        None => (&lighting.empty, &lighting.empty, &lighting.empty),
     };
+    let micro_shadow = micro_shadow.map_or(&lighting.no_micro_shadow, |t| &t.0.default_view);
     let group_2 = ctx.render_device().create_bind_group(
         "mesostructure_lighting_bind_group",
         &pipeline_cache.get_bind_group_layout(&lighting.layout),
@@ -252,7 +311,7 @@ pub fn lighting_pass(
             sector_horizons,
             settings_binding,
             bump_normal,
-            &textures.micro_shadow.default_view,
+            micro_shadow,
         )),
     );
     let diagnostics = ctx.diagnostic_recorder();

@@ -9,15 +9,18 @@ use bevy::{
     render::{
         render_phase::ViewSortedRenderPhases,
         render_resource::{binding_types::*, *},
-        renderer::{RenderContext, ViewQuery},
-        view::{ExtractedView, ViewUniform, ViewUniformOffset},
+        renderer::{RenderContext, RenderDevice, ViewQuery},
+        texture::{CachedTexture, TextureCache},
+        view::{ExtractedView, ViewUniform, ViewUniformOffset, ViewUniforms},
     },
 };
 
 use super::{
-    OCCLUSION_FORMAT, SECTOR_HORIZONS_FORMAT, ViewMesostructureBindGroups, ViewMesostructureTextures,
-    ViewMesostructureUniformOffset, dispatch_per_pixel, height::HeightPhaseItem,
-    view_has_mesostructure,
+    MesostructureUniforms, STORAGE_IMAGE, ViewMesostructureUniformOffset, apex::ViewApexSets,
+    dispatch_per_pixel,
+    gradient::ViewGradientMap,
+    height::{HeightPhaseItem, ViewHeightTextures},
+    view_has_mesostructure, view_texture,
 };
 use crate::{
     reference::OcclusionForm,
@@ -27,6 +30,92 @@ use crate::{
 /// Embeds the pass's shaders (their asset paths follow this folder).
 pub(super) fn embed_shaders(app: &mut App) {
     bevy::asset::embedded_asset!(app, "occlusion.wgsl");
+}
+
+/// Mesostructure ambient occlusion (1 = open).
+pub const OCCLUSION_FORMAT: TextureFormat = TextureFormat::R32Float;
+/// Sector record per pixel: horizons about N', N' and the apexes that set the horizons
+/// (`surface.wgsl`), for the lighting and bleeding passes.
+pub const SECTOR_HORIZONS_FORMAT: TextureFormat = TextureFormat::Rgba32Uint;
+
+/// The occlusion pass's images of one view.
+#[derive(Component)]
+pub struct ViewOcclusionTextures {
+    /// Ambient occlusion.
+    pub occlusion: CachedTexture,
+    /// Sector records.
+    pub sector_horizons: CachedTexture,
+}
+
+/// The occlusion pass's bind group of one view.
+#[derive(Component)]
+pub struct ViewOcclusionBindGroup(pub BindGroup);
+
+/// Creates each view's occlusion and sector-record images (render `PrepareResources`).
+pub fn prepare_occlusion_textures(
+    mut commands: Commands,
+    mut texture_cache: ResMut<TextureCache>,
+    device: Res<RenderDevice>,
+    views: Query<(Entity, &ViewHeightTextures)>,
+) {
+    for (entity, height) in &views {
+        let mut texture = |label, format| {
+            view_texture(&mut texture_cache, &device, label, format, STORAGE_IMAGE, height.size)
+        };
+        let textures = ViewOcclusionTextures {
+            occlusion: texture("mesostructure_occlusion", OCCLUSION_FORMAT),
+            sector_horizons: texture("mesostructure_sector_horizons", SECTOR_HORIZONS_FORMAT),
+        };
+        commands.entity(entity).insert(textures);
+    }
+}
+
+/// Binds what each view's occlusion pass reads and writes (render `PrepareBindGroups`); views
+/// without apex sets (too large for the GPU) get none, and the pass skips them.
+pub fn prepare_occlusion_bind_group(
+    mut commands: Commands,
+    device: Res<RenderDevice>,
+    pipeline_cache: Res<PipelineCache>,
+    pipeline: Res<OcclusionPipeline>,
+    uniforms: Res<MesostructureUniforms>,
+    view_uniforms: Res<ViewUniforms>,
+    views: Query<(
+        Entity,
+        &ViewHeightTextures,
+        &ViewGradientMap,
+        &ViewApexSets,
+        &ViewOcclusionTextures,
+        &bevy::core_pipeline::prepass::ViewPrepassTextures,
+    )>,
+) {
+    let (Some(settings), Some(view_binding)) =
+        (uniforms.0.binding(), view_uniforms.uniforms.binding())
+    else {
+        return;
+    };
+    for (entity, height, mhgm, apex, outputs, prepass) in &views {
+        let Some(depth) = prepass.depth_view() else {
+            commands.entity(entity).remove::<ViewOcclusionBindGroup>();
+            continue;
+        };
+        let bind_group = device.create_bind_group(
+            "mesostructure_occlusion_bind_group",
+            &pipeline_cache.get_bind_group_layout(&pipeline.layout),
+            &BindGroupEntries::sequential((
+                &height.mhm.default_view,
+                &height.core_normal.default_view,
+                apex.sets.as_entire_binding(),
+                &outputs.occlusion.default_view,
+                settings.clone(),
+                view_binding.clone(),
+                &mhgm.0.default_view,
+                depth,
+                &height.bump_normal.default_view,
+                &outputs.sector_horizons.default_view,
+            )),
+        );
+        commands.entity(entity).insert(ViewOcclusionBindGroup(bind_group));
+    }
 }
 
 /// Layout and shader of the occlusion pass; its pipelines are specialised per
@@ -153,8 +242,8 @@ pub fn occlusion_pass(
     view: ViewQuery<(
         &ExtractedView,
         &ExtractedMesostructure,
-        &ViewMesostructureTextures,
-        &ViewMesostructureBindGroups,
+        &ViewHeightTextures,
+        &ViewOcclusionBindGroup,
         &ViewMesostructureUniformOffset,
         &ViewUniformOffset,
         &ViewOcclusionPipeline,
@@ -163,7 +252,7 @@ pub fn occlusion_pass(
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, settings, textures, bind_groups, offset, view_offset, pipeline) =
+    let (extracted_view, settings, height, bind_group, offset, view_offset, pipeline) =
         view.into_inner();
     if !settings.0.occlusion_pass_runs() || !view_has_mesostructure(&phases, extracted_view) {
         return;
@@ -175,9 +264,9 @@ pub fn occlusion_pass(
         &mut ctx,
         "mesostructure/occlusion",
         compute,
-        &bind_groups.occlusion,
+        &bind_group.0,
         &[offset.0, view_offset.offset],
-        textures.size,
+        height.size,
         |_| {},
     );
 }
