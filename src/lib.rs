@@ -52,6 +52,10 @@
 //! `src/render/` (a folder per pass). [`reference`](mod@reference) is the same method in plain
 //! Rust, the oracle of the GPU tests.
 //!
+//! ## Sub-plugins
+//! [`volumetric::VolumetricSpotsPlugin`]: spot lights seen in a homogeneous medium, by
+//! equal-angle single scattering (seed 004), with or without the mesostructure plugin.
+//!
 //! ## Bad input
 //! Missing or still-loading height maps, unsupported formats, meshes without UVs or normals,
 //! scales that are not finite and positive, MSAA on the camera, zero-sized viewports: each gets
@@ -86,6 +90,7 @@ pub mod material;
 pub mod reference;
 mod render;
 pub mod settings;
+pub mod volumetric;
 mod warn_once;
 
 pub use warn_once::MesostructureWarnings;
@@ -122,12 +127,7 @@ pub struct MesostructurePlugin;
 impl Plugin for MesostructurePlugin {
     fn build(&self, app: &mut App) {
         // One set of warning causes for both worlds, readable as `MesostructureWarnings`.
-        let warned = warn_once::WarnedOnce::default();
-        app.insert_resource(warn_once::MesostructureWarnings::of(&warned))
-            .insert_resource(warned.clone());
-        if let Some(render_app) = app.get_sub_app_mut(bevy::render::RenderApp) {
-            render_app.insert_resource(warned);
-        }
+        warn_once::install(app);
         app.register_type::<Mesostructure>()
             .register_type::<MesostructureQuality>()
             .register_type::<MesostructureCost>()

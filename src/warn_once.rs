@@ -35,6 +35,20 @@ impl WarnedOnce {
     }
 }
 
+/// Installs one [`WarnedOnce`] shared by the main and render worlds, and its public view
+/// [`MesostructureWarnings`], unless an earlier plugin of this crate did.
+pub(crate) fn install(app: &mut App) {
+    if app.world().contains_resource::<WarnedOnce>() {
+        return;
+    }
+    let warned = WarnedOnce::default();
+    app.insert_resource(MesostructureWarnings::of(&warned))
+        .insert_resource(warned.clone());
+    if let Some(render_app) = app.get_sub_app_mut(bevy::render::RenderApp) {
+        render_app.insert_resource(warned);
+    }
+}
+
 /// The causes of the plugin's one-time warnings given so far (bad settings, unusable height
 /// maps or meshes, cameras the effect cannot run on), main and render world together: each is
 /// a short key naming the cause and the entity or asset, e.g. `"msaa 12v0"`. A cause that goes

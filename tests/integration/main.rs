@@ -13,3 +13,4 @@ mod lighting;
 mod micro_shadows;
 mod stability;
 mod unseen;
+mod volumetric;

@@ -1,0 +1,376 @@
+//! The render side of the volumetric spots: extraction with validation, the per-view uniform,
+//! the fullscreen pipeline and its pass.
+
+use bevy::{
+    camera::Camera3d,
+    core_pipeline::{FullscreenShader, prepass::ViewPrepassTextures},
+    prelude::*,
+    render::{
+        Extract,
+        diagnostic::RecordDiagnostics,
+        render_resource::{binding_types::*, *},
+        renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
+        sync_component::SyncComponent,
+        sync_world::RenderEntity,
+        view::{Msaa, ViewTarget, ViewUniform, ViewUniformOffset, ViewUniforms},
+    },
+};
+
+use super::{MAX_VOLUMETRIC_SPOTS, VolumetricMedium, VolumetricSpot};
+use crate::warn_once::WarnedOnce;
+
+/// The render world's copy of a camera's medium, sanitized.
+#[derive(Component, Clone, Copy, Debug)]
+pub struct ExtractedVolumetricMedium(pub VolumetricMedium);
+
+impl SyncComponent for VolumetricMedium {
+    type Target = (
+        ExtractedVolumetricMedium,
+        ViewVolumetricPipeline,
+        ViewVolumetricUniformOffset,
+    );
+}
+
+/// One spot as the shader reads it.
+#[derive(Clone, Copy, Debug, Default, ShaderType)]
+pub struct GpuVolumetricSpot {
+    /// Position, range.
+    pub position_range: Vec4,
+    /// Unit axis, samples.
+    pub direction_samples: Vec4,
+    /// Linear colour × intensity (candela) × `intensity_scale`.
+    pub color: Vec4,
+    /// cos(outer angle), Bevy's spot scale and offset, unused.
+    pub cone: Vec4,
+}
+
+/// The spots of this frame.
+#[derive(Resource, Default)]
+pub struct ExtractedVolumetricSpots(pub Vec<GpuVolumetricSpot>);
+
+/// What the shader reads for one view: the medium and the spots.
+#[derive(Clone, Copy, ShaderType)]
+pub struct VolumetricUniform {
+    /// σs, σa, g, number of spots.
+    pub medium: Vec4,
+    /// The spots (the first `medium.w` are used).
+    pub spots: [GpuVolumetricSpot; MAX_VOLUMETRIC_SPOTS],
+}
+
+/// The views' uniforms.
+#[derive(Resource, Default)]
+pub struct VolumetricUniforms(pub DynamicUniformBuffer<VolumetricUniform>);
+
+/// Offset of a view's [`VolumetricUniform`].
+#[derive(Component, Clone, Copy)]
+pub struct ViewVolumetricUniformOffset(pub u32);
+
+fn finite_at_least(v: f32, min: f32, default: f32) -> (f32, bool) {
+    if v.is_finite() {
+        (v.max(min), v < min)
+    } else {
+        (default, true)
+    }
+}
+
+/// Copies each camera's medium after checking it; bad values get one warning and a sane
+/// fallback (their defaults or the nearest valid value); MSAA turns the effect off for that
+/// camera, with a warning.
+pub fn extract_volumetric_cameras(
+    mut commands: Commands,
+    cameras: Extract<
+        Query<(RenderEntity, Entity, &Camera, &VolumetricMedium, Option<&Msaa>), With<Camera3d>>,
+    >,
+    mut warned: ResMut<WarnedOnce>,
+) {
+    for (render_entity, entity, camera, medium, msaa) in &cameras {
+        let Ok(mut target) = commands.get_entity(render_entity) else {
+            continue;
+        };
+        let size = camera.physical_viewport_size();
+        if !camera.is_active || size.is_none_or(|s| s.x == 0 || s.y == 0) {
+            target.remove::<ExtractedVolumetricMedium>();
+            continue;
+        }
+        if msaa.is_some_and(|m| *m != Msaa::Off) {
+            warned.warn(format!("volumetric msaa {entity}"), || {
+                format!("camera {entity} has VolumetricMedium but MSAA is on; the volumetric spots need Msaa::Off and are off until then")
+            });
+            target.remove::<ExtractedVolumetricMedium>();
+            continue;
+        }
+        warned.forget(&format!("volumetric msaa {entity}"));
+        let d = VolumetricMedium::default();
+        let (scattering, bad_s) = finite_at_least(medium.scattering, 0.0, d.scattering);
+        let (absorption, bad_a) = finite_at_least(medium.absorption, 0.0, d.absorption);
+        let asymmetry = if medium.asymmetry.is_finite() {
+            medium.asymmetry.clamp(-0.95, 0.95)
+        } else {
+            d.asymmetry
+        };
+        if bad_s || bad_a || asymmetry != medium.asymmetry {
+            warned.warn(format!("volumetric medium {entity}"), || {
+                format!(
+                    "camera {entity}: VolumetricMedium {medium:?} has negative or non-finite \
+                     coefficients or |g| > 0.95; using σs {scattering}, σa {absorption}, g {asymmetry}"
+                )
+            });
+        }
+        target.insert(ExtractedVolumetricMedium(VolumetricMedium {
+            scattering,
+            absorption,
+            asymmetry,
+        }));
+    }
+}
+
+/// Collects the visible spots with [`VolumetricSpot`]; a cone angle of 0 (or NaN) drops the
+/// spot, one of 90° or more is narrowed to 89°, other bad values fall back to the defaults —
+/// each with one warning.
+pub fn extract_volumetric_spots(
+    lights: Extract<
+        Query<(
+            Entity,
+            &SpotLight,
+            &GlobalTransform,
+            &VolumetricSpot,
+            Option<&ViewVisibility>,
+        )>,
+    >,
+    mut spots: ResMut<ExtractedVolumetricSpots>,
+    mut warned: ResMut<WarnedOnce>,
+) {
+    spots.0.clear();
+    for (entity, light, transform, volumetric, visibility) in &lights {
+        if visibility.is_some_and(|v| !v.get()) || light.intensity <= 0.0 {
+            continue;
+        }
+        let max_outer = 89f32.to_radians();
+        let outer = light.outer_angle;
+        if !(outer > 0.0) || !light.intensity.is_finite() || !light.range.is_finite() {
+            warned.warn(format!("volumetric spot {entity}"), || {
+                format!(
+                    "spot light {entity}: outer angle {outer}, intensity {} or range {} cannot \
+                     light a medium; its volumetric light is off",
+                    light.intensity, light.range
+                )
+            });
+            continue;
+        }
+        let outer = if outer >= max_outer {
+            warned.warn(format!("volumetric spot angle {entity}"), || {
+                format!(
+                    "spot light {entity}: an outer angle of {:.1}° is not a cone; its \
+                     volumetric light uses 89°",
+                    outer.to_degrees()
+                )
+            });
+            max_outer
+        } else {
+            outer
+        };
+        let inner = if light.inner_angle.is_finite() {
+            light.inner_angle.clamp(0.0, outer)
+        } else {
+            0.0
+        };
+        let (scale, bad_scale) = finite_at_least(volumetric.intensity_scale, 0.0, 1.0);
+        let samples = volumetric.samples.clamp(1, 64);
+        if bad_scale || samples != volumetric.samples {
+            warned.warn(format!("volumetric spot settings {entity}"), || {
+                format!(
+                    "spot light {entity}: VolumetricSpot {volumetric:?} out of range; using \
+                     intensity_scale {scale}, samples {samples}"
+                )
+            });
+        }
+        if spots.0.len() == MAX_VOLUMETRIC_SPOTS {
+            warned.warn("volumetric spot count", || {
+                format!("more than {MAX_VOLUMETRIC_SPOTS} spots have VolumetricSpot; the rest are skipped")
+            });
+            break;
+        }
+        // As Bevy lights surfaces (`render/light.rs`): candela = lumens / 4π, and the spot
+        // fall-off saturate(cos ψ · scale + offset)².
+        let candela = light.intensity / (4.0 * std::f32::consts::PI) * scale;
+        let color = light.color.to_linear().to_vec3() * candela;
+        let cos_outer = outer.cos();
+        let spot_scale = 1.0 / (inner.cos() - cos_outer).max(1e-4);
+        spots.0.push(GpuVolumetricSpot {
+            position_range: transform.translation().extend(light.range.max(0.0)),
+            direction_samples: transform.forward().as_vec3().extend(samples as f32),
+            color: color.extend(0.0),
+            cone: Vec4::new(cos_outer, spot_scale, -cos_outer * spot_scale, 0.0),
+        });
+    }
+}
+
+pub fn prepare_volumetric_uniforms(
+    mut commands: Commands,
+    mut uniforms: ResMut<VolumetricUniforms>,
+    spots: Res<ExtractedVolumetricSpots>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    views: Query<(Entity, &ExtractedVolumetricMedium)>,
+) {
+    let Some(mut writer) = uniforms.0.get_writer(views.iter().len(), &device, &queue) else {
+        return;
+    };
+    let mut gpu_spots = [GpuVolumetricSpot::default(); MAX_VOLUMETRIC_SPOTS];
+    gpu_spots[..spots.0.len()].copy_from_slice(&spots.0);
+    for (entity, medium) in &views {
+        let m = medium.0;
+        let offset = writer.write(&VolumetricUniform {
+            medium: Vec4::new(m.scattering, m.absorption, m.asymmetry, spots.0.len() as f32),
+            spots: gpu_spots,
+        });
+        commands
+            .entity(entity)
+            .insert(ViewVolumetricUniformOffset(offset));
+    }
+}
+
+/// Layout and shader of the volumetric pass.
+#[derive(Resource)]
+pub struct VolumetricSpotsPipeline {
+    /// View, volumetric uniform, prepass depth.
+    pub layout: BindGroupLayoutDescriptor,
+    fullscreen: FullscreenShader,
+    shader: Handle<Shader>,
+}
+
+pub fn init_volumetric_pipeline(
+    mut commands: Commands,
+    asset_server: Res<AssetServer>,
+    fullscreen: Res<FullscreenShader>,
+) {
+    let layout = BindGroupLayoutDescriptor::new(
+        "volumetric_spots_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::FRAGMENT,
+            (
+                uniform_buffer::<ViewUniform>(true),
+                uniform_buffer::<VolumetricUniform>(true),
+                texture_depth_2d(),
+            ),
+        ),
+    );
+    commands.insert_resource(VolumetricSpotsPipeline {
+        layout,
+        fullscreen: fullscreen.clone(),
+        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "spots.wgsl"),
+    });
+}
+
+impl SpecializedRenderPipeline for VolumetricSpotsPipeline {
+    type Key = TextureFormat;
+
+    fn specialize(&self, format: TextureFormat) -> RenderPipelineDescriptor {
+        RenderPipelineDescriptor {
+            label: Some("volumetric_spots_pipeline".into()),
+            layout: vec![self.layout.clone()],
+            vertex: self.fullscreen.to_vertex_state(),
+            fragment: Some(FragmentState {
+                shader: self.shader.clone(),
+                entry_point: Some("fragment".into()),
+                targets: vec![Some(ColorTargetState {
+                    format,
+                    // In-scatter + what the surface sends × its transmittance (the shader's
+                    // alpha): one blend, L + T · L_surface.
+                    blend: Some(BlendState {
+                        color: BlendComponent {
+                            src_factor: BlendFactor::One,
+                            dst_factor: BlendFactor::SrcAlpha,
+                            operation: BlendOperation::Add,
+                        },
+                        alpha: BlendComponent {
+                            src_factor: BlendFactor::Zero,
+                            dst_factor: BlendFactor::One,
+                            operation: BlendOperation::Add,
+                        },
+                    }),
+                    write_mask: ColorWrites::ALL,
+                })],
+                ..default()
+            }),
+            ..default()
+        }
+    }
+}
+
+/// The volumetric pipeline of a view (for its target format).
+#[derive(Component)]
+pub struct ViewVolumetricPipeline(pub CachedRenderPipelineId);
+
+pub fn prepare_volumetric_pipelines(
+    mut commands: Commands,
+    pipeline_cache: Res<PipelineCache>,
+    mut pipelines: ResMut<SpecializedRenderPipelines<VolumetricSpotsPipeline>>,
+    pipeline: Res<VolumetricSpotsPipeline>,
+    views: Query<(Entity, &ViewTarget), With<ExtractedVolumetricMedium>>,
+) {
+    for (entity, target) in &views {
+        let id = pipelines.specialize(&pipeline_cache, &pipeline, target.main_texture_format());
+        commands.entity(entity).insert(ViewVolumetricPipeline(id));
+    }
+}
+
+/// Core3d system between the opaque and transparent passes: adds the in-scattered light of
+/// every volumetric spot to the view, timed as `volumetric/spots`; nothing without spots.
+#[allow(clippy::too_many_arguments)]
+pub fn volumetric_spots_pass(
+    view: ViewQuery<(
+        &ViewTarget,
+        &ViewPrepassTextures,
+        &ViewVolumetricPipeline,
+        &ViewVolumetricUniformOffset,
+        &ViewUniformOffset,
+        &bevy::render::camera::ExtractedCamera,
+    )>,
+    spots: Res<ExtractedVolumetricSpots>,
+    pipeline: Res<VolumetricSpotsPipeline>,
+    pipeline_cache: Res<PipelineCache>,
+    uniforms: Res<VolumetricUniforms>,
+    view_uniforms: Res<ViewUniforms>,
+    mut ctx: RenderContext,
+) {
+    let (target, prepass, pipeline_id, offset, view_offset, camera) = view.into_inner();
+    if spots.0.is_empty() {
+        return;
+    }
+    let (Some(render_pipeline), Some(volumetric), Some(view_binding), Some(depth)) = (
+        pipeline_cache.get_render_pipeline(pipeline_id.0),
+        uniforms.0.binding(),
+        view_uniforms.uniforms.binding(),
+        prepass.depth_view(),
+    ) else {
+        return;
+    };
+    let bind_group = ctx.render_device().create_bind_group(
+        "volumetric_spots_bind_group",
+        &pipeline_cache.get_bind_group_layout(&pipeline.layout),
+        &BindGroupEntries::sequential((view_binding, volumetric, depth)),
+    );
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    ctx.command_encoder().push_debug_group("volumetric/spots");
+    {
+        let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+            label: Some("volumetric_spots_pass"),
+            color_attachments: &[Some(target.get_color_attachment())],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        let span = diagnostics.pass_span(&mut pass, "volumetric/spots");
+        if let Some(viewport) = camera.viewport.as_ref() {
+            pass.set_camera_viewport(viewport);
+        }
+        pass.set_render_pipeline(render_pipeline);
+        pass.set_bind_group(0, &bind_group, &[view_offset.offset, offset.0]);
+        pass.draw(0..3, 0..1);
+        span.end(&mut pass);
+    }
+    ctx.command_encoder().pop_debug_group();
+}

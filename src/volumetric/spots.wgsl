@@ -1,0 +1,160 @@
+// Volumetric spot lights (seed 004): per pixel, the view ray from the camera to the depth
+// buffer, clipped to each spot's cone and range, and its single scattering integrated at equal
+// angles around the light: t = t_c + h tan γ, for which dt / |x − p|² = dγ / h (no 1/d² spike).
+// Output: the in-scattered radiance (added) and the transmittance to the surface (which
+// multiplies what the surface sends). Mirrors `volumetric::reference::estimate` with
+// `Sampling::EqualAngle`.
+
+#import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
+#import bevy_render::view::View
+
+struct Spot {
+    position_range: vec4<f32>,
+    direction_samples: vec4<f32>,
+    color: vec4<f32>,
+    // cos(outer), Bevy's spot scale and offset.
+    cone: vec4<f32>,
+}
+
+struct Volumetric {
+    // σs, σa, g, number of spots.
+    medium: vec4<f32>,
+    spots: array<Spot, 64>,
+}
+
+@group(0) @binding(0) var<uniform> view: View;
+@group(0) @binding(1) var<uniform> volumetric: Volumetric;
+@group(0) @binding(2) var depth: texture_depth_2d;
+
+const PI: f32 = 3.141592653589793;
+// Where a ray without a surface stops: the range sphere clips it first.
+const NO_SURFACE: f32 = 1.0e30;
+
+// Henyey–Greenstein phase of the angle between the light's travel and the scattered light's.
+fn phase(cos_theta: f32, g: f32) -> f32 {
+    return (1.0 - g * g) / (4.0 * PI * pow(max(1.0 + g * g - 2.0 * g * cos_theta, 1e-6), 1.5));
+}
+
+// Whether x lies inside the cone (its forward half) and the range of the spot.
+fn inside(spot: Spot, x: vec3<f32>) -> bool {
+    let w = x - spot.position_range.xyz;
+    return dot(w, spot.direction_samples.xyz) >= spot.cone.x * length(w)
+        && dot(w, w) < spot.position_range.w * spot.position_range.w;
+}
+
+// The part of [t_a, t_b] of the ray inside the spot's cone and range (one interval: both are
+// convex); x > y where it has none.
+fn clip_to_light(spot: Spot, o: vec3<f32>, d: vec3<f32>, t_a: f32, t_b: f32) -> vec2<f32> {
+    let p = spot.position_range.xyz;
+    let w0 = o - p;
+    // Range sphere.
+    let b = dot(d, w0);
+    let disc_s = b * b - (dot(w0, w0) - spot.position_range.w * spot.position_range.w);
+    if disc_s <= 0.0 {
+        return vec2(1.0, 0.0);
+    }
+    let s = sqrt(disc_s);
+    let a0 = max(t_a, -b - s);
+    let b0 = min(t_b, -b + s);
+    if b0 <= a0 {
+        return vec2(1.0, 0.0);
+    }
+    // Cone: (w·u)² = cos² |w|², a quadratic in t; its roots split [a0, b0] into at most three
+    // pieces, of which the inside ones are contiguous.
+    let u = spot.direction_samples.xyz;
+    let c2 = spot.cone.x * spot.cone.x;
+    let du = dot(d, u);
+    let wu = dot(w0, u);
+    let qa = du * du - c2;
+    let qb = 2.0 * (du * wu - c2 * dot(d, w0));
+    let qc = wu * wu - c2 * dot(w0, w0);
+    var r = vec2(a0, a0);
+    if abs(qa) > 1e-7 {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let q = sqrt(disc);
+            let r1 = (-qb - q) / (2.0 * qa);
+            let r2 = (-qb + q) / (2.0 * qa);
+            r = clamp(vec2(min(r1, r2), max(r1, r2)), vec2(a0), vec2(b0));
+        }
+    } else if abs(qb) > 1e-7 {
+        r = vec2(clamp(-qc / qb, a0, b0));
+    }
+    let cuts = array<f32, 4>(a0, r.x, r.y, b0);
+    var first = 1.0;
+    var last = 0.0;
+    var found = false;
+    for (var i = 0u; i < 3u; i++) {
+        let lo = cuts[i];
+        let hi = cuts[i + 1u];
+        if hi > lo && inside(spot, o + d * (0.5 * (lo + hi))) {
+            if !found {
+                first = lo;
+                found = true;
+            }
+            last = hi;
+        }
+    }
+    return vec2(first, last);
+}
+
+// In-scattered radiance of one spot along the ray over [t_a, t_b].
+fn in_scattered(spot: Spot, o: vec3<f32>, d: vec3<f32>, t_a: f32, t_b: f32) -> vec3<f32> {
+    let span = clip_to_light(spot, o, d, t_a, t_b);
+    if span.y <= span.x {
+        return vec3(0.0);
+    }
+    let p = spot.position_range.xyz;
+    let t_c = dot(p - o, d);
+    let h = max(length(p - o - d * t_c), 1e-5);
+    let g_a = atan((span.x - t_c) / h);
+    let g_b = atan((span.y - t_c) / h);
+    let n = max(u32(spot.direction_samples.w), 1u);
+    let step = (g_b - g_a) / f32(n);
+    let sigma_s = volumetric.medium.x;
+    let sigma_t = volumetric.medium.x + volumetric.medium.y;
+    let range2 = spot.position_range.w * spot.position_range.w;
+    var sum = 0.0;
+    for (var i = 0u; i < n; i++) {
+        let gamma = g_a + (f32(i) + 0.5) * step;
+        let t = t_c + h * tan(gamma);
+        let v = o + d * t - p;
+        let dist = length(v);
+        let l = v / dist;
+        // Bevy's spot fall-off and range window (`pbr_lighting.wgsl`).
+        let a = saturate(dot(l, spot.direction_samples.xyz) * spot.cone.y + spot.cone.z);
+        let f = dist * dist / range2;
+        let window = saturate(1.0 - f * f);
+        let w = a * a * window * window;
+        sum += w * phase(-dot(l, d), volumetric.medium.z) * exp(-sigma_t * (t + dist));
+    }
+    return spot.color.rgb * (sigma_s / h * sum * step);
+}
+
+@fragment
+fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    let pixel = vec2<i32>(floor(in.position.xy));
+    let ndc_depth = textureLoad(depth, pixel, 0);
+    let ndc = (in.position.xy - view.viewport.xy) / view.viewport.zw * vec2(2.0, -2.0) + vec2(-1.0, 1.0);
+    let near = view.world_from_clip * vec4(ndc, 1.0, 1.0);
+    let near_point = near.xyz / near.w;
+    // Perspective: from the camera; orthographic: from the near plane.
+    let orthographic = view.clip_from_view[3].w == 1.0;
+    let o = select(view.world_position, near_point, orthographic);
+    let d = normalize(select(near_point - view.world_position, (view.world_from_view * vec4(0.0, 0.0, -1.0, 0.0)).xyz, orthographic));
+    var t_end = NO_SURFACE;
+    if ndc_depth > 0.0 {
+        let surface = view.world_from_clip * vec4(ndc, ndc_depth, 1.0);
+        t_end = dot(surface.xyz / surface.w - o, d);
+    }
+    var radiance = vec3(0.0);
+    let count = u32(volumetric.medium.w);
+    for (var i = 0u; i < count; i++) {
+        radiance += in_scattered(volumetric.spots[i], o, d, 0.0, t_end);
+    }
+    // What the surface sends is dimmed by the medium in front of it; the sky is left as it is
+    // (the medium is taken to end before it).
+    let sigma_t = volumetric.medium.x + volumetric.medium.y;
+    let transmittance = select(1.0, exp(-sigma_t * t_end), ndc_depth > 0.0);
+    return vec4(radiance * view.exposure, transmittance);
+}

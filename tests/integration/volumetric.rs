@@ -1,0 +1,313 @@
+//! Volumetric spot lights (issue 12): the GPU pass against the exact CPU reference and its CPU
+//! mirror, and bad input.
+
+use bevy::{
+    camera::{Exposure, RenderTarget},
+    core_pipeline::tonemapping::Tonemapping,
+    light::GlobalAmbientLight,
+    math::DVec3,
+    prelude::*,
+    render::render_resource::{TextureFormat, TextureUsages},
+};
+use bevy_mesostructure::volumetric::{
+    VolumetricMedium, VolumetricSpot, VolumetricSpotsPlugin,
+    reference::{self, Medium, Sampling},
+};
+
+use crate::harness::*;
+
+const W: u32 = 64;
+const H: u32 = 48;
+const EV100: f32 = 3.0;
+
+/// The issue's reference set-up, scaled down: a spot at (0, 4, 0) aimed at (0.5, 0, 0), outer
+/// 30°, inner 20°, 20 000 lm, range 100, over a black floor; σs 0.10, σa 0.01, g 0.6; seen by
+/// a camera at `view`.
+fn spot_scene(
+    spot: SpotLight,
+    settings: VolumetricSpot,
+    view: Transform,
+) -> (App, Entity, Handle<Image>) {
+    let mut app = app_with(|app| {
+        app.add_plugins(VolumetricSpotsPlugin);
+    });
+    app.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    })
+    .insert_resource(ClearColor(Color::BLACK));
+    let black = unlit(&mut app, Color::BLACK);
+    let plane = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(Plane3d::default().mesh().size(20.0, 20.0));
+    app.world_mut().spawn((Mesh3d(plane), black));
+    app.world_mut().spawn((
+        spot,
+        settings,
+        Transform::from_xyz(0.0, 4.0, 0.0).looking_at(Vec3::new(0.5, 0.0, 0.0), Vec3::Z),
+    ));
+    let mut image = Image::new_target_texture(W, H, TextureFormat::Rgba16Float, None);
+    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+    let target = app.world_mut().resource_mut::<Assets<Image>>().add(image);
+    let camera = app
+        .world_mut()
+        .spawn((
+            Camera3d::default(),
+            RenderTarget::Image(target.clone().into()),
+            Msaa::Off,
+            Tonemapping::None,
+            bevy::camera::Hdr,
+            bevy::core_pipeline::tonemapping::DebandDither::Disabled,
+            Exposure { ev100: EV100 },
+            VolumetricMedium {
+                scattering: 0.10,
+                absorption: 0.01,
+                asymmetry: 0.6,
+            },
+            view,
+        ))
+        .id();
+    (app, camera, target)
+}
+
+fn reference_spot() -> SpotLight {
+    SpotLight {
+        intensity: 20_000.0,
+        range: 100.0,
+        outer_angle: 30f32.to_radians(),
+        inner_angle: 20f32.to_radians(),
+        shadow_maps_enabled: false,
+        ..default()
+    }
+}
+
+/// The red channel of every pixel (linear, exposure applied), row-major.
+fn red(image: &Image) -> Vec<f32> {
+    let data = image.data.as_ref().unwrap();
+    data.chunks_exact(8)
+        .map(|px| half::f16::from_le_bytes([px[0], px[1]]).to_f32())
+        .collect()
+}
+
+/// Per pixel, the reference's in-scatter and the `n`-sample estimate with `sampling` (equal
+/// angles: the CPU mirror of the pass), both times the exposure.
+fn expected(app: &mut App, camera: Entity, n: u32, sampling: Sampling) -> (Vec<f64>, Vec<f64>) {
+    let world = app.world_mut();
+    let (cam, transform) = world
+        .query::<(&Camera, &GlobalTransform)>()
+        .get(world, camera)
+        .unwrap();
+    let spot = reference::SpotLight {
+        position: DVec3::new(0.0, 4.0, 0.0),
+        direction: (DVec3::new(0.5, 0.0, 0.0) - DVec3::new(0.0, 4.0, 0.0)).normalize(),
+        intensity: 20_000.0 / (4.0 * std::f64::consts::PI),
+        inner_angle: 20f64.to_radians(),
+        outer_angle: 30f64.to_radians(),
+        range: 100.0,
+    };
+    let medium = Medium {
+        scattering: 0.10,
+        absorption: 0.01,
+        asymmetry: 0.6,
+    };
+    let exposure = Exposure { ev100: EV100 }.exposure() as f64;
+    let (mut exact, mut mirror) = (vec![], vec![]);
+    for y in 0..H {
+        for x in 0..W {
+            let ray = cam
+                .viewport_to_world(transform, Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
+                .unwrap();
+            // Bevy's ray starts on the near plane; the medium starts at the camera.
+            let o = transform.translation().as_dvec3();
+            let d = ray.direction.as_vec3().as_dvec3();
+            // The floor (y = 0, 20 × 20), or nothing.
+            let t_floor = -o.y / d.y;
+            let hit = o + d * t_floor;
+            let end = if d.y < 0.0 && hit.x.abs() <= 10.0 && hit.z.abs() <= 10.0 {
+                t_floor
+            } else {
+                1.0e30
+            };
+            let r = reference::Ray {
+                origin: o,
+                direction: d,
+                start: 0.0,
+                end,
+            };
+            exact.push(reference::in_scattered(&r, &spot, &medium, &[]) * exposure);
+            mirror.push(reference::estimate(&r, &spot, &medium, &[], sampling, n) * exposure);
+        }
+    }
+    (exact, mirror)
+}
+
+/// The pixels whose view ray passes within `degrees` of the direction to the light.
+fn tip_pixels(app: &mut App, camera: Entity, degrees: f32) -> Vec<usize> {
+    let world = app.world_mut();
+    let (cam, transform) = world
+        .query::<(&Camera, &GlobalTransform)>()
+        .get(world, camera)
+        .unwrap();
+    let to_light = (Vec3::new(0.0, 4.0, 0.0) - transform.translation()).normalize();
+    let mut out = vec![];
+    for y in 0..H {
+        for x in 0..W {
+            let ray = cam
+                .viewport_to_world(transform, Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
+                .unwrap();
+            if ray.direction.dot(to_light).acos().to_degrees() < degrees {
+                out.push((y * W + x) as usize);
+            }
+        }
+    }
+    out
+}
+
+/// Σ|a − b| / Σ b over the pixels where `b` is above 1 % of its largest value.
+fn relative_l1<A: Copy + Into<f64>>(a: &[A], b: &[f64]) -> f64 {
+    let max = b.iter().cloned().fold(0.0, f64::max);
+    let (mut num, mut den) = (0.0, 0.0);
+    for (&a, &b) in a.iter().zip(b) {
+        if b > 0.01 * max {
+            num += (a.into() - b).abs();
+            den += b;
+        }
+    }
+    num / den
+}
+
+/// The scores of one view: the GPU against the exact reference (all, and within 15° of the
+/// light), against its CPU mirror, the mirror's own error, and what equal depths would give
+/// near the tip.
+struct Scores {
+    exact: f64,
+    tip: f64,
+    tip_pixels: usize,
+    mirror: f64,
+    mirror_own: f64,
+    equal_depth_tip: f64,
+}
+
+fn scores(view: Transform) -> Scores {
+    let (mut app, camera, target) = spot_scene(reference_spot(), VolumetricSpot::default(), view);
+    run(&mut app, 3);
+    let gpu = red(&screenshot(&mut app, &target));
+    let (exact, mirror) = expected(&mut app, camera, 16, Sampling::EqualAngle);
+    let (_, equal_depth) = expected(&mut app, camera, 16, Sampling::EqualDepth);
+    let tip = tip_pixels(&mut app, camera, 15.0);
+    let pick = |v: &[f64]| tip.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+    let gpu_tip: Vec<f32> = tip.iter().map(|&i| gpu[i]).collect();
+    assert!(exact.iter().cloned().fold(0.0, f64::max) > 0.05, "the beam is visible");
+    let s = Scores {
+        exact: relative_l1(&gpu, &exact),
+        tip: relative_l1(&gpu_tip, &pick(&exact)),
+        tip_pixels: tip.len(),
+        mirror: relative_l1(&gpu, &mirror),
+        mirror_own: relative_l1(&mirror, &exact),
+        equal_depth_tip: relative_l1(&pick(&equal_depth), &pick(&exact)),
+    };
+    eprintln!(
+        "rel L1: GPU/exact {:.4} (tip {:.4}, {} px), GPU/mirror {:.4}, mirror/exact {:.4}, \
+         equal depths at the tip {:.4}",
+        s.exact, s.tip, s.tip_pixels, s.mirror, s.mirror_own, s.equal_depth_tip
+    );
+    s
+}
+
+#[test]
+fn an_unshadowed_spot_matches_the_reference_at_16_equal_angle_samples() {
+    if !gpu_or_skip() {
+        return;
+    }
+    // The issue's camera: across the room, the light in view near the top.
+    let across = scores(
+        Transform::from_xyz(0.0, 1.6, 7.0).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y),
+    );
+    // From inside the beam, looking up at the light: rays run along the cone to its tip, where
+    // equal depths miss the 1/d² spike.
+    let up_the_beam = scores(
+        Transform::from_xyz(0.45, 0.3, 0.25).looking_at(Vec3::new(0.0, 4.0, 0.0), Vec3::X),
+    );
+    // Measured on llvmpipe (across / up the beam): against the exact reference 0.0017 / 0.0010,
+    // within 15° of the light 0.0016 / 0.0009 (the issue's goals: 0.01 and 0.02); against the
+    // CPU mirror of the pass 0.0004 / 0.0003 (f32 against f64, f16 output). Margins 0.002 and
+    // 0.001. Equal depths would give 0.019 near the tip up the beam: this test fails if the
+    // pass samples so.
+    for (name, s) in [("across", &across), ("up the beam", &up_the_beam)] {
+        assert!(s.tip_pixels > 20, "{name}: the light is in view ({} px)", s.tip_pixels);
+        assert!(s.exact <= 0.0037, "{name}: GPU against the exact reference {:.4}", s.exact);
+        assert!(s.tip <= 0.0036, "{name}: near the tip {:.4}", s.tip);
+        assert!(s.mirror <= 0.0014, "{name}: GPU against its CPU mirror {:.4}", s.mirror);
+    }
+}
+
+#[test]
+fn bad_spots_and_media_warn_once_and_render() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let view = Transform::from_xyz(0.0, 1.6, 7.0).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y);
+    let (mut app, camera, image) = spot_scene(
+        SpotLight {
+            // Not a cone: narrowed to 89°.
+            outer_angle: 95f32.to_radians(),
+            inner_angle: f32::NAN,
+            ..reference_spot()
+        },
+        VolumetricSpot {
+            intensity_scale: f32::NAN,
+            samples: 0,
+        },
+        view,
+    );
+    // A spot with no cone at all: dropped.
+    app.world_mut().spawn((
+        SpotLight {
+            outer_angle: 0.0,
+            inner_angle: 0.0,
+            ..reference_spot()
+        },
+        VolumetricSpot::default(),
+        Transform::from_xyz(1.0, 3.0, 0.0).looking_at(Vec3::ZERO, Vec3::Z),
+    ));
+    app.world_mut().entity_mut(camera).insert(VolumetricMedium {
+        scattering: -1.0,
+        absorption: f32::NAN,
+        asymmetry: 2.0,
+    });
+    // A second camera with MSAA: the volumetric spots are off there, with a warning.
+    let t2 = target(&mut app, 32, 32);
+    app.world_mut().spawn((
+        Camera3d::default(),
+        RenderTarget::Image(t2.into()),
+        Camera {
+            order: 1,
+            ..default()
+        },
+        Msaa::Sample4,
+        VolumetricMedium::default(),
+        view,
+    ));
+    run(&mut app, 3);
+    let gpu = red(&screenshot(&mut app, &image));
+    assert!(gpu.iter().all(|v| v.is_finite()), "no NaN on screen");
+    let w = warnings(&app);
+    for key in [
+        "volumetric spot angle",
+        "volumetric spot settings",
+        "volumetric medium",
+        "volumetric msaa",
+    ] {
+        assert!(w.iter().any(|k| k.starts_with(key)), "a warning about {key}: {w:?}");
+    }
+    let dropped = |k: &String| {
+        k.strip_prefix("volumetric spot ")
+            .is_some_and(|rest| rest.starts_with(|c: char| c.is_ascii_digit()))
+    };
+    assert!(w.iter().any(dropped), "a warning about the spot without a cone: {w:?}");
+    // One-time: running on adds none.
+    let count = w.len();
+    run(&mut app, 2);
+    assert_eq!(warnings(&app).len(), count);
+}
