@@ -16,11 +16,14 @@
 //! and range, and its in-scatter integrated with `samples` points at **equal angles around the
 //! light** — the change of variable `t = t_c + h tan γ` of [`reference`], which cancels the 1/d²
 //! spike near the light — with extinction along the ray and from the light to each point,
-//! Bevy's angular fall-off and range window, and a Henyey–Greenstein phase function; added to
+//! Bevy's angular fall-off and range window, the spot's own shadow map (where it has one) at
+//! every point, and a Henyey–Greenstein phase function; added to
 //! the view between the opaque and transparent passes, whose surfaces it dims by the medium's
 //! transmittance in front of them (a fullscreen fragment pass, timed as `volumetric/spots`; the
-//! sky is left undimmed). **Not yet**: shadows (the spots' shadow maps), per-tile light culling,
-//! a reduced resolution, the seed's plane-slicing method and the comparison with Bevy's fog.
+//! sky is left undimmed). The pass is Bevy's deferred lighting pipeline of the view with this
+//! shader: the same mesh view bindings (lights, shadow maps, prepass depth). **Not yet**:
+//! per-tile light culling, a reduced resolution, the seed's plane-slicing method and the
+//! comparison with Bevy's fog. Use an `Hdr` camera: the in-scatter is added in linear light.
 //! [`reference`] is the exact CPU ground truth.
 
 pub mod reference;
@@ -36,7 +39,7 @@ use bevy::{
     prelude::*,
     render::{
         ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
-        render_resource::SpecializedRenderPipelines, sync_component::SyncComponentPlugin,
+        sync_component::SyncComponentPlugin,
     },
 };
 
@@ -113,8 +116,10 @@ impl Plugin for VolumetricSpotsPlugin {
         render_app
             .init_resource::<ExtractedVolumetricSpots>()
             .init_resource::<VolumetricUniforms>()
-            .init_resource::<SpecializedRenderPipelines<VolumetricSpotsPipeline>>()
-            .add_systems(RenderStartup, init_volumetric_pipeline)
+            .add_systems(
+                RenderStartup,
+                init_volumetric_pipeline.after(bevy::pbr::MeshPipelineSystems),
+            )
             .add_systems(ExtractSchedule, (extract_volumetric_cameras, extract_volumetric_spots))
             .add_systems(
                 Render,

@@ -3,7 +3,11 @@
 
 use bevy::{
     camera::Camera3d,
-    core_pipeline::{FullscreenShader, prepass::ViewPrepassTextures},
+    pbr::{
+        GlobalClusterableObjectMeta, MeshViewBindGroup, ViewKeyCache,
+        deferred::DeferredLightingLayout,
+    },
+    platform::collections::HashMap,
     prelude::*,
     render::{
         Extract,
@@ -12,7 +16,7 @@ use bevy::{
         renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
         sync_component::SyncComponent,
         sync_world::RenderEntity,
-        view::{Msaa, ViewTarget, ViewUniform, ViewUniformOffset, ViewUniforms},
+        view::{ExtractedView, Msaa, ViewTarget},
     },
 };
 
@@ -40,13 +44,14 @@ pub struct GpuVolumetricSpot {
     pub direction_samples: Vec4,
     /// Linear colour × intensity (candela) × `intensity_scale`.
     pub color: Vec4,
-    /// cos(outer angle), Bevy's spot scale and offset, unused.
+    /// cos(outer angle), Bevy's spot scale and offset, the light's index in Bevy's clustered
+    /// lights where its shadow map is sampled (−1: no shadow map).
     pub cone: Vec4,
 }
 
-/// The spots of this frame.
+/// The spots of this frame, with their render-world entities and whether they cast shadows.
 #[derive(Resource, Default)]
-pub struct ExtractedVolumetricSpots(pub Vec<GpuVolumetricSpot>);
+pub struct ExtractedVolumetricSpots(pub Vec<(GpuVolumetricSpot, Entity, bool)>);
 
 /// What the shader reads for one view: the medium and the spots.
 #[derive(Clone, Copy, ShaderType)]
@@ -131,6 +136,7 @@ pub fn extract_volumetric_spots(
     lights: Extract<
         Query<(
             Entity,
+            RenderEntity,
             &SpotLight,
             &GlobalTransform,
             &VolumetricSpot,
@@ -141,7 +147,7 @@ pub fn extract_volumetric_spots(
     mut warned: ResMut<WarnedOnce>,
 ) {
     spots.0.clear();
-    for (entity, light, transform, volumetric, visibility) in &lights {
+    for (entity, render_entity, light, transform, volumetric, visibility) in &lights {
         if visibility.is_some_and(|v| !v.get()) || light.intensity <= 0.0 {
             continue;
         }
@@ -196,19 +202,23 @@ pub fn extract_volumetric_spots(
         let color = light.color.to_linear().to_vec3() * candela;
         let cos_outer = outer.cos();
         let spot_scale = 1.0 / (inner.cos() - cos_outer).max(1e-4);
-        spots.0.push(GpuVolumetricSpot {
+        let spot = GpuVolumetricSpot {
             position_range: transform.translation().extend(light.range.max(0.0)),
             direction_samples: transform.forward().as_vec3().extend(samples as f32),
             color: color.extend(0.0),
-            cone: Vec4::new(cos_outer, spot_scale, -cos_outer * spot_scale, 0.0),
-        });
+            cone: Vec4::new(cos_outer, spot_scale, -cos_outer * spot_scale, -1.0),
+        };
+        spots.0.push((spot, render_entity, light.shadow_maps_enabled));
     }
 }
 
+/// Writes each view's uniform, with each shadowed spot's index in Bevy's clustered lights (known
+/// once Bevy has prepared its lights) for its shadow map.
 pub fn prepare_volumetric_uniforms(
     mut commands: Commands,
     mut uniforms: ResMut<VolumetricUniforms>,
     spots: Res<ExtractedVolumetricSpots>,
+    clusterables: Option<Res<GlobalClusterableObjectMeta>>,
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
     views: Query<(Entity, &ExtractedVolumetricMedium)>,
@@ -217,7 +227,16 @@ pub fn prepare_volumetric_uniforms(
         return;
     };
     let mut gpu_spots = [GpuVolumetricSpot::default(); MAX_VOLUMETRIC_SPOTS];
-    gpu_spots[..spots.0.len()].copy_from_slice(&spots.0);
+    for (gpu, (spot, entity, shadows)) in gpu_spots.iter_mut().zip(&spots.0) {
+        *gpu = *spot;
+        if let Some(index) = clusterables
+            .as_ref()
+            .filter(|_| *shadows)
+            .and_then(|c| c.entity_to_index.get(entity))
+        {
+            gpu.cone.w = *index as f32;
+        }
+    }
     for (entity, medium) in &views {
         let m = medium.0;
         let offset = writer.write(&VolumetricUniform {
@@ -230,54 +249,67 @@ pub fn prepare_volumetric_uniforms(
     }
 }
 
-/// Layout and shader of the volumetric pass.
+/// Our group 2 (the volumetric uniform), the shader, and the pipelines made so far, by view
+/// key: Bevy's deferred lighting pipeline for the view (its mesh view bindings — lights, shadow
+/// maps, prepass depth — and shader defs) with our shader, group 2 and blending.
 #[derive(Resource)]
 pub struct VolumetricSpotsPipeline {
-    /// View, volumetric uniform, prepass depth.
+    /// Group 2: the volumetric uniform.
     pub layout: BindGroupLayoutDescriptor,
-    fullscreen: FullscreenShader,
     shader: Handle<Shader>,
+    pipelines: HashMap<bevy::pbr::MeshPipelineKey, CachedRenderPipelineId>,
 }
 
-pub fn init_volumetric_pipeline(
-    mut commands: Commands,
-    asset_server: Res<AssetServer>,
-    fullscreen: Res<FullscreenShader>,
-) {
+pub fn init_volumetric_pipeline(mut commands: Commands, asset_server: Res<AssetServer>) {
     let layout = BindGroupLayoutDescriptor::new(
         "volumetric_spots_layout",
-        &BindGroupLayoutEntries::sequential(
+        &BindGroupLayoutEntries::single(
             ShaderStages::FRAGMENT,
-            (
-                uniform_buffer::<ViewUniform>(true),
-                uniform_buffer::<VolumetricUniform>(true),
-                texture_depth_2d(),
-            ),
+            uniform_buffer::<VolumetricUniform>(true),
         ),
     );
     commands.insert_resource(VolumetricSpotsPipeline {
         layout,
-        fullscreen: fullscreen.clone(),
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "spots.wgsl"),
+        pipelines: HashMap::default(),
     });
 }
 
-impl SpecializedRenderPipeline for VolumetricSpotsPipeline {
-    type Key = TextureFormat;
+/// The volumetric pipeline of a view.
+#[derive(Component)]
+pub struct ViewVolumetricPipeline(pub CachedRenderPipelineId);
 
-    fn specialize(&self, format: TextureFormat) -> RenderPipelineDescriptor {
-        RenderPipelineDescriptor {
-            label: Some("volumetric_spots_pipeline".into()),
-            layout: vec![self.layout.clone()],
-            vertex: self.fullscreen.to_vertex_state(),
-            fragment: Some(FragmentState {
-                shader: self.shader.clone(),
-                entry_point: Some("fragment".into()),
-                targets: vec![Some(ColorTargetState {
-                    format,
+pub fn prepare_volumetric_pipelines(
+    mut commands: Commands,
+    pipeline_cache: Res<PipelineCache>,
+    view_key_cache: Res<ViewKeyCache>,
+    deferred: Option<Res<DeferredLightingLayout>>,
+    mut volumetric: ResMut<VolumetricSpotsPipeline>,
+    views: Query<(Entity, &ExtractedView), With<ExtractedVolumetricMedium>>,
+) {
+    let Some(deferred) = deferred else {
+        return;
+    };
+    let volumetric = volumetric.as_mut();
+    for (entity, view) in &views {
+        let Some(&key) = view_key_cache.get(&view.retained_view_entity) else {
+            continue;
+        };
+        let id = *volumetric.pipelines.entry(key).or_insert_with(|| {
+            let mut descriptor = deferred.specialize(key);
+            descriptor.label = Some("volumetric_spots_pipeline".into());
+            descriptor.layout[2] = volumetric.layout.clone();
+            descriptor.vertex.shader = volumetric.shader.clone();
+            descriptor.vertex.entry_point = Some("vertex".into());
+            // Every pixel, whatever lies there: no id-depth test.
+            descriptor.depth_stencil = None;
+            if let Some(fragment) = descriptor.fragment.as_mut() {
+                fragment.shader = volumetric.shader.clone();
+                fragment.entry_point = Some("fragment".into());
+                for target in fragment.targets.iter_mut().flatten() {
                     // In-scatter + what the surface sends × its transmittance (the shader's
                     // alpha): one blend, L + T · L_surface.
-                    blend: Some(BlendState {
+                    target.blend = Some(BlendState {
                         color: BlendComponent {
                             src_factor: BlendFactor::One,
                             dst_factor: BlendFactor::SrcAlpha,
@@ -288,68 +320,45 @@ impl SpecializedRenderPipeline for VolumetricSpotsPipeline {
                             dst_factor: BlendFactor::One,
                             operation: BlendOperation::Add,
                         },
-                    }),
-                    write_mask: ColorWrites::ALL,
-                })],
-                ..default()
-            }),
-            ..default()
-        }
-    }
-}
-
-/// The volumetric pipeline of a view (for its target format).
-#[derive(Component)]
-pub struct ViewVolumetricPipeline(pub CachedRenderPipelineId);
-
-pub fn prepare_volumetric_pipelines(
-    mut commands: Commands,
-    pipeline_cache: Res<PipelineCache>,
-    mut pipelines: ResMut<SpecializedRenderPipelines<VolumetricSpotsPipeline>>,
-    pipeline: Res<VolumetricSpotsPipeline>,
-    views: Query<(Entity, &ViewTarget), With<ExtractedVolumetricMedium>>,
-) {
-    for (entity, target) in &views {
-        let id = pipelines.specialize(&pipeline_cache, &pipeline, target.main_texture_format());
+                    });
+                }
+            }
+            pipeline_cache.queue_render_pipeline(descriptor)
+        });
         commands.entity(entity).insert(ViewVolumetricPipeline(id));
     }
 }
 
 /// Core3d system between the opaque and transparent passes: adds the in-scattered light of
 /// every volumetric spot to the view, timed as `volumetric/spots`; nothing without spots.
-#[allow(clippy::too_many_arguments)]
 pub fn volumetric_spots_pass(
     view: ViewQuery<(
         &ViewTarget,
-        &ViewPrepassTextures,
+        &MeshViewBindGroup,
         &ViewVolumetricPipeline,
         &ViewVolumetricUniformOffset,
-        &ViewUniformOffset,
         &bevy::render::camera::ExtractedCamera,
     )>,
     spots: Res<ExtractedVolumetricSpots>,
     pipeline: Res<VolumetricSpotsPipeline>,
     pipeline_cache: Res<PipelineCache>,
     uniforms: Res<VolumetricUniforms>,
-    view_uniforms: Res<ViewUniforms>,
     mut ctx: RenderContext,
 ) {
-    let (target, prepass, pipeline_id, offset, view_offset, camera) = view.into_inner();
+    let (target, mesh_view, pipeline_id, offset, camera) = view.into_inner();
     if spots.0.is_empty() {
         return;
     }
-    let (Some(render_pipeline), Some(volumetric), Some(view_binding), Some(depth)) = (
+    let (Some(render_pipeline), Some(volumetric)) = (
         pipeline_cache.get_render_pipeline(pipeline_id.0),
         uniforms.0.binding(),
-        view_uniforms.uniforms.binding(),
-        prepass.depth_view(),
     ) else {
         return;
     };
     let bind_group = ctx.render_device().create_bind_group(
         "volumetric_spots_bind_group",
         &pipeline_cache.get_bind_group_layout(&pipeline.layout),
-        &BindGroupEntries::sequential((view_binding, volumetric, depth)),
+        &BindGroupEntries::single(volumetric),
     );
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
@@ -368,7 +377,9 @@ pub fn volumetric_spots_pass(
             pass.set_camera_viewport(viewport);
         }
         pass.set_render_pipeline(render_pipeline);
-        pass.set_bind_group(0, &bind_group, &[view_offset.offset, offset.0]);
+        pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
+        pass.set_bind_group(1, &mesh_view.binding_array, &[]);
+        pass.set_bind_group(2, &bind_group, &[offset.0]);
         pass.draw(0..3, 0..1);
         span.end(&mut pass);
     }

@@ -5,14 +5,19 @@
 // multiplies what the surface sends). Mirrors `volumetric::reference::estimate` with
 // `Sampling::EqualAngle`.
 
-#import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
-#import bevy_render::view::View
+#import bevy_pbr::{
+    mesh_view_bindings::{view, clustered_lights},
+    mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT,
+    prepass_utils,
+    shadows,
+}
 
 struct Spot {
     position_range: vec4<f32>,
     direction_samples: vec4<f32>,
     color: vec4<f32>,
-    // cos(outer), Bevy's spot scale and offset.
+    // cos(outer), Bevy's spot scale and offset, the light's index in Bevy's clustered lights
+    // (its shadow map; −1: none).
     cone: vec4<f32>,
 }
 
@@ -22,9 +27,7 @@ struct Volumetric {
     spots: array<Spot, 64>,
 }
 
-@group(0) @binding(0) var<uniform> view: View;
-@group(0) @binding(1) var<uniform> volumetric: Volumetric;
-@group(0) @binding(2) var depth: texture_depth_2d;
+@group(2) @binding(0) var<uniform> volumetric: Volumetric;
 
 const PI: f32 = 3.141592653589793;
 // Where a ray without a surface stops: the range sphere clips it first.
@@ -98,8 +101,29 @@ fn clip_to_light(spot: Spot, o: vec3<f32>, d: vec3<f32>, t_a: f32, t_b: f32) -> 
     return vec2(first, last);
 }
 
+// Visibility of the spot from x through its shadow map (Bevy's own lookup and filtering, the
+// direction to the light standing for the surface normal of its normal bias).
+fn spot_visibility(spot: Spot, x: vec3<f32>, l: vec3<f32>, frag_coord: vec2<f32>) -> f32 {
+    if spot.cone.w < 0.0 {
+        return 1.0;
+    }
+    let id = u32(spot.cone.w);
+    let light = &clustered_lights.data[id];
+    if ((*light).flags & POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
+        return 1.0;
+    }
+    return shadows::fetch_spot_shadow(id, vec4(x, 1.0), -l, (*light).shadow_map_near_z, frag_coord);
+}
+
 // In-scattered radiance of one spot along the ray over [t_a, t_b].
-fn in_scattered(spot: Spot, o: vec3<f32>, d: vec3<f32>, t_a: f32, t_b: f32) -> vec3<f32> {
+fn in_scattered(
+    spot: Spot,
+    o: vec3<f32>,
+    d: vec3<f32>,
+    t_a: f32,
+    t_b: f32,
+    frag_coord: vec2<f32>,
+) -> vec3<f32> {
     let span = clip_to_light(spot, o, d, t_a, t_b);
     if span.y <= span.x {
         return vec3(0.0);
@@ -126,15 +150,28 @@ fn in_scattered(spot: Spot, o: vec3<f32>, d: vec3<f32>, t_a: f32, t_b: f32) -> v
         let f = dist * dist / range2;
         let window = saturate(1.0 - f * f);
         let w = a * a * window * window;
-        sum += w * phase(-dot(l, d), volumetric.medium.z) * exp(-sigma_t * (t + dist));
+        if w <= 0.0 {
+            continue;
+        }
+        let visible = spot_visibility(spot, p + v, l, frag_coord);
+        sum += w * visible * phase(-dot(l, d), volumetric.medium.z) * exp(-sigma_t * (t + dist));
     }
     return spot.color.rgb * (sigma_s / h * sum * step);
 }
 
+struct FullscreenVertexOutput {
+    @builtin(position) position: vec4<f32>,
+}
+
+@vertex
+fn vertex(@builtin(vertex_index) vertex_index: u32) -> FullscreenVertexOutput {
+    let uv = vec2<f32>(f32(vertex_index >> 1u), f32(vertex_index & 1u)) * 2.0;
+    return FullscreenVertexOutput(vec4(uv * vec2(2.0, -2.0) + vec2(-1.0, 1.0), 0.0, 1.0));
+}
+
 @fragment
 fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    let pixel = vec2<i32>(floor(in.position.xy));
-    let ndc_depth = textureLoad(depth, pixel, 0);
+    let ndc_depth = prepass_utils::prepass_depth(in.position, 0u);
     let ndc = (in.position.xy - view.viewport.xy) / view.viewport.zw * vec2(2.0, -2.0) + vec2(-1.0, 1.0);
     let near = view.world_from_clip * vec4(ndc, 1.0, 1.0);
     let near_point = near.xyz / near.w;
@@ -150,7 +187,7 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     var radiance = vec3(0.0);
     let count = u32(volumetric.medium.w);
     for (var i = 0u; i < count; i++) {
-        radiance += in_scattered(volumetric.spots[i], o, d, 0.0, t_end);
+        radiance += in_scattered(volumetric.spots[i], o, d, 0.0, t_end, in.position.xy);
     }
     // What the surface sends is dimmed by the medium in front of it; the sky is left as it is
     // (the medium is taken to end before it).

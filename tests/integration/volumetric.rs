@@ -28,6 +28,17 @@ fn spot_scene(
     settings: VolumetricSpot,
     view: Transform,
 ) -> (App, Entity, Handle<Image>) {
+    spot_scene_with(spot, settings, view, false)
+}
+
+/// [`spot_scene`], with the reference set-up's 1 m cube at (0, 2.5, 0) when `cube` (black; it
+/// casts the spot's shadow).
+fn spot_scene_with(
+    spot: SpotLight,
+    settings: VolumetricSpot,
+    view: Transform,
+    cube: bool,
+) -> (App, Entity, Handle<Image>) {
     let mut app = app_with(|app| {
         app.add_plugins(VolumetricSpotsPlugin);
     });
@@ -41,7 +52,15 @@ fn spot_scene(
         .world_mut()
         .resource_mut::<Assets<Mesh>>()
         .add(Plane3d::default().mesh().size(20.0, 20.0));
-    app.world_mut().spawn((Mesh3d(plane), black));
+    app.world_mut().spawn((Mesh3d(plane), black.clone()));
+    if cube {
+        let mesh = app
+            .world_mut()
+            .resource_mut::<Assets<Mesh>>()
+            .add(Cuboid::new(1.0, 1.0, 1.0));
+        app.world_mut()
+            .spawn((Mesh3d(mesh), black, Transform::from_xyz(0.0, 2.5, 0.0)));
+    }
     app.world_mut().spawn((
         spot,
         settings,
@@ -93,6 +112,17 @@ fn red(image: &Image) -> Vec<f32> {
 /// Per pixel, the reference's in-scatter and the `n`-sample estimate with `sampling` (equal
 /// angles: the CPU mirror of the pass), both times the exposure.
 fn expected(app: &mut App, camera: Entity, n: u32, sampling: Sampling) -> (Vec<f64>, Vec<f64>) {
+    expected_with(app, camera, n, sampling, &[])
+}
+
+/// [`expected`], with `occluders` (which also stop the view rays).
+fn expected_with(
+    app: &mut App,
+    camera: Entity,
+    n: u32,
+    sampling: Sampling,
+    occluders: &[reference::Occluder],
+) -> (Vec<f64>, Vec<f64>) {
     let world = app.world_mut();
     let (cam, transform) = world
         .query::<(&Camera, &GlobalTransform)>()
@@ -124,22 +154,38 @@ fn expected(app: &mut App, camera: Entity, n: u32, sampling: Sampling) -> (Vec<f
             // The floor (y = 0, 20 × 20), or nothing.
             let t_floor = -o.y / d.y;
             let hit = o + d * t_floor;
-            let end = if d.y < 0.0 && hit.x.abs() <= 10.0 && hit.z.abs() <= 10.0 {
+            let mut end = if d.y < 0.0 && hit.x.abs() <= 10.0 && hit.z.abs() <= 10.0 {
                 t_floor
             } else {
                 1.0e30
             };
+            for box_ in occluders {
+                if let Some(t) = entry(o, d, box_) {
+                    end = end.min(t);
+                }
+            }
             let r = reference::Ray {
                 origin: o,
                 direction: d,
                 start: 0.0,
                 end,
             };
-            exact.push(reference::in_scattered(&r, &spot, &medium, &[]) * exposure);
-            mirror.push(reference::estimate(&r, &spot, &medium, &[], sampling, n) * exposure);
+            exact.push(reference::in_scattered(&r, &spot, &medium, occluders) * exposure);
+            mirror.push(reference::estimate(&r, &spot, &medium, occluders, sampling, n) * exposure);
         }
     }
     (exact, mirror)
+}
+
+/// Where the ray from `o` along `d` enters the box, if it does (slab test).
+fn entry(o: DVec3, d: DVec3, b: &reference::Occluder) -> Option<f64> {
+    let (mut near, mut far) = (0.0f64, f64::INFINITY);
+    for axis in 0..3 {
+        let (t0, t1) = ((b.min[axis] - o[axis]) / d[axis], (b.max[axis] - o[axis]) / d[axis]);
+        near = near.max(t0.min(t1));
+        far = far.min(t0.max(t1));
+    }
+    (near <= far).then_some(near)
 }
 
 /// The pixels whose view ray passes within `degrees` of the direction to the light.
@@ -310,4 +356,40 @@ fn bad_spots_and_media_warn_once_and_render() {
     let count = w.len();
     run(&mut app, 2);
     assert_eq!(warnings(&app).len(), count);
+}
+
+#[test]
+fn a_box_casts_a_shaft_through_the_beam() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let view = Transform::from_xyz(0.0, 1.6, 7.0).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y);
+    let spot = SpotLight {
+        shadow_maps_enabled: true,
+        ..reference_spot()
+    };
+    let (mut app, camera, target) = spot_scene_with(spot, VolumetricSpot::default(), view, true);
+    run(&mut app, 3);
+    let gpu = red(&screenshot(&mut app, &target));
+    let cube = reference::Occluder {
+        min: DVec3::new(-0.5, 2.0, -0.5),
+        max: DVec3::new(0.5, 3.0, 0.5),
+    };
+    let (shadowed, mirror) = expected_with(&mut app, camera, 16, Sampling::EqualAngle, &[cube]);
+    // The same rays (stopped by the cube) without its shadow: how much the shaft takes.
+    let (open, _) = expected_with(&mut app, camera, 16, Sampling::EqualAngle, &[]);
+    let error = relative_l1(&gpu, &shadowed);
+    let mirror_error = relative_l1(&mirror, &shadowed);
+    let taken = 1.0 - shadowed.iter().sum::<f64>() / open.iter().sum::<f64>();
+    let gpu_taken = 1.0 - gpu.iter().map(|&v| v as f64).sum::<f64>() / open.iter().sum::<f64>();
+    eprintln!(
+        "shadowed rel L1: GPU/exact {error:.4}, mirror/exact {mirror_error:.4}; the shaft \
+         takes {taken:.4} of the in-scatter (GPU {gpu_taken:.4})"
+    );
+    // Measured on llvmpipe: 0.0023 against the exact reference (the issue's goal for shadowed
+    // spots: 0.03; the 16 samples' own error is 0.0025), the shaft taking 0.6357 of the
+    // in-scatter against the reference's 0.6358 (Bevy's spot shadow map, 1024², read at every
+    // sample). Margins 0.002 and 0.01.
+    assert!(error <= 0.0043, "GPU against the exact shadowed reference: {error:.4}");
+    assert!((gpu_taken - taken).abs() <= 0.01, "the shaft takes {gpu_taken:.4}, not {taken:.4}");
 }
