@@ -57,3 +57,8 @@ if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ]; then
   run deforming -- --frames 20 --view none --out "$out/window"
   cp "$out/window/morph_none.png" docs/images/deforming_window.png
 fi
+
+# Volumetric spots: the dark room with and without the haze.
+run volumetric_spots -- --frames 20 --out "$out/volumetric" --headless
+cp "$out/volumetric/volumetric_spots.png" docs/images/volumetric_spots.png
+cp "$out/volumetric/volumetric_spots_no-haze.png" docs/images/volumetric_spots_no-haze.png

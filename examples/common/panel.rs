@@ -81,7 +81,12 @@ fn slider<T>(lo: T, hi: T) -> NumberOptions<T> {
 
 /// Average GPU (or, where the driver has no timestamps, CPU) milliseconds of a pass.
 pub fn pass_time(store: &DiagnosticsStore, pass: &str) -> Option<f64> {
-    let path = |kind| DiagnosticPath::new(format!("render/mesostructure/{pass}/elapsed_{kind}"));
+    span_time(store, &format!("mesostructure/{pass}"))
+}
+
+/// The same for any span (`volumetric/spots`).
+pub fn span_time(store: &DiagnosticsStore, span: &str) -> Option<f64> {
+    let path = |kind| DiagnosticPath::new(format!("render/{span}/elapsed_{kind}"));
     store
         .get(&path("gpu"))
         .and_then(|d| d.average())
@@ -116,6 +121,9 @@ fn panel(world: &mut World) {
                 }
             }
             ui.label(format!("  all passes: {total:.3} ms"));
+            if let Some(ms) = span_time(store, "volumetric/spots") {
+                ui.label(format!("  volumetric spots: {ms:.3} ms"));
+            }
             egui::ScrollArea::vertical().show(ui, |ui| {
                 let cameras: Vec<Entity> = world
                     .query_filtered::<Entity, With<Mesostructure>>()
@@ -148,6 +156,8 @@ fn panel(world: &mut World) {
                             }
                         });
                 }
+                edit_all::<bevy_mesostructure::volumetric::VolumetricMedium>(ui, world, "camera");
+                edit_all::<bevy_mesostructure::volumetric::VolumetricSpot>(ui, world, "spot");
                 let meshes: Vec<Entity> = world
                     .query_filtered::<Entity, With<MesostructureMaterial>>()
                     .iter(world)
@@ -167,6 +177,24 @@ fn panel(world: &mut World) {
                 }
             });
         });
+}
+
+/// A collapsible inspector for component `C` of every entity that has it.
+fn edit_all<C: Component<Mutability = bevy::ecs::component::Mutable> + Reflect + Clone>(
+    ui: &mut egui::Ui,
+    world: &mut World,
+    what: &str,
+) {
+    let entities: Vec<Entity> = world.query_filtered::<Entity, With<C>>().iter(world).collect();
+    let name = std::any::type_name::<C>().rsplit("::").next().unwrap_or("");
+    for entity in entities {
+        ui.collapsing(format!("{what} {entity}: {name}"), |ui| {
+            let mut value = world.get::<C>(entity).unwrap().clone();
+            if bevy_inspector_egui::bevy_inspector::ui_for_value(&mut value, ui, world) {
+                world.entity_mut(entity).insert(value);
+            }
+        });
+    }
 }
 
 fn keys(
@@ -217,6 +245,7 @@ pub fn print_timings(world: &World) {
     let times: Vec<String> = PASSES
         .iter()
         .filter_map(|p| pass_time(store, p).map(|ms| format!("{p} {ms:.2} ms")))
+        .chain(span_time(store, "volumetric/spots").map(|ms| format!("volumetric/spots {ms:.2} ms")))
         .collect();
     if !times.is_empty() {
         println!("average time per pass: {}", times.join(", "));
