@@ -1,0 +1,473 @@
+//! Speed against accuracy of volumetric spot lights: this crate's equal-angle pass at 4, 8,
+//! 16 and 32 samples against Bevy's `VolumetricFog` at 16, 32, 64 and 128 steps, on issue 12's
+//! reference set-up (a spot at (0, 4, 0) aimed at (0.5, 0, 0), outer 30°, inner 20°, 20 000 lm,
+//! range 100, in a 20 × 10 × 20 m fog volume of σs 0.10, σa 0.01; all surfaces black), with and
+//! without a 1 m cube casting a shaft. Each run's fog-only radiance (HDR, read back) is scored
+//! against the exact CPU reference (`volumetric::reference`), and its GPU time is what it adds
+//! to a frame (median frame GPU time with it, less the same scene without volumetrics).
+//!
+//! ```text
+//! cargo run --example volumetric_bench -- [--size WxH] [--frames N] [--g G]
+//!     [--out docs/volumetric.csv]
+//! ```
+//!
+//! CSV header: `scene,method,setting,width,height,gpu_ms,rel_l1,rmse,tip_rel_l1,adapter`
+//! (`tip_rel_l1`: the pixels whose ray passes within 15° of the light).
+
+#[path = "common/frame_timer.rs"]
+mod frame_timer;
+#[path = "common/headless.rs"]
+mod headless;
+
+use std::{
+    io::Write,
+    path::PathBuf,
+    sync::{Arc, Mutex},
+};
+
+use bevy::{
+    camera::{CameraProjection, Exposure, Hdr, RenderTarget},
+    core_pipeline::tonemapping::{DebandDither, Tonemapping},
+    light::{FogVolume, GlobalAmbientLight, VolumetricFog, VolumetricLight},
+    math::DVec3,
+    prelude::*,
+    render::{
+        render_resource::{TextureFormat, TextureUsages},
+        renderer::RenderAdapterInfo,
+        view::screenshot::{Screenshot, ScreenshotCaptured},
+    },
+};
+use bevy_mesostructure::volumetric::{
+    VolumetricMedium, VolumetricSpot, VolumetricSpotsPlugin,
+    reference::{self, Medium, Occluder},
+};
+
+const EV100: f32 = 3.0;
+const SPOT: Vec3 = Vec3::new(0.0, 4.0, 0.0);
+const EYE: Vec3 = Vec3::new(0.0, 1.6, 7.0);
+
+/// Speed against accuracy of the volumetric spots and Bevy's fog, into a CSV.
+#[derive(clap::Parser)]
+#[command(long_about = None)]
+struct Cli {
+    /// Picture size, WxH
+    #[arg(long, default_value = "256x144", value_parser = parse_size)]
+    size: UVec2,
+    /// Frames timed per run (after 5 of warm-up)
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..))]
+    frames: u32,
+    /// Henyey–Greenstein g of the medium
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    g: f32,
+    /// The CSV to write
+    #[arg(long, default_value = "docs/volumetric.csv")]
+    out: PathBuf,
+    /// The chart to draw (GPU time against relative L1, per scene)
+    #[arg(long, default_value = "docs/images/volumetric_chart.png")]
+    chart: PathBuf,
+}
+
+/// One measured run.
+struct Row {
+    scene: &'static str,
+    method: &'static str,
+    gpu_ms: f64,
+    rel_l1: f64,
+}
+
+/// Per scene, GPU time against relative L1 (log scale) of each method's settings.
+fn draw_chart(rows: &[Row], path: &PathBuf) {
+    use plotters::prelude::*;
+    plotters::style::register_font(
+        "sans-serif",
+        FontStyle::Normal,
+        epaint_default_fonts::UBUNTU_LIGHT,
+    )
+    .map_err(|_| ())
+    .expect("the font registers");
+    let (w, h) = (1200u32, 480u32);
+    let mut buffer = vec![0u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
+        root.fill(&WHITE).expect("draw");
+        for (panel, scene) in root.split_evenly((1, 2)).iter().zip(["unshadowed", "shadowed"]) {
+            let of_scene: Vec<&Row> = rows.iter().filter(|r| r.scene == scene).collect();
+            let max_x = of_scene.iter().map(|r| r.gpu_ms).fold(1e-3, f64::max) * 1.1;
+            let mut chart = ChartBuilder::on(panel)
+                .caption(format!("{scene} spot: GPU time against error"), ("sans-serif", 20))
+                .margin(15)
+                .x_label_area_size(45)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..max_x, (1e-4..10.0).log_scale())
+                .expect("draw");
+            chart
+                .configure_mesh()
+                .x_desc("GPU time added to the frame, ms")
+                .y_desc("relative L1 against the exact reference")
+                .label_style(("sans-serif", 14))
+                .draw()
+                .expect("draw");
+            for (i, method) in ["equal_angle", "bevy_fog"].into_iter().enumerate() {
+                let color = [RED, BLUE][i].to_rgba();
+                let mut points: Vec<(f64, f64)> = of_scene
+                    .iter()
+                    .filter(|r| r.method == method)
+                    .map(|r| (r.gpu_ms.max(0.0), r.rel_l1.max(1e-4)))
+                    .collect();
+                points.sort_by(|a, b| a.0.total_cmp(&b.0));
+                chart
+                    .draw_series(LineSeries::new(points.iter().copied(), color.stroke_width(2)))
+                    .expect("draw")
+                    .label(method)
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+                chart
+                    .draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                    .expect("draw");
+            }
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 14))
+                .draw()
+                .expect("draw");
+        }
+        root.present().expect("draw");
+    }
+    image::RgbImage::from_raw(w, h, buffer)
+        .expect("w × h pixels")
+        .save(path)
+        .expect("cannot write the chart");
+}
+
+fn parse_size(s: &str) -> Result<UVec2, String> {
+    let (w, h) = s
+        .split_once('x')
+        .ok_or_else(|| format!("{s:?} is not WxH"))?;
+    let parse = |v: &str| v.parse::<u32>().ok().filter(|&n| n > 0);
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok(UVec2::new(w, h)),
+        _ => Err(format!("{s:?} is not WxH with positive numbers")),
+    }
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Method {
+    /// No volumetrics: the frame time to subtract.
+    Off,
+    EqualAngle(u32),
+    BevyFog(u32),
+}
+
+/// One run: renders the scene with `method`, returns the fog-only radiance (red channel,
+/// exposure applied), the median frame GPU time, and the adapter's name.
+fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec<f32>, f64, String) {
+    let mut app = App::new();
+    app.add_plugins((
+        headless::headless_plugins().disable::<bevy::log::LogPlugin>(),
+        VolumetricSpotsPlugin,
+        frame_timer::FrameTimerPlugin,
+    ))
+    .insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    })
+    .insert_resource(ClearColor(Color::BLACK));
+    let world = app.world_mut();
+    let black = world
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::BLACK,
+            unlit: true,
+            ..default()
+        });
+    let plane = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(Plane3d::default().mesh().size(20.0, 20.0));
+    world.spawn((Mesh3d(plane), MeshMaterial3d(black.clone())));
+    if shadowed {
+        let cube = world.resource_mut::<Assets<Mesh>>().add(Cuboid::new(1.0, 1.0, 1.0));
+        world.spawn((Mesh3d(cube), MeshMaterial3d(black), Transform::from_xyz(0.0, 2.5, 0.0)));
+    }
+    let mut spot = world.spawn((
+        SpotLight {
+            intensity: 20_000.0,
+            range: 100.0,
+            outer_angle: 30f32.to_radians(),
+            inner_angle: 20f32.to_radians(),
+            // On in both scenes: Bevy 0.19.1's fog lights only spots with shadow maps (its
+            // VOLUMETRIC flag needs them); the unshadowed scene has nothing to cast a shadow.
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_translation(SPOT).looking_at(Vec3::new(0.5, 0.0, 0.0), Vec3::Z),
+    ));
+    match method {
+        Method::EqualAngle(samples) => {
+            spot.insert(VolumetricSpot {
+                samples,
+                ..default()
+            });
+        }
+        Method::BevyFog(_) => {
+            spot.insert(VolumetricLight);
+        }
+        Method::Off => {}
+    }
+    let mut image = Image::new_target_texture(size.x, size.y, TextureFormat::Rgba16Float, None);
+    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+    let target = world.resource_mut::<Assets<Image>>().add(image);
+    let mut camera = world.spawn((
+        Camera3d::default(),
+        RenderTarget::Image(target.clone().into()),
+        Hdr,
+        Msaa::Off,
+        Tonemapping::None,
+        DebandDither::Disabled,
+        Exposure { ev100: EV100 },
+        Transform::from_translation(EYE).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y),
+    ));
+    match method {
+        Method::EqualAngle(_) => {
+            camera.insert(VolumetricMedium {
+                scattering: 0.10,
+                absorption: 0.01,
+                asymmetry: g,
+            });
+        }
+        Method::BevyFog(steps) => {
+            camera.insert(VolumetricFog {
+                ambient_intensity: 0.0,
+                jitter: 0.0,
+                step_count: steps,
+                ..default()
+            });
+        }
+        Method::Off => {}
+    }
+    if let Method::BevyFog(_) = method {
+        world.spawn((
+            FogVolume {
+                density_factor: 1.0,
+                scattering: 0.10,
+                absorption: 0.01,
+                scattering_asymmetry: g,
+                ..default()
+            },
+            Transform::from_xyz(0.0, 5.0, 0.0).with_scale(Vec3::new(20.0, 10.0, 20.0)),
+        ));
+    }
+    app.finish();
+    app.cleanup();
+    for _ in 0..5 {
+        app.update();
+    }
+    app.world()
+        .resource::<frame_timer::FrameGpuTimes>()
+        .0
+        .lock()
+        .unwrap()
+        .frame_ms
+        .clear();
+    for _ in 0..frames {
+        app.update();
+    }
+    let slot: Arc<Mutex<Option<Image>>> = Arc::default();
+    let s = slot.clone();
+    app.world_mut()
+        .spawn(Screenshot::image(target))
+        .observe(move |ev: On<ScreenshotCaptured>| {
+            *s.lock().unwrap() = Some(ev.image.clone());
+        });
+    let mut shot = None;
+    for _ in 0..10 {
+        app.update();
+        if let Some(image) = slot.lock().unwrap().take() {
+            shot = Some(image);
+            break;
+        }
+    }
+    let shot = shot.expect("no screenshot after 10 frames");
+    let red = shot
+        .data
+        .as_ref()
+        .unwrap()
+        .chunks_exact(8)
+        .map(|px| half::f16::from_le_bytes([px[0], px[1]]).to_f32())
+        .collect();
+    let mut times = app
+        .world()
+        .resource::<frame_timer::FrameGpuTimes>()
+        .0
+        .lock()
+        .unwrap()
+        .frame_ms
+        .clone();
+    times.sort_by(f64::total_cmp);
+    let median = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
+    let adapter = app
+        .get_sub_app(bevy::render::RenderApp)
+        .and_then(|r| r.world().get_resource::<RenderAdapterInfo>())
+        .map_or_else(|| "unknown".into(), |info| info.name.clone());
+    (red, median, adapter)
+}
+
+/// Per pixel, the exact fog-only radiance (exposure applied) and whether the ray passes within
+/// 15° of the light.
+fn truth(size: UVec2, g: f32, shadowed: bool) -> (Vec<f64>, Vec<bool>) {
+    let transform = Transform::from_translation(EYE).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y);
+    let projection = PerspectiveProjection {
+        aspect_ratio: size.x as f32 / size.y as f32,
+        ..default()
+    };
+    let clip_from_view = projection.get_clip_from_view();
+    let world_from_clip = transform.to_matrix() * clip_from_view.inverse();
+    let spot = reference::SpotLight {
+        position: SPOT.as_dvec3(),
+        direction: (DVec3::new(0.5, 0.0, 0.0) - SPOT.as_dvec3()).normalize(),
+        intensity: 20_000.0 / (4.0 * std::f64::consts::PI),
+        inner_angle: 20f64.to_radians(),
+        outer_angle: 30f64.to_radians(),
+        range: 100.0,
+    };
+    let medium = Medium {
+        scattering: 0.10,
+        absorption: 0.01,
+        asymmetry: g as f64,
+    };
+    let cube = Occluder {
+        min: DVec3::new(-0.5, 2.0, -0.5),
+        max: DVec3::new(0.5, 3.0, 0.5),
+    };
+    let occluders: &[Occluder] = if shadowed { &[cube] } else { &[] };
+    let exposure = Exposure { ev100: EV100 }.exposure() as f64;
+    let o = EYE.as_dvec3();
+    let to_light = (SPOT - EYE).normalize();
+    let (mut values, mut tip) = (vec![], vec![]);
+    for y in 0..size.y {
+        for x in 0..size.x {
+            let ndc = Vec2::new(
+                (x as f32 + 0.5) / size.x as f32 * 2.0 - 1.0,
+                1.0 - (y as f32 + 0.5) / size.y as f32 * 2.0,
+            );
+            let p = world_from_clip * Vec4::new(ndc.x, ndc.y, 1.0, 1.0);
+            let dir = (p.truncate() / p.w - EYE).normalize();
+            let d = dir.as_dvec3();
+            let t_floor = -o.y / d.y;
+            let hit = o + d * t_floor;
+            let mut end = if d.y < 0.0 && hit.x.abs() <= 10.0 && hit.z.abs() <= 10.0 {
+                t_floor
+            } else {
+                1.0e30
+            };
+            // The fog volume's box, for Bevy's fog, ends the medium: the reference stops there
+            // too (20 × 10 × 20 about (0, 5, 0)).
+            let volume = Occluder {
+                min: DVec3::new(-10.0, 0.0, -10.0),
+                max: DVec3::new(10.0, 10.0, 10.0),
+            };
+            end = end.min(exit(o, d, &volume));
+            for b in occluders {
+                if let Some(t) = entry(o, d, b) {
+                    end = end.min(t);
+                }
+            }
+            let ray = reference::Ray {
+                origin: o,
+                direction: d,
+                start: 0.0,
+                end,
+            };
+            values.push(reference::in_scattered(&ray, &spot, &medium, occluders) * exposure);
+            tip.push(dir.dot(to_light).acos().to_degrees() < 15.0);
+        }
+    }
+    (values, tip)
+}
+
+fn entry(o: DVec3, d: DVec3, b: &Occluder) -> Option<f64> {
+    let (near, far) = slabs(o, d, b);
+    (near <= far && far > 0.0).then_some(near.max(0.0))
+}
+
+fn exit(o: DVec3, d: DVec3, b: &Occluder) -> f64 {
+    let (near, far) = slabs(o, d, b);
+    if near <= far { far.max(0.0) } else { 0.0 }
+}
+
+fn slabs(o: DVec3, d: DVec3, b: &Occluder) -> (f64, f64) {
+    let (mut near, mut far) = (f64::NEG_INFINITY, f64::INFINITY);
+    for axis in 0..3 {
+        let (t0, t1) = ((b.min[axis] - o[axis]) / d[axis], (b.max[axis] - o[axis]) / d[axis]);
+        near = near.max(t0.min(t1));
+        far = far.min(t0.max(t1));
+    }
+    (near, far)
+}
+
+/// Relative L1, RMSE (relative to the mean) and relative L1 over `mask`, on the pixels where
+/// the truth is above 1 % of its largest value.
+fn scores(values: &[f32], truth: &[f64], mask: &[bool]) -> (f64, f64, f64) {
+    let max = truth.iter().cloned().fold(0.0, f64::max);
+    let (mut l1, mut den, mut sq, mut n, mut tip_l1, mut tip_den) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for ((&v, &t), &m) in values.iter().zip(truth).zip(mask) {
+        if t <= 0.01 * max {
+            continue;
+        }
+        let e = v as f64 - t;
+        l1 += e.abs();
+        den += t;
+        sq += e * e;
+        n += 1.0;
+        if m {
+            tip_l1 += e.abs();
+            tip_den += t;
+        }
+    }
+    let mean = den / n;
+    (l1 / den, (sq / n).sqrt() / mean, tip_l1 / tip_den)
+}
+
+fn main() {
+    use clap::Parser;
+    let cli = Cli::parse();
+    let mut rows = vec!["scene,method,setting,width,height,gpu_ms,rel_l1,rmse,tip_rel_l1,adapter".to_string()];
+    let mut measured = vec![];
+    for (scene, shadowed) in [("unshadowed", false), ("shadowed", true)] {
+        let (truth, tip) = truth(cli.size, cli.g, shadowed);
+        let (_, off_ms, _) = run(cli.size, cli.frames, cli.g, shadowed, Method::Off);
+        let methods = [4, 8, 16, 32]
+            .map(|n| ("equal_angle", Method::EqualAngle(n), n))
+            .into_iter()
+            .chain([16, 32, 64, 128].map(|n| ("bevy_fog", Method::BevyFog(n), n)));
+        for (name, method, setting) in methods {
+            let (values, ms, adapter) = run(cli.size, cli.frames, cli.g, shadowed, method);
+            let (rel_l1, rmse, tip_l1) = scores(&values, &truth, &tip);
+            let ratio = values.iter().map(|&v| v as f64).sum::<f64>() / truth.iter().sum::<f64>();
+            eprintln!("{scene} {name} {setting}: mean radiance {ratio:.3} × the reference");
+            let row = format!(
+                "{scene},{name},{setting},{},{},{:.4},{rel_l1:.4},{rmse:.4},{tip_l1:.4},\"{adapter}\"",
+                cli.size.x,
+                cli.size.y,
+                ms - off_ms
+            );
+            println!("{row}");
+            rows.push(row);
+            measured.push(Row {
+                scene,
+                method: name,
+                gpu_ms: ms - off_ms,
+                rel_l1,
+            });
+        }
+    }
+    if let Some(dir) = cli.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).ok();
+    }
+    let mut file = std::fs::File::create(&cli.out)
+        .unwrap_or_else(|e| panic!("cannot write {}: {e}", cli.out.display()));
+    writeln!(file, "{}", rows.join("\n")).unwrap();
+    println!("wrote {}", cli.out.display());
+    draw_chart(&measured, &cli.chart);
+    println!("wrote {}", cli.chart.display());
+}
