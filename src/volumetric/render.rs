@@ -23,9 +23,15 @@ use bevy::{
 use super::{MAX_VOLUMETRIC_SPOTS, VolumetricMedium, VolumetricSpot};
 use crate::warn_once::WarnedOnce;
 
-/// The render world's copy of a camera's medium, sanitized.
+/// The render world's copy of a camera's medium, sanitized, and the camera's frustum (to cull
+/// the spots whose cones it does not see).
 #[derive(Component, Clone, Copy, Debug)]
-pub struct ExtractedVolumetricMedium(pub VolumetricMedium);
+pub struct ExtractedVolumetricMedium {
+    /// The medium.
+    pub medium: VolumetricMedium,
+    /// The camera's view frustum.
+    pub frustum: bevy::camera::primitives::Frustum,
+}
 
 impl SyncComponent for VolumetricMedium {
     type Target = (
@@ -49,9 +55,38 @@ pub struct GpuVolumetricSpot {
     pub cone: Vec4,
 }
 
-/// The spots of this frame, with their render-world entities and whether they cast shadows.
+/// One spot of this frame.
+#[derive(Clone, Copy, Debug)]
+pub struct ExtractedVolumetricSpot {
+    /// What the shader reads (its shadow-map index still to be filled in).
+    pub gpu: GpuVolumetricSpot,
+    /// Its render-world entity.
+    pub entity: Entity,
+    /// Whether it casts shadows.
+    pub shadows: bool,
+    /// A sphere bounding its cone out to its range: views whose frustum misses it skip it.
+    pub bounds: bevy::camera::primitives::Sphere,
+}
+
+/// The spots of this frame.
 #[derive(Resource, Default)]
-pub struct ExtractedVolumetricSpots(pub Vec<(GpuVolumetricSpot, Entity, bool)>);
+pub struct ExtractedVolumetricSpots(pub Vec<ExtractedVolumetricSpot>);
+
+/// The smallest sphere around a cone of half-angle `angle` and length `length` from `apex`
+/// along the unit `axis`: about the far disc's centre for wide cones, else through the apex and
+/// the far rim.
+pub fn cone_bounds(apex: Vec3, axis: Vec3, angle: f32, length: f32) -> bevy::camera::primitives::Sphere {
+    let (center, radius) = if angle > std::f32::consts::FRAC_PI_4 {
+        (apex + axis * length * angle.cos(), length * angle.sin())
+    } else {
+        let r = length / (2.0 * angle.cos() * angle.cos());
+        (apex + axis * r, r)
+    };
+    bevy::camera::primitives::Sphere {
+        center: center.into(),
+        radius,
+    }
+}
 
 /// What the shader reads for one view: the medium and the spots.
 #[derive(Clone, Copy, ShaderType)]
@@ -66,9 +101,14 @@ pub struct VolumetricUniform {
 #[derive(Resource, Default)]
 pub struct VolumetricUniforms(pub DynamicUniformBuffer<VolumetricUniform>);
 
-/// Offset of a view's [`VolumetricUniform`].
+/// Offset of a view's [`VolumetricUniform`], and how many spots the view sees.
 #[derive(Component, Clone, Copy)]
-pub struct ViewVolumetricUniformOffset(pub u32);
+pub struct ViewVolumetricUniformOffset {
+    /// Dynamic offset.
+    pub offset: u32,
+    /// Spots whose cones are in the view's frustum (0: the pass does not run).
+    pub spots: u32,
+}
 
 fn finite_at_least(v: f32, min: f32, default: f32) -> (f32, bool) {
     if v.is_finite() {
@@ -84,11 +124,21 @@ fn finite_at_least(v: f32, min: f32, default: f32) -> (f32, bool) {
 pub fn extract_volumetric_cameras(
     mut commands: Commands,
     cameras: Extract<
-        Query<(RenderEntity, Entity, &Camera, &VolumetricMedium, Option<&Msaa>), With<Camera3d>>,
+        Query<
+            (
+                RenderEntity,
+                Entity,
+                &Camera,
+                &VolumetricMedium,
+                Option<&Msaa>,
+                &bevy::camera::primitives::Frustum,
+            ),
+            With<Camera3d>,
+        >,
     >,
     mut warned: ResMut<WarnedOnce>,
 ) {
-    for (render_entity, entity, camera, medium, msaa) in &cameras {
+    for (render_entity, entity, camera, medium, msaa, frustum) in &cameras {
         let Ok(mut target) = commands.get_entity(render_entity) else {
             continue;
         };
@@ -121,11 +171,14 @@ pub fn extract_volumetric_cameras(
                 )
             });
         }
-        target.insert(ExtractedVolumetricMedium(VolumetricMedium {
-            scattering,
-            absorption,
-            asymmetry,
-        }));
+        target.insert(ExtractedVolumetricMedium {
+            medium: VolumetricMedium {
+                scattering,
+                absorption,
+                asymmetry,
+            },
+            frustum: *frustum,
+        });
     }
 }
 
@@ -208,7 +261,13 @@ pub fn extract_volumetric_spots(
             color: color.extend(0.0),
             cone: Vec4::new(cos_outer, spot_scale, -cos_outer * spot_scale, -1.0),
         };
-        spots.0.push((spot, render_entity, light.shadow_maps_enabled));
+        let axis = transform.forward().as_vec3();
+        spots.0.push(ExtractedVolumetricSpot {
+            gpu: spot,
+            entity: render_entity,
+            shadows: light.shadow_maps_enabled,
+            bounds: cone_bounds(transform.translation(), axis, outer, light.range.max(0.0)),
+        });
     }
 }
 
@@ -226,26 +285,34 @@ pub fn prepare_volumetric_uniforms(
     let Some(mut writer) = uniforms.0.get_writer(views.iter().len(), &device, &queue) else {
         return;
     };
-    let mut gpu_spots = [GpuVolumetricSpot::default(); MAX_VOLUMETRIC_SPOTS];
-    for (gpu, (spot, entity, shadows)) in gpu_spots.iter_mut().zip(&spots.0) {
-        *gpu = *spot;
-        if let Some(index) = clusterables
-            .as_ref()
-            .filter(|_| *shadows)
-            .and_then(|c| c.entity_to_index.get(entity))
-        {
-            gpu.cone.w = *index as f32;
+    for (entity, view) in &views {
+        // The spots whose cones this camera sees (a bounding sphere against its frustum).
+        let mut gpu_spots = [GpuVolumetricSpot::default(); MAX_VOLUMETRIC_SPOTS];
+        let mut count = 0;
+        for spot in &spots.0 {
+            if !view.frustum.intersects_sphere(&spot.bounds, false) {
+                continue;
+            }
+            let mut gpu = spot.gpu;
+            if let Some(index) = clusterables
+                .as_ref()
+                .filter(|_| spot.shadows)
+                .and_then(|c| c.entity_to_index.get(&spot.entity))
+            {
+                gpu.cone.w = *index as f32;
+            }
+            gpu_spots[count] = gpu;
+            count += 1;
         }
-    }
-    for (entity, medium) in &views {
-        let m = medium.0;
+        let m = view.medium;
         let offset = writer.write(&VolumetricUniform {
-            medium: Vec4::new(m.scattering, m.absorption, m.asymmetry, spots.0.len() as f32),
+            medium: Vec4::new(m.scattering, m.absorption, m.asymmetry, count as f32),
             spots: gpu_spots,
         });
-        commands
-            .entity(entity)
-            .insert(ViewVolumetricUniformOffset(offset));
+        commands.entity(entity).insert(ViewVolumetricUniformOffset {
+            offset,
+            spots: count as u32,
+        });
     }
 }
 
@@ -346,7 +413,8 @@ pub fn volumetric_spots_pass(
     mut ctx: RenderContext,
 ) {
     let (target, mesh_view, pipeline_id, offset, camera) = view.into_inner();
-    if spots.0.is_empty() {
+    // Nothing to add where no cone is in view.
+    if spots.0.is_empty() || offset.spots == 0 {
         return;
     }
     let (Some(render_pipeline), Some(volumetric)) = (
@@ -379,9 +447,39 @@ pub fn volumetric_spots_pass(
         pass.set_render_pipeline(render_pipeline);
         pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
         pass.set_bind_group(1, &mesh_view.binding_array, &[]);
-        pass.set_bind_group(2, &bind_group, &[offset.0]);
+        pass.set_bind_group(2, &bind_group, &[offset.offset]);
         pass.draw(0..3, 0..1);
         span.end(&mut pass);
     }
     ctx.command_encoder().pop_debug_group();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cone_bounds_hold_every_point_of_the_cone() {
+        for angle_deg in [1.0f32, 20.0, 44.0, 46.0, 70.0, 89.0] {
+            let angle = angle_deg.to_radians();
+            let (apex, axis, length) = (Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.0, -0.6, 0.8), 5.0);
+            let bounds = cone_bounds(apex, axis, angle, length);
+            let side = axis.any_orthonormal_vector();
+            let other = axis.cross(side);
+            for i in 0..=20 {
+                for j in 0..16 {
+                    // Points of the cone's surface (within the range sphere) and of its axis.
+                    let t = length * i as f32 / 20.0;
+                    let phi = j as f32 * std::f32::consts::TAU / 16.0;
+                    let dir = (axis * angle.cos()
+                        + (side * phi.cos() + other * phi.sin()) * angle.sin())
+                    .normalize();
+                    for p in [apex + dir * t, apex + axis * t] {
+                        let d = (p - Vec3::from(bounds.center)).length();
+                        assert!(d <= bounds.radius * 1.0001 + 1e-5, "{angle_deg}°: {d} > {}", bounds.radius);
+                    }
+                }
+            }
+        }
+    }
 }

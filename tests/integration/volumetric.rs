@@ -40,7 +40,10 @@ fn spot_scene_with(
     cube: bool,
 ) -> (App, Entity, Handle<Image>) {
     let mut app = app_with(|app| {
-        app.add_plugins(VolumetricSpotsPlugin);
+        app.add_plugins((
+            VolumetricSpotsPlugin,
+            bevy::render::diagnostic::RenderDiagnosticsPlugin,
+        ));
     });
     app.insert_resource(GlobalAmbientLight {
         brightness: 0.0,
@@ -392,4 +395,33 @@ fn a_box_casts_a_shaft_through_the_beam() {
     // sample). Margins 0.002 and 0.01.
     assert!(error <= 0.0043, "GPU against the exact shadowed reference: {error:.4}");
     assert!((gpu_taken - taken).abs() <= 0.01, "the shaft takes {gpu_taken:.4}, not {taken:.4}");
+}
+
+/// Whether the volumetric pass recorded its span.
+fn volumetric_pass_ran(app: &App) -> bool {
+    let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
+    let path = bevy::diagnostic::DiagnosticPath::new("render/volumetric/spots/elapsed_cpu");
+    store.get(&path).and_then(|d| d.measurement()).is_some()
+}
+
+#[test]
+fn the_pass_costs_nothing_when_no_cone_is_in_view() {
+    if !gpu_or_skip() {
+        return;
+    }
+    // A spot whose range ends at the floor: its cone's bounding sphere stays near it.
+    let short = SpotLight {
+        range: 6.0,
+        ..reference_spot()
+    };
+    // Looking away from it.
+    let away = Transform::from_xyz(0.0, 1.6, 7.0).looking_at(Vec3::new(0.0, 1.6, 20.0), Vec3::Y);
+    let (mut app, _, _) = spot_scene(short, VolumetricSpot::default(), away);
+    run(&mut app, 5);
+    assert!(!volumetric_pass_ran(&app), "the pass ran with no cone in view");
+    // Looking at it: it runs.
+    let towards = Transform::from_xyz(0.0, 1.6, 7.0).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y);
+    let (mut app, _, _) = spot_scene(short, VolumetricSpot::default(), towards);
+    run(&mut app, 5);
+    assert!(volumetric_pass_ran(&app), "the pass did not run with the cone in view");
 }
