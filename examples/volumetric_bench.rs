@@ -38,7 +38,7 @@ use bevy::{
     },
 };
 use bevy_mesostructure::volumetric::{
-    VolumetricMedium, VolumetricSpot, VolumetricSpotsPlugin,
+    VolumetricMedium, VolumetricResolution, VolumetricSpot, VolumetricSpotsPlugin,
     reference::{self, Medium, Occluder},
 };
 
@@ -107,8 +107,11 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
                 .label_style(("sans-serif", 14))
                 .draw()
                 .expect("draw");
-            for (i, method) in ["equal_angle", "bevy_fog"].into_iter().enumerate() {
-                let color = [RED, BLUE][i].to_rgba();
+            for (i, method) in ["equal_angle", "equal_angle (reduced)", "bevy_fog"]
+                .into_iter()
+                .enumerate()
+            {
+                let color = [RED, MAGENTA, BLUE][i].to_rgba();
                 let mut points: Vec<(f64, f64)> = of_scene
                     .iter()
                     .filter(|r| r.method == method)
@@ -156,6 +159,8 @@ enum Method {
     /// No volumetrics: the frame time to subtract.
     Off,
     EqualAngle(u32),
+    /// 16 samples at a reduced resolution.
+    EqualAngleReduced(VolumetricResolution),
     BevyFog(u32),
 }
 
@@ -209,6 +214,9 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
                 ..default()
             });
         }
+        Method::EqualAngleReduced(_) => {
+            spot.insert(VolumetricSpot::default());
+        }
         Method::BevyFog(_) => {
             spot.insert(VolumetricLight);
         }
@@ -228,11 +236,15 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
         Transform::from_translation(EYE).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y),
     ));
     match method {
-        Method::EqualAngle(_) => {
+        Method::EqualAngle(_) | Method::EqualAngleReduced(_) => {
             camera.insert(VolumetricMedium {
                 scattering: 0.10,
                 absorption: 0.01,
                 asymmetry: g,
+                resolution: match method {
+                    Method::EqualAngleReduced(r) => r,
+                    _ => VolumetricResolution::Full,
+                },
             });
         }
         Method::BevyFog(steps) => {
@@ -437,9 +449,21 @@ fn main() {
         let (truth, tip) = truth(cli.size, cli.g, shadowed);
         let (_, off_ms, _) = run(cli.size, cli.frames, cli.g, shadowed, Method::Off);
         let methods = [4, 8, 16, 32]
-            .map(|n| ("equal_angle", Method::EqualAngle(n), n))
+            .map(|n| ("equal_angle", Method::EqualAngle(n), n.to_string()))
             .into_iter()
-            .chain([16, 32, 64, 128].map(|n| ("bevy_fog", Method::BevyFog(n), n)));
+            .chain([
+                (
+                    "equal_angle",
+                    Method::EqualAngleReduced(VolumetricResolution::Half),
+                    "16@half".to_string(),
+                ),
+                (
+                    "equal_angle",
+                    Method::EqualAngleReduced(VolumetricResolution::Quarter),
+                    "16@quarter".to_string(),
+                ),
+            ])
+            .chain([16, 32, 64, 128].map(|n| ("bevy_fog", Method::BevyFog(n), n.to_string())));
         for (name, method, setting) in methods {
             let (values, ms, adapter) = run(cli.size, cli.frames, cli.g, shadowed, method);
             let (rel_l1, rmse, tip_l1) = scores(&values, &truth, &tip);
@@ -455,7 +479,7 @@ fn main() {
             rows.push(row);
             measured.push(Row {
                 scene,
-                method: name,
+                method: if setting.contains('@') { "equal_angle (reduced)" } else { name },
                 gpu_ms: ms - off_ms,
                 rel_l1,
             });

@@ -80,6 +80,7 @@ fn main() {
             scattering: cli.scattering,
             absorption: 0.01,
             asymmetry: cli.asymmetry,
+            ..default()
         },
         cli.samples,
     );

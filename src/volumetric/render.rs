@@ -176,6 +176,7 @@ pub fn extract_volumetric_cameras(
                 scattering,
                 absorption,
                 asymmetry,
+                resolution: medium.resolution,
             },
             frustum: *frustum,
         });
@@ -324,27 +325,131 @@ pub struct VolumetricSpotsPipeline {
     /// Group 2: the volumetric uniform.
     pub layout: BindGroupLayoutDescriptor,
     shader: Handle<Shader>,
-    pipelines: HashMap<bevy::pbr::MeshPipelineKey, CachedRenderPipelineId>,
+    pipelines: HashMap<(bevy::pbr::MeshPipelineKey, VolumetricPass), CachedRenderPipelineId>,
+    /// Bound as the low-resolution in-scatter where a pass does not read it.
+    no_in_scatter: TextureView,
 }
 
-pub fn init_volumetric_pipeline(mut commands: Commands, asset_server: Res<AssetServer>) {
+/// Which of the shader's passes a pipeline runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum VolumetricPass {
+    /// Every pixel, blended into the view.
+    Full,
+    /// One pixel in `factor`², into the low-resolution in-scatter image.
+    LowResolution(u32),
+    /// The depth-aware upsample of that image, blended into the view.
+    Upsample(u32),
+}
+
+/// Format of the low-resolution in-scatter image.
+pub const IN_SCATTER_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
+
+pub fn init_volumetric_pipeline(
+    mut commands: Commands,
+    asset_server: Res<AssetServer>,
+    device: Res<RenderDevice>,
+) {
     let layout = BindGroupLayoutDescriptor::new(
         "volumetric_spots_layout",
-        &BindGroupLayoutEntries::single(
+        &BindGroupLayoutEntries::sequential(
             ShaderStages::FRAGMENT,
-            uniform_buffer::<VolumetricUniform>(true),
+            (
+                uniform_buffer::<VolumetricUniform>(true),
+                texture_2d(TextureSampleType::Float { filterable: false }),
+            ),
         ),
     );
+    let no_in_scatter = device
+        .create_texture(&TextureDescriptor {
+            label: Some("volumetric_no_in_scatter"),
+            size: Extent3d::default(),
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: TextureDimension::D2,
+            format: IN_SCATTER_FORMAT,
+            usage: TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        })
+        .create_view(&TextureViewDescriptor::default());
     commands.insert_resource(VolumetricSpotsPipeline {
         layout,
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "spots.wgsl"),
         pipelines: HashMap::default(),
+        no_in_scatter,
     });
 }
 
-/// The volumetric pipeline of a view.
+/// The volumetric pipelines of a view: the full-resolution one, or the low-resolution pass and
+/// its upsample.
 #[derive(Component)]
-pub struct ViewVolumetricPipeline(pub CachedRenderPipelineId);
+pub struct ViewVolumetricPipeline {
+    /// Full resolution, or the upsample.
+    pub blend: CachedRenderPipelineId,
+    /// The low-resolution pass, where the view has one.
+    pub low_resolution: Option<CachedRenderPipelineId>,
+}
+
+/// The low-resolution in-scatter image of a view.
+#[derive(Component)]
+pub struct ViewInScatterTexture {
+    /// The image.
+    pub texture: bevy::render::texture::CachedTexture,
+}
+
+fn specialize(
+    deferred: &DeferredLightingLayout,
+    volumetric: &VolumetricSpotsPipeline,
+    key: bevy::pbr::MeshPipelineKey,
+    pass: VolumetricPass,
+) -> RenderPipelineDescriptor {
+    let mut descriptor = deferred.specialize(key);
+    descriptor.label = Some("volumetric_spots_pipeline".into());
+    descriptor.layout[2] = volumetric.layout.clone();
+    descriptor.vertex.shader = volumetric.shader.clone();
+    descriptor.vertex.entry_point = Some("vertex".into());
+    // Every pixel, whatever lies there: no id-depth test.
+    descriptor.depth_stencil = None;
+    let (entry, factor) = match pass {
+        VolumetricPass::Full => ("fragment", None),
+        VolumetricPass::LowResolution(f) => ("fragment", Some(f)),
+        VolumetricPass::Upsample(f) => ("upsample", Some(f)),
+    };
+    if let Some(fragment) = descriptor.fragment.as_mut() {
+        fragment.shader = volumetric.shader.clone();
+        fragment.entry_point = Some(entry.into());
+        if let Some(f) = factor {
+            fragment
+                .shader_defs
+                .push(bevy::shader::ShaderDefVal::UInt("RESOLUTION_FACTOR".into(), f));
+        }
+        if let VolumetricPass::LowResolution(_) = pass {
+            fragment.shader_defs.push("LOW_RESOLUTION_PASS".into());
+            fragment.targets = vec![Some(ColorTargetState {
+                format: IN_SCATTER_FORMAT,
+                blend: None,
+                write_mask: ColorWrites::ALL,
+            })];
+        } else {
+            for target in fragment.targets.iter_mut().flatten() {
+                // In-scatter + what the surface sends × its transmittance (the shader's
+                // alpha): one blend, L + T · L_surface.
+                target.blend = Some(BlendState {
+                    color: BlendComponent {
+                        src_factor: BlendFactor::One,
+                        dst_factor: BlendFactor::SrcAlpha,
+                        operation: BlendOperation::Add,
+                    },
+                    alpha: BlendComponent {
+                        src_factor: BlendFactor::Zero,
+                        dst_factor: BlendFactor::One,
+                        operation: BlendOperation::Add,
+                    },
+                });
+            }
+        }
+    }
+    descriptor
+}
 
 pub fn prepare_volumetric_pipelines(
     mut commands: Commands,
@@ -352,47 +457,75 @@ pub fn prepare_volumetric_pipelines(
     view_key_cache: Res<ViewKeyCache>,
     deferred: Option<Res<DeferredLightingLayout>>,
     mut volumetric: ResMut<VolumetricSpotsPipeline>,
-    views: Query<(Entity, &ExtractedView), With<ExtractedVolumetricMedium>>,
+    mut texture_cache: ResMut<bevy::render::texture::TextureCache>,
+    device: Res<RenderDevice>,
+    views: Query<(
+        Entity,
+        &ExtractedView,
+        &ExtractedVolumetricMedium,
+        &bevy::render::camera::ExtractedCamera,
+    )>,
 ) {
     let Some(deferred) = deferred else {
         return;
     };
     let volumetric = volumetric.as_mut();
-    for (entity, view) in &views {
+    for (entity, view, medium, camera) in &views {
         let Some(&key) = view_key_cache.get(&view.retained_view_entity) else {
             continue;
         };
-        let id = *volumetric.pipelines.entry(key).or_insert_with(|| {
-            let mut descriptor = deferred.specialize(key);
-            descriptor.label = Some("volumetric_spots_pipeline".into());
-            descriptor.layout[2] = volumetric.layout.clone();
-            descriptor.vertex.shader = volumetric.shader.clone();
-            descriptor.vertex.entry_point = Some("vertex".into());
-            // Every pixel, whatever lies there: no id-depth test.
-            descriptor.depth_stencil = None;
-            if let Some(fragment) = descriptor.fragment.as_mut() {
-                fragment.shader = volumetric.shader.clone();
-                fragment.entry_point = Some("fragment".into());
-                for target in fragment.targets.iter_mut().flatten() {
-                    // In-scatter + what the surface sends × its transmittance (the shader's
-                    // alpha): one blend, L + T · L_surface.
-                    target.blend = Some(BlendState {
-                        color: BlendComponent {
-                            src_factor: BlendFactor::One,
-                            dst_factor: BlendFactor::SrcAlpha,
-                            operation: BlendOperation::Add,
-                        },
-                        alpha: BlendComponent {
-                            src_factor: BlendFactor::Zero,
-                            dst_factor: BlendFactor::One,
-                            operation: BlendOperation::Add,
-                        },
-                    });
-                }
+        let mut pipeline = |pass| {
+            if let Some(&id) = volumetric.pipelines.get(&(key, pass)) {
+                return id;
             }
-            pipeline_cache.queue_render_pipeline(descriptor)
-        });
-        commands.entity(entity).insert(ViewVolumetricPipeline(id));
+            let id =
+                pipeline_cache.queue_render_pipeline(specialize(&deferred, volumetric, key, pass));
+            volumetric.pipelines.insert((key, pass), id);
+            id
+        };
+        let factor = medium.medium.resolution.factor();
+        let size = camera
+            .physical_viewport_size
+            .unwrap_or_default()
+            .max(UVec2::ONE);
+        if factor == 1 {
+            let blend = pipeline(VolumetricPass::Full);
+            commands
+                .entity(entity)
+                .insert(ViewVolumetricPipeline {
+                    blend,
+                    low_resolution: None,
+                })
+                .remove::<ViewInScatterTexture>();
+            continue;
+        }
+        let low_resolution = Some(pipeline(VolumetricPass::LowResolution(factor)));
+        let blend = pipeline(VolumetricPass::Upsample(factor));
+        let low_size = (size + factor - 1) / factor;
+        let texture = texture_cache.get(
+            &device,
+            TextureDescriptor {
+                label: Some("volumetric_in_scatter"),
+                size: Extent3d {
+                    width: low_size.x,
+                    height: low_size.y,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: TextureDimension::D2,
+                format: IN_SCATTER_FORMAT,
+                usage: TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+        );
+        commands.entity(entity).insert((
+            ViewVolumetricPipeline {
+                blend,
+                low_resolution,
+            },
+            ViewInScatterTexture { texture },
+        ));
     }
 }
 
@@ -405,6 +538,7 @@ pub fn volumetric_spots_pass(
         &ViewVolumetricPipeline,
         &ViewVolumetricUniformOffset,
         &bevy::render::camera::ExtractedCamera,
+        Option<&ViewInScatterTexture>,
     )>,
     spots: Res<ExtractedVolumetricSpots>,
     pipeline: Res<VolumetricSpotsPipeline>,
@@ -412,26 +546,68 @@ pub fn volumetric_spots_pass(
     uniforms: Res<VolumetricUniforms>,
     mut ctx: RenderContext,
 ) {
-    let (target, mesh_view, pipeline_id, offset, camera) = view.into_inner();
+    let (target, mesh_view, pipelines, offset, camera, in_scatter) = view.into_inner();
     // Nothing to add where no cone is in view.
     if spots.0.is_empty() || offset.spots == 0 {
         return;
     }
-    let (Some(render_pipeline), Some(volumetric)) = (
-        pipeline_cache.get_render_pipeline(pipeline_id.0),
+    let (Some(blend_pipeline), Some(volumetric)) = (
+        pipeline_cache.get_render_pipeline(pipelines.blend),
         uniforms.0.binding(),
     ) else {
         return;
     };
-    let bind_group = ctx.render_device().create_bind_group(
-        "volumetric_spots_bind_group",
-        &pipeline_cache.get_bind_group_layout(&pipeline.layout),
-        &BindGroupEntries::single(volumetric),
-    );
+    // At a reduced resolution: the low-resolution pass first, into its own image.
+    let low = match (pipelines.low_resolution, in_scatter) {
+        (Some(id), Some(image)) => match pipeline_cache.get_render_pipeline(id) {
+            Some(p) => Some((p, image)),
+            None => return,
+        },
+        (None, _) => None,
+        (Some(_), None) => return,
+    };
+    let device = ctx.render_device().clone();
+    let layout = pipeline_cache.get_bind_group_layout(&pipeline.layout);
+    let group = |texture: &TextureView| {
+        device.create_bind_group(
+            "volumetric_spots_bind_group",
+            &layout,
+            &BindGroupEntries::sequential((volumetric.clone(), texture)),
+        )
+    };
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     ctx.command_encoder().push_debug_group("volumetric/spots");
+    let span = diagnostics.time_span(ctx.command_encoder(), "volumetric/spots");
+    if let Some((low_pipeline, image)) = low {
+        let bind_group = group(&pipeline.no_in_scatter);
+        let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+            label: Some("volumetric_spots_low_resolution_pass"),
+            color_attachments: &[Some(RenderPassColorAttachment {
+                view: &image.texture.default_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: Operations {
+                    load: LoadOp::Clear(Default::default()),
+                    store: StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_render_pipeline(low_pipeline);
+        pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
+        pass.set_bind_group(1, &mesh_view.binding_array, &[]);
+        pass.set_bind_group(2, &bind_group, &[offset.offset]);
+        pass.draw(0..3, 0..1);
+    }
     {
+        let bind_group = match low {
+            Some((_, image)) => group(&image.texture.default_view),
+            None => group(&pipeline.no_in_scatter),
+        };
         let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
             label: Some("volumetric_spots_pass"),
             color_attachments: &[Some(target.get_color_attachment())],
@@ -440,17 +616,16 @@ pub fn volumetric_spots_pass(
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        let span = diagnostics.pass_span(&mut pass, "volumetric/spots");
         if let Some(viewport) = camera.viewport.as_ref() {
             pass.set_camera_viewport(viewport);
         }
-        pass.set_render_pipeline(render_pipeline);
+        pass.set_render_pipeline(blend_pipeline);
         pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
         pass.set_bind_group(1, &mesh_view.binding_array, &[]);
         pass.set_bind_group(2, &bind_group, &[offset.offset]);
         pass.draw(0..3, 0..1);
-        span.end(&mut pass);
     }
+    span.end(ctx.command_encoder());
     ctx.command_encoder().pop_debug_group();
 }
 

@@ -28,6 +28,8 @@ struct Volumetric {
 }
 
 @group(2) @binding(0) var<uniform> volumetric: Volumetric;
+// The low-resolution in-scatter, for the upsample.
+@group(2) @binding(1) var in_scatter: texture_2d<f32>;
 
 const PI: f32 = 3.141592653589793;
 // Where a ray without a surface stops: the range sphere clips it first.
@@ -169,29 +171,136 @@ fn vertex(@builtin(vertex_index) vertex_index: u32) -> FullscreenVertexOutput {
     return FullscreenVertexOutput(vec4(uv * vec2(2.0, -2.0) + vec2(-1.0, 1.0), 0.0, 1.0));
 }
 
-@fragment
-fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    let ndc_depth = prepass_utils::prepass_depth(in.position, 0u);
-    let ndc = (in.position.xy - view.viewport.xy) / view.viewport.zw * vec2(2.0, -2.0) + vec2(-1.0, 1.0);
+// The view ray of the pixel at `pixel` (render-target coordinates): origin, direction, where it
+// meets the depth buffer's surface (NO_SURFACE for the sky), and that surface's NDC depth.
+struct ViewRay {
+    o: vec3<f32>,
+    d: vec3<f32>,
+    t_end: f32,
+    ndc_depth: f32,
+}
+
+fn view_ray(pixel: vec2<f32>) -> ViewRay {
+    var r: ViewRay;
+    r.ndc_depth = prepass_utils::prepass_depth(vec4(pixel, 0.0, 0.0), 0u);
+    let ndc = (pixel - view.viewport.xy) / view.viewport.zw * vec2(2.0, -2.0) + vec2(-1.0, 1.0);
     let near = view.world_from_clip * vec4(ndc, 1.0, 1.0);
     let near_point = near.xyz / near.w;
     // Perspective: from the camera; orthographic: from the near plane.
     let orthographic = view.clip_from_view[3].w == 1.0;
-    let o = select(view.world_position, near_point, orthographic);
-    let d = normalize(select(near_point - view.world_position, (view.world_from_view * vec4(0.0, 0.0, -1.0, 0.0)).xyz, orthographic));
-    var t_end = NO_SURFACE;
-    if ndc_depth > 0.0 {
-        let surface = view.world_from_clip * vec4(ndc, ndc_depth, 1.0);
-        t_end = dot(surface.xyz / surface.w - o, d);
+    r.o = select(view.world_position, near_point, orthographic);
+    r.d = normalize(select(near_point - view.world_position, (view.world_from_view * vec4(0.0, 0.0, -1.0, 0.0)).xyz, orthographic));
+    r.t_end = NO_SURFACE;
+    if r.ndc_depth > 0.0 {
+        let surface = view.world_from_clip * vec4(ndc, r.ndc_depth, 1.0);
+        r.t_end = dot(surface.xyz / surface.w - r.o, r.d);
     }
+    return r;
+}
+
+// What the surface sends is dimmed by the medium in front of it; the sky is left as it is
+// (the medium is taken to end before it).
+fn transmittance(r: ViewRay) -> f32 {
+    let sigma_t = volumetric.medium.x + volumetric.medium.y;
+    return select(1.0, exp(-sigma_t * r.t_end), r.ndc_depth > 0.0);
+}
+
+// The in-scatter's smooth, unshadowed part for the reduced resolutions: per spot the closed
+// form σs · I · (γ_b − γ_a) / (4π h) over the ray clipped to its cone and range (no fall-off,
+// phase or extinction), summed with each spot's brightest channel. It holds the 1/h spike near
+// each light and the cone's edges at full resolution; the low-resolution pass stores the
+// in-scatter divided by it, which is smooth, and the upsample multiplies it back.
+fn unshadowed_closed_form(r: ViewRay) -> f32 {
+    var sum = 0.0;
+    let count = u32(volumetric.medium.w);
+    for (var i = 0u; i < count; i++) {
+        let spot = volumetric.spots[i];
+        let span = clip_to_light(spot, r.o, r.d, 0.0, r.t_end);
+        if span.y <= span.x {
+            continue;
+        }
+        let p = spot.position_range.xyz;
+        let t_c = dot(p - r.o, r.d);
+        let h = max(length(p - r.o - r.d * t_c), 1e-5);
+        let angle = atan((span.y - t_c) / h) - atan((span.x - t_c) / h);
+        let c = spot.color.rgb;
+        sum += max(c.r, max(c.g, c.b)) * angle / h;
+    }
+    return sum * volumetric.medium.x / (4.0 * PI) * view.exposure;
+}
+
+fn in_scattered_all(r: ViewRay, frag_coord: vec2<f32>) -> vec3<f32> {
     var radiance = vec3(0.0);
     let count = u32(volumetric.medium.w);
     for (var i = 0u; i < count; i++) {
-        radiance += in_scattered(volumetric.spots[i], o, d, 0.0, t_end, in.position.xy);
+        radiance += in_scattered(volumetric.spots[i], r.o, r.d, 0.0, r.t_end, frag_coord);
     }
-    // What the surface sends is dimmed by the medium in front of it; the sky is left as it is
-    // (the medium is taken to end before it).
-    let sigma_t = volumetric.medium.x + volumetric.medium.y;
-    let transmittance = select(1.0, exp(-sigma_t * t_end), ndc_depth > 0.0);
-    return vec4(radiance * view.exposure, transmittance);
+    return radiance * view.exposure;
 }
+
+// Full resolution: every pixel's in-scatter and transmittance, blended into the view. At a
+// reduced resolution (LOW_RESOLUTION_PASS): one pixel in RESOLUTION_FACTOR², the block's
+// first, into the in-scatter image.
+@fragment
+fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+#ifdef LOW_RESOLUTION_PASS
+    let pixel = view.viewport.xy + floor(in.position.xy) * f32(#{RESOLUTION_FACTOR}u) + 0.5;
+    let r = view_ray(pixel);
+    let closed_form = unshadowed_closed_form(r);
+    if closed_form <= 0.0 {
+        return vec4(0.0);
+    }
+    // The ratio to the closed form (alpha 1: this sample has one).
+    return vec4(in_scattered_all(r, pixel) / closed_form, 1.0);
+#else
+    let r = view_ray(in.position.xy);
+    return vec4(in_scattered_all(r, in.position.xy), transmittance(r));
+#endif
+}
+
+#ifdef RESOLUTION_FACTOR
+// Distance along the view direction of the surface at NDC depth `ndc_depth` (the sky far away).
+fn view_depth(ndc_depth: f32) -> f32 {
+    if ndc_depth <= 0.0 {
+        return 1.0e9;
+    }
+    let p = view.view_from_clip * vec4(0.0, 0.0, ndc_depth, 1.0);
+    return -p.z / p.w;
+}
+
+// The depth-aware upsample of the ratio to the closed form: the four low-resolution samples
+// around the pixel, bilinear weights times how close each sample's surface is in depth to the
+// pixel's (so that a beam's edge on a foreground object does not bleed onto the background),
+// samples without a closed form (outside every cone) left out; times the pixel's own closed
+// form; the transmittance per pixel.
+@fragment
+fn upsample(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    let f = f32(#{RESOLUTION_FACTOR}u);
+    let r = view_ray(in.position.xy);
+    let closed_form = unshadowed_closed_form(r);
+    if closed_form <= 0.0 {
+        return vec4(0.0, 0.0, 0.0, transmittance(r));
+    }
+    let z = view_depth(r.ndc_depth);
+    let size = vec2<i32>(textureDimensions(in_scatter));
+    // Low-resolution sample i stands at the centre of full-resolution pixel i·f.
+    let g = (in.position.xy - view.viewport.xy - 0.5) / f;
+    let base = floor(g);
+    let t = g - base;
+    var sum = vec3(0.0);
+    var weight = 0.0;
+    for (var k = 0u; k < 4u; k++) {
+        let c = vec2(f32(k & 1u), f32(k >> 1u));
+        let q = clamp(vec2<i32>(base + c), vec2(0), size - 1);
+        let sample_pixel = view.viewport.xy + vec2<f32>(q) * f + 0.5;
+        let zq = view_depth(prepass_utils::prepass_depth(vec4(sample_pixel, 0.0, 0.0), 0u));
+        let bilinear = mix(1.0 - t.x, t.x, c.x) * mix(1.0 - t.y, t.y, c.y);
+        let similar = 1.0 / (1.0e-3 + abs(zq - z) / max(z, 1.0e-3));
+        let ratio = textureLoad(in_scatter, q, 0);
+        let w = max(bilinear, 1.0e-3) * similar * ratio.a;
+        sum += w * ratio.rgb;
+        weight += w;
+    }
+    return vec4(sum / max(weight, 1.0e-9) * closed_form, transmittance(r));
+}
+#endif

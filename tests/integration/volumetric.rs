@@ -10,7 +10,7 @@ use bevy::{
     render::render_resource::{TextureFormat, TextureUsages},
 };
 use bevy_mesostructure::volumetric::{
-    VolumetricMedium, VolumetricSpot, VolumetricSpotsPlugin,
+    VolumetricMedium, VolumetricResolution, VolumetricSpot, VolumetricSpotsPlugin,
     reference::{self, Medium, Sampling},
 };
 
@@ -86,6 +86,7 @@ fn spot_scene_with(
                 scattering: 0.10,
                 absorption: 0.01,
                 asymmetry: 0.6,
+                ..default()
             },
             view,
         ))
@@ -324,6 +325,7 @@ fn bad_spots_and_media_warn_once_and_render() {
         scattering: -1.0,
         absorption: f32::NAN,
         asymmetry: 2.0,
+        ..default()
     });
     // A second camera with MSAA: the volumetric spots are off there, with a warning.
     let t2 = target(&mut app, 32, 32);
@@ -424,4 +426,36 @@ fn the_pass_costs_nothing_when_no_cone_is_in_view() {
     let (mut app, _, _) = spot_scene(short, VolumetricSpot::default(), towards);
     run(&mut app, 5);
     assert!(volumetric_pass_ran(&app), "the pass did not run with the cone in view");
+}
+
+#[test]
+fn reduced_resolutions_upsample_close_to_the_reference() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let view = Transform::from_xyz(0.0, 1.6, 7.0).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y);
+    let mut errors = vec![];
+    for resolution in [VolumetricResolution::Half, VolumetricResolution::Quarter] {
+        let spot = SpotLight {
+            shadow_maps_enabled: true,
+            ..reference_spot()
+        };
+        let (mut app, camera, target) = spot_scene_with(spot, VolumetricSpot::default(), view, true);
+        let mut medium = *app.world().get::<VolumetricMedium>(camera).unwrap();
+        medium.resolution = resolution;
+        app.world_mut().entity_mut(camera).insert(medium);
+        run(&mut app, 3);
+        let gpu = red(&screenshot(&mut app, &target));
+        let cube = reference::Occluder {
+            min: DVec3::new(-0.5, 2.0, -0.5),
+            max: DVec3::new(0.5, 3.0, 0.5),
+        };
+        let (exact, _) = expected_with(&mut app, camera, 16, Sampling::EqualAngle, &[cube]);
+        errors.push(relative_l1(&gpu, &exact));
+    }
+    eprintln!("rel L1 at half and quarter resolution (shadowed): {errors:?}");
+    // Measured at 64×48 (the worst case: the light's tip, where the in-scatter peaks, spans a
+    // few pixels): 0.199 and 0.294; at 256×144 the bench measures 0.063 and 0.161 (full
+    // resolution: 0.0023). Margins 0.02 and 0.03.
+    assert!(errors[0] <= 0.22 && errors[1] <= 0.32, "{errors:?}");
 }
