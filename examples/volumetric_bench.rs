@@ -18,6 +18,8 @@
 mod frame_timer;
 #[path = "common/headless.rs"]
 mod headless;
+#[path = "common/spot_scene.rs"]
+mod spot_scene;
 
 use std::{
     io::Write,
@@ -39,11 +41,10 @@ use bevy::{
 };
 use bevy_mesostructure::volumetric::{
     VolumetricMedium, VolumetricResolution, VolumetricSpot, VolumetricSpotsPlugin,
-    reference::{self, Medium, Occluder},
+    reference::{Occluder, Sampling},
 };
+use spot_scene::{ABSORPTION, EV100, SCATTERING};
 
-const EV100: f32 = 3.0;
-const SPOT: Vec3 = Vec3::new(0.0, 4.0, 0.0);
 const EYE: Vec3 = Vec3::new(0.0, 1.6, 7.0);
 
 /// Speed against accuracy of the volumetric spots and Bevy's fog, into a CSV.
@@ -194,19 +195,9 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
         let cube = world.resource_mut::<Assets<Mesh>>().add(Cuboid::new(1.0, 1.0, 1.0));
         world.spawn((Mesh3d(cube), MeshMaterial3d(black), Transform::from_xyz(0.0, 2.5, 0.0)));
     }
-    let mut spot = world.spawn((
-        SpotLight {
-            intensity: 20_000.0,
-            range: 100.0,
-            outer_angle: 30f32.to_radians(),
-            inner_angle: 20f32.to_radians(),
-            // On in both scenes: Bevy 0.19.1's fog lights only spots with shadow maps (its
-            // VOLUMETRIC flag needs them); the unshadowed scene has nothing to cast a shadow.
-            shadow_maps_enabled: true,
-            ..default()
-        },
-        Transform::from_translation(SPOT).looking_at(Vec3::new(0.5, 0.0, 0.0), Vec3::Z),
-    ));
+    // Shadow maps on in both scenes: Bevy 0.19.1's fog lights only spots with shadow maps (its
+    // VOLUMETRIC flag needs them); the unshadowed scene has nothing to cast a shadow.
+    let mut spot = world.spawn((spot_scene::bevy_spot(true), spot_scene::spot_transform()));
     match method {
         Method::EqualAngle(samples) => {
             spot.insert(VolumetricSpot {
@@ -238,8 +229,8 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
     match method {
         Method::EqualAngle(_) | Method::EqualAngleReduced(_) => {
             camera.insert(VolumetricMedium {
-                scattering: 0.10,
-                absorption: 0.01,
+                scattering: SCATTERING,
+                absorption: ABSORPTION,
                 asymmetry: g,
                 resolution: match method {
                     Method::EqualAngleReduced(r) => r,
@@ -261,8 +252,8 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
         world.spawn((
             FogVolume {
                 density_factor: 1.0,
-                scattering: 0.10,
-                absorption: 0.01,
+                scattering: SCATTERING,
+                absorption: ABSORPTION,
                 scattering_asymmetry: g,
                 ..default()
             },
@@ -300,13 +291,7 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
         }
     }
     let shot = shot.expect("no screenshot after 10 frames");
-    let red = shot
-        .data
-        .as_ref()
-        .unwrap()
-        .chunks_exact(8)
-        .map(|px| half::f16::from_le_bytes([px[0], px[1]]).to_f32())
-        .collect();
+    let red = spot_scene::red(&shot);
     let mut times = app
         .world()
         .resource::<frame_timer::FrameGpuTimes>()
@@ -325,119 +310,49 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
 }
 
 /// Per pixel, the exact fog-only radiance (exposure applied) and whether the ray passes within
-/// 15° of the light.
+/// 15° of the light; the medium ends at the fog volume's box, as Bevy's fog does.
 fn truth(size: UVec2, g: f32, shadowed: bool) -> (Vec<f64>, Vec<bool>) {
     let transform = Transform::from_translation(EYE).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y);
     let projection = PerspectiveProjection {
         aspect_ratio: size.x as f32 / size.y as f32,
         ..default()
     };
-    let clip_from_view = projection.get_clip_from_view();
-    let world_from_clip = transform.to_matrix() * clip_from_view.inverse();
-    let spot = reference::SpotLight {
-        position: SPOT.as_dvec3(),
-        direction: (DVec3::new(0.5, 0.0, 0.0) - SPOT.as_dvec3()).normalize(),
-        intensity: 20_000.0 / (4.0 * std::f64::consts::PI),
-        inner_angle: 20f64.to_radians(),
-        outer_angle: 30f64.to_radians(),
-        range: 100.0,
+    let world_from_clip = transform.to_matrix() * projection.get_clip_from_view().inverse();
+    let volume = Occluder {
+        min: DVec3::new(-10.0, 0.0, -10.0),
+        max: DVec3::new(10.0, 10.0, 10.0),
     };
-    let medium = Medium {
-        scattering: 0.10,
-        absorption: 0.01,
-        asymmetry: g as f64,
-    };
-    let cube = Occluder {
-        min: DVec3::new(-0.5, 2.0, -0.5),
-        max: DVec3::new(0.5, 3.0, 0.5),
-    };
-    let occluders: &[Occluder] = if shadowed { &[cube] } else { &[] };
-    let exposure = Exposure { ev100: EV100 }.exposure() as f64;
-    let o = EYE.as_dvec3();
-    let to_light = (SPOT - EYE).normalize();
-    let (mut values, mut tip) = (vec![], vec![]);
-    for y in 0..size.y {
-        for x in 0..size.x {
-            let ndc = Vec2::new(
-                (x as f32 + 0.5) / size.x as f32 * 2.0 - 1.0,
-                1.0 - (y as f32 + 0.5) / size.y as f32 * 2.0,
-            );
-            let p = world_from_clip * Vec4::new(ndc.x, ndc.y, 1.0, 1.0);
-            let dir = (p.truncate() / p.w - EYE).normalize();
-            let d = dir.as_dvec3();
-            let t_floor = -o.y / d.y;
-            let hit = o + d * t_floor;
-            let mut end = if d.y < 0.0 && hit.x.abs() <= 10.0 && hit.z.abs() <= 10.0 {
-                t_floor
-            } else {
-                1.0e30
-            };
-            // The fog volume's box, for Bevy's fog, ends the medium: the reference stops there
-            // too (20 × 10 × 20 about (0, 5, 0)).
-            let volume = Occluder {
-                min: DVec3::new(-10.0, 0.0, -10.0),
-                max: DVec3::new(10.0, 10.0, 10.0),
-            };
-            end = end.min(exit(o, d, &volume));
-            for b in occluders {
-                if let Some(t) = entry(o, d, b) {
-                    end = end.min(t);
-                }
-            }
-            let ray = reference::Ray {
-                origin: o,
-                direction: d,
-                start: 0.0,
-                end,
-            };
-            values.push(reference::in_scattered(&ray, &spot, &medium, occluders) * exposure);
-            tip.push(dir.dot(to_light).acos().to_degrees() < 15.0);
-        }
-    }
-    (values, tip)
-}
-
-fn entry(o: DVec3, d: DVec3, b: &Occluder) -> Option<f64> {
-    let (near, far) = slabs(o, d, b);
-    (near <= far && far > 0.0).then_some(near.max(0.0))
-}
-
-fn exit(o: DVec3, d: DVec3, b: &Occluder) -> f64 {
-    let (near, far) = slabs(o, d, b);
-    if near <= far { far.max(0.0) } else { 0.0 }
-}
-
-fn slabs(o: DVec3, d: DVec3, b: &Occluder) -> (f64, f64) {
-    let (mut near, mut far) = (f64::NEG_INFINITY, f64::INFINITY);
-    for axis in 0..3 {
-        let (t0, t1) = ((b.min[axis] - o[axis]) / d[axis], (b.max[axis] - o[axis]) / d[axis]);
-        near = near.max(t0.min(t1));
-        far = far.min(t0.max(t1));
-    }
-    (near, far)
+    let cube = [spot_scene::cube()];
+    let occluders: &[Occluder] = if shadowed { &cube } else { &[] };
+    let t = spot_scene::truth(
+        EYE,
+        world_from_clip,
+        size,
+        g,
+        occluders,
+        Some(&volume),
+        (Sampling::EqualAngle, 1),
+    );
+    (t.exact, t.tip)
 }
 
 /// Relative L1, RMSE (relative to the mean) and relative L1 over `mask`, on the pixels where
 /// the truth is above 1 % of its largest value.
 fn scores(values: &[f32], truth: &[f64], mask: &[bool]) -> (f64, f64, f64) {
     let max = truth.iter().cloned().fold(0.0, f64::max);
-    let (mut l1, mut den, mut sq, mut n, mut tip_l1, mut tip_den) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for ((&v, &t), &m) in values.iter().zip(truth).zip(mask) {
-        if t <= 0.01 * max {
-            continue;
-        }
-        let e = v as f64 - t;
-        l1 += e.abs();
-        den += t;
-        sq += e * e;
-        n += 1.0;
-        if m {
-            tip_l1 += e.abs();
-            tip_den += t;
+    let (mut sq, mut sum, mut n) = (0.0, 0.0, 0.0);
+    for (&v, &t) in values.iter().zip(truth) {
+        if t > 0.01 * max {
+            sq += (v as f64 - t).powi(2);
+            sum += t;
+            n += 1.0;
         }
     }
-    let mean = den / n;
-    (l1 / den, (sq / n).sqrt() / mean, tip_l1 / tip_den)
+    (
+        spot_scene::relative_l1(values, truth, None),
+        (sq / n).sqrt() / (sum / n),
+        spot_scene::relative_l1(values, truth, Some(mask)),
+    )
 }
 
 fn main() {

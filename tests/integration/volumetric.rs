@@ -5,20 +5,24 @@ use bevy::{
     camera::{Exposure, RenderTarget},
     core_pipeline::tonemapping::Tonemapping,
     light::GlobalAmbientLight,
-    math::DVec3,
     prelude::*,
     render::render_resource::{TextureFormat, TextureUsages},
 };
 use bevy_mesostructure::volumetric::{
     VolumetricMedium, VolumetricResolution, VolumetricSpot, VolumetricSpotsPlugin,
-    reference::{self, Medium, Sampling},
+    reference::{self, Sampling},
 };
 
 use crate::harness::*;
 
 const W: u32 = 64;
 const H: u32 = 48;
-const EV100: f32 = 3.0;
+/// The medium's asymmetry in these tests.
+const G: f32 = 0.6;
+
+#[path = "../../examples/common/spot_scene.rs"]
+mod spot_scene;
+use spot_scene::{EV100, red, relative_l1};
 
 /// The issue's reference set-up, scaled down: a spot at (0, 4, 0) aimed at (0.5, 0, 0), outer
 /// 30°, inner 20°, 20 000 lm, range 100, over a black floor; σs 0.10, σa 0.01, g 0.6; seen by
@@ -67,7 +71,7 @@ fn spot_scene_with(
     app.world_mut().spawn((
         spot,
         settings,
-        Transform::from_xyz(0.0, 4.0, 0.0).looking_at(Vec3::new(0.5, 0.0, 0.0), Vec3::Z),
+        spot_scene::spot_transform(),
     ));
     let mut image = Image::new_target_texture(W, H, TextureFormat::Rgba16Float, None);
     image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
@@ -83,9 +87,9 @@ fn spot_scene_with(
             bevy::core_pipeline::tonemapping::DebandDither::Disabled,
             Exposure { ev100: EV100 },
             VolumetricMedium {
-                scattering: 0.10,
-                absorption: 0.01,
-                asymmetry: 0.6,
+                scattering: spot_scene::SCATTERING,
+                absorption: spot_scene::ABSORPTION,
+                asymmetry: G,
                 ..default()
             },
             view,
@@ -95,136 +99,33 @@ fn spot_scene_with(
 }
 
 fn reference_spot() -> SpotLight {
-    SpotLight {
-        intensity: 20_000.0,
-        range: 100.0,
-        outer_angle: 30f32.to_radians(),
-        inner_angle: 20f32.to_radians(),
-        shadow_maps_enabled: false,
-        ..default()
-    }
+    spot_scene::bevy_spot(false)
 }
 
-/// The red channel of every pixel (linear, exposure applied), row-major.
-fn red(image: &Image) -> Vec<f32> {
-    let data = image.data.as_ref().unwrap();
-    data.chunks_exact(8)
-        .map(|px| half::f16::from_le_bytes([px[0], px[1]]).to_f32())
-        .collect()
-}
-
-/// Per pixel, the reference's in-scatter and the `n`-sample estimate with `sampling` (equal
-/// angles: the CPU mirror of the pass), both times the exposure.
-fn expected(app: &mut App, camera: Entity, n: u32, sampling: Sampling) -> (Vec<f64>, Vec<f64>) {
-    expected_with(app, camera, n, sampling, &[])
-}
-
-/// [`expected`], with `occluders` (which also stop the view rays).
+/// Per pixel of `camera`'s view: the exact in-scatter with `occluders`, the `n`-sample
+/// estimate with `sampling`, and the pixels within 15° of the light.
 fn expected_with(
     app: &mut App,
     camera: Entity,
     n: u32,
     sampling: Sampling,
     occluders: &[reference::Occluder],
-) -> (Vec<f64>, Vec<f64>) {
+) -> spot_scene::Truth {
     let world = app.world_mut();
     let (cam, transform) = world
         .query::<(&Camera, &GlobalTransform)>()
         .get(world, camera)
         .unwrap();
-    let spot = reference::SpotLight {
-        position: DVec3::new(0.0, 4.0, 0.0),
-        direction: (DVec3::new(0.5, 0.0, 0.0) - DVec3::new(0.0, 4.0, 0.0)).normalize(),
-        intensity: 20_000.0 / (4.0 * std::f64::consts::PI),
-        inner_angle: 20f64.to_radians(),
-        outer_angle: 30f64.to_radians(),
-        range: 100.0,
-    };
-    let medium = Medium {
-        scattering: 0.10,
-        absorption: 0.01,
-        asymmetry: 0.6,
-    };
-    let exposure = Exposure { ev100: EV100 }.exposure() as f64;
-    let (mut exact, mut mirror) = (vec![], vec![]);
-    for y in 0..H {
-        for x in 0..W {
-            let ray = cam
-                .viewport_to_world(transform, Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
-                .unwrap();
-            // Bevy's ray starts on the near plane; the medium starts at the camera.
-            let o = transform.translation().as_dvec3();
-            let d = ray.direction.as_vec3().as_dvec3();
-            // The floor (y = 0, 20 × 20), or nothing.
-            let t_floor = -o.y / d.y;
-            let hit = o + d * t_floor;
-            let mut end = if d.y < 0.0 && hit.x.abs() <= 10.0 && hit.z.abs() <= 10.0 {
-                t_floor
-            } else {
-                1.0e30
-            };
-            for box_ in occluders {
-                if let Some(t) = entry(o, d, box_) {
-                    end = end.min(t);
-                }
-            }
-            let r = reference::Ray {
-                origin: o,
-                direction: d,
-                start: 0.0,
-                end,
-            };
-            exact.push(reference::in_scattered(&r, &spot, &medium, occluders) * exposure);
-            mirror.push(reference::estimate(&r, &spot, &medium, occluders, sampling, n) * exposure);
-        }
-    }
-    (exact, mirror)
-}
-
-/// Where the ray from `o` along `d` enters the box, if it does (slab test).
-fn entry(o: DVec3, d: DVec3, b: &reference::Occluder) -> Option<f64> {
-    let (mut near, mut far) = (0.0f64, f64::INFINITY);
-    for axis in 0..3 {
-        let (t0, t1) = ((b.min[axis] - o[axis]) / d[axis], (b.max[axis] - o[axis]) / d[axis]);
-        near = near.max(t0.min(t1));
-        far = far.min(t0.max(t1));
-    }
-    (near <= far).then_some(near)
-}
-
-/// The pixels whose view ray passes within `degrees` of the direction to the light.
-fn tip_pixels(app: &mut App, camera: Entity, degrees: f32) -> Vec<usize> {
-    let world = app.world_mut();
-    let (cam, transform) = world
-        .query::<(&Camera, &GlobalTransform)>()
-        .get(world, camera)
-        .unwrap();
-    let to_light = (Vec3::new(0.0, 4.0, 0.0) - transform.translation()).normalize();
-    let mut out = vec![];
-    for y in 0..H {
-        for x in 0..W {
-            let ray = cam
-                .viewport_to_world(transform, Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
-                .unwrap();
-            if ray.direction.dot(to_light).acos().to_degrees() < degrees {
-                out.push((y * W + x) as usize);
-            }
-        }
-    }
-    out
-}
-
-/// Σ|a − b| / Σ b over the pixels where `b` is above 1 % of its largest value.
-fn relative_l1<A: Copy + Into<f64>>(a: &[A], b: &[f64]) -> f64 {
-    let max = b.iter().cloned().fold(0.0, f64::max);
-    let (mut num, mut den) = (0.0, 0.0);
-    for (&a, &b) in a.iter().zip(b) {
-        if b > 0.01 * max {
-            num += (a.into() - b).abs();
-            den += b;
-        }
-    }
-    num / den
+    let world_from_clip = transform.to_matrix() * cam.clip_from_view().inverse();
+    spot_scene::truth(
+        transform.translation(),
+        world_from_clip,
+        UVec2::new(W, H),
+        G,
+        occluders,
+        None,
+        (sampling, n),
+    )
 }
 
 /// The scores of one view: the GPU against the exact reference (all, and within 15° of the
@@ -243,19 +144,17 @@ fn scores(view: Transform) -> Scores {
     let (mut app, camera, target) = spot_scene(reference_spot(), VolumetricSpot::default(), view);
     run(&mut app, 3);
     let gpu = red(&screenshot(&mut app, &target));
-    let (exact, mirror) = expected(&mut app, camera, 16, Sampling::EqualAngle);
-    let (_, equal_depth) = expected(&mut app, camera, 16, Sampling::EqualDepth);
-    let tip = tip_pixels(&mut app, camera, 15.0);
-    let pick = |v: &[f64]| tip.iter().map(|&i| v[i]).collect::<Vec<f64>>();
-    let gpu_tip: Vec<f32> = tip.iter().map(|&i| gpu[i]).collect();
+    let angles = expected_with(&mut app, camera, 16, Sampling::EqualAngle, &[]);
+    let depths = expected_with(&mut app, camera, 16, Sampling::EqualDepth, &[]);
+    let (exact, tip) = (&angles.exact, Some(angles.tip.as_slice()));
     assert!(exact.iter().cloned().fold(0.0, f64::max) > 0.05, "the beam is visible");
     let s = Scores {
-        exact: relative_l1(&gpu, &exact),
-        tip: relative_l1(&gpu_tip, &pick(&exact)),
-        tip_pixels: tip.len(),
-        mirror: relative_l1(&gpu, &mirror),
-        mirror_own: relative_l1(&mirror, &exact),
-        equal_depth_tip: relative_l1(&pick(&equal_depth), &pick(&exact)),
+        exact: relative_l1(&gpu, exact, None),
+        tip: relative_l1(&gpu, exact, tip),
+        tip_pixels: angles.tip.iter().filter(|&&t| t).count(),
+        mirror: relative_l1(&gpu, &angles.estimate, None),
+        mirror_own: relative_l1(&angles.estimate, exact, None),
+        equal_depth_tip: relative_l1(&depths.estimate, exact, tip),
     };
     eprintln!(
         "rel L1: GPU/exact {:.4} (tip {:.4}, {} px), GPU/mirror {:.4}, mirror/exact {:.4}, \
@@ -376,15 +275,14 @@ fn a_box_casts_a_shaft_through_the_beam() {
     let (mut app, camera, target) = spot_scene_with(spot, VolumetricSpot::default(), view, true);
     run(&mut app, 3);
     let gpu = red(&screenshot(&mut app, &target));
-    let cube = reference::Occluder {
-        min: DVec3::new(-0.5, 2.0, -0.5),
-        max: DVec3::new(0.5, 3.0, 0.5),
-    };
-    let (shadowed, mirror) = expected_with(&mut app, camera, 16, Sampling::EqualAngle, &[cube]);
-    // The same rays (stopped by the cube) without its shadow: how much the shaft takes.
-    let (open, _) = expected_with(&mut app, camera, 16, Sampling::EqualAngle, &[]);
-    let error = relative_l1(&gpu, &shadowed);
-    let mirror_error = relative_l1(&mirror, &shadowed);
+    let cube = spot_scene::cube();
+    let with_cube = expected_with(&mut app, camera, 16, Sampling::EqualAngle, &[cube]);
+    let (shadowed, mirror) = (&with_cube.exact, &with_cube.estimate);
+    // The same rays without the cube's shadow: how much the shaft takes. (These rays pass the
+    // cube; only the pixels it covers differ, and there both are 0 past its face.)
+    let open = expected_with(&mut app, camera, 16, Sampling::EqualAngle, &[]).exact;
+    let error = relative_l1(&gpu, shadowed, None);
+    let mirror_error = relative_l1(mirror, shadowed, None);
     let taken = 1.0 - shadowed.iter().sum::<f64>() / open.iter().sum::<f64>();
     let gpu_taken = 1.0 - gpu.iter().map(|&v| v as f64).sum::<f64>() / open.iter().sum::<f64>();
     eprintln!(
@@ -446,12 +344,9 @@ fn reduced_resolutions_upsample_close_to_the_reference() {
         app.world_mut().entity_mut(camera).insert(medium);
         run(&mut app, 3);
         let gpu = red(&screenshot(&mut app, &target));
-        let cube = reference::Occluder {
-            min: DVec3::new(-0.5, 2.0, -0.5),
-            max: DVec3::new(0.5, 3.0, 0.5),
-        };
-        let (exact, _) = expected_with(&mut app, camera, 16, Sampling::EqualAngle, &[cube]);
-        errors.push(relative_l1(&gpu, &exact));
+        let cube = spot_scene::cube();
+        let exact = expected_with(&mut app, camera, 16, Sampling::EqualAngle, &[cube]).exact;
+        errors.push(relative_l1(&gpu, &exact, None));
     }
     eprintln!("rel L1 at half and quarter resolution (shadowed): {errors:?}");
     // Measured at 64×48 (the worst case: the light's tip, where the in-scatter peaks, spans a
