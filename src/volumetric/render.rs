@@ -31,6 +31,8 @@ pub struct ExtractedVolumetricMedium {
     pub medium: VolumetricMedium,
     /// The camera's view frustum.
     pub frustum: bevy::camera::primitives::Frustum,
+    /// The camera's view-projection.
+    pub clip_from_world: Mat4,
 }
 
 impl SyncComponent for VolumetricMedium {
@@ -53,6 +55,9 @@ pub struct GpuVolumetricSpot {
     /// cos(outer angle), Bevy's spot scale and offset, the light's index in Bevy's clustered
     /// lights where its shadow map is sampled (−1: no shadow map).
     pub cone: Vec4,
+    /// The part of the view the cone can cover, in NDC: (min x, min y, max x, max y) — its
+    /// bounding sphere's projection; pixels outside skip the spot.
+    pub screen_rect: Vec4,
 }
 
 /// One spot of this frame.
@@ -71,6 +76,31 @@ pub struct ExtractedVolumetricSpot {
 /// The spots of this frame.
 #[derive(Resource, Default)]
 pub struct ExtractedVolumetricSpots(pub Vec<ExtractedVolumetricSpot>);
+
+/// The NDC rectangle (min x, min y, max x, max y) that a sphere can cover in a view with
+/// `clip_from_world`: the projections of its bounding box's corners; the whole view where a
+/// corner lies behind the camera's plane.
+pub fn screen_rect(sphere: &bevy::camera::primitives::Sphere, clip_from_world: Mat4) -> Vec4 {
+    let whole = Vec4::new(-1.0, -1.0, 1.0, 1.0);
+    let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
+    let center = Vec3::from(sphere.center);
+    for i in 0..8 {
+        let corner = center
+            + Vec3::new(
+                if i & 1 == 0 { -1.0 } else { 1.0 },
+                if i & 2 == 0 { -1.0 } else { 1.0 },
+                if i & 4 == 0 { -1.0 } else { 1.0 },
+            ) * sphere.radius;
+        let clip = clip_from_world * corner.extend(1.0);
+        if !(clip.w > 1e-6) {
+            return whole;
+        }
+        let ndc = clip.truncate().truncate() / clip.w;
+        lo = lo.min(ndc);
+        hi = hi.max(ndc);
+    }
+    Vec4::new(lo.x.max(-1.0), lo.y.max(-1.0), hi.x.min(1.0), hi.y.min(1.0))
+}
 
 /// The smallest sphere around a cone of half-angle `angle` and length `length` from `apex`
 /// along the unit `axis`: about the far disc's centre for wide cones, else through the apex and
@@ -132,13 +162,14 @@ pub fn extract_volumetric_cameras(
                 &VolumetricMedium,
                 Option<&Msaa>,
                 &bevy::camera::primitives::Frustum,
+                &GlobalTransform,
             ),
             With<Camera3d>,
         >,
     >,
     mut warned: ResMut<WarnedOnce>,
 ) {
-    for (render_entity, entity, camera, medium, msaa, frustum) in &cameras {
+    for (render_entity, entity, camera, medium, msaa, frustum, transform) in &cameras {
         let Ok(mut target) = commands.get_entity(render_entity) else {
             continue;
         };
@@ -179,6 +210,7 @@ pub fn extract_volumetric_cameras(
                 resolution: medium.resolution,
             },
             frustum: *frustum,
+            clip_from_world: camera.clip_from_view() * transform.to_matrix().inverse(),
         });
     }
 }
@@ -261,6 +293,8 @@ pub fn extract_volumetric_spots(
             direction_samples: transform.forward().as_vec3().extend(samples as f32),
             color: color.extend(0.0),
             cone: Vec4::new(cos_outer, spot_scale, -cos_outer * spot_scale, -1.0),
+            // Per view, in `prepare_volumetric_uniforms`.
+            screen_rect: Vec4::new(-1.0, -1.0, 1.0, 1.0),
         };
         let axis = transform.forward().as_vec3();
         spots.0.push(ExtractedVolumetricSpot {
@@ -295,6 +329,7 @@ pub fn prepare_volumetric_uniforms(
                 continue;
             }
             let mut gpu = spot.gpu;
+            gpu.screen_rect = screen_rect(&spot.bounds, view.clip_from_world);
             if let Some(index) = clusterables
                 .as_ref()
                 .filter(|_| spot.shadows)
@@ -632,6 +667,35 @@ pub fn volumetric_spots_pass(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_screen_rect_holds_the_sphere_and_falls_back_to_the_whole_view() {
+        let clip_from_view = Mat4::perspective_infinite_reverse_rh(0.8, 1.5, 0.1);
+        let view_from_world =
+            Transform::from_xyz(0.0, 1.0, 6.0).looking_at(Vec3::ZERO, Vec3::Y).to_matrix().inverse();
+        let clip_from_world = clip_from_view * view_from_world;
+        let sphere = bevy::camera::primitives::Sphere {
+            center: Vec3::new(0.5, 0.2, 0.0).into(),
+            radius: 0.3,
+        };
+        let rect = screen_rect(&sphere, clip_from_world);
+        assert!(rect.x < rect.z && rect.y < rect.w && rect.z - rect.x < 0.5, "{rect}");
+        // Points of the sphere's surface project inside the rectangle.
+        for i in 0..64 {
+            let (a, b) = (i as f32 * 0.7, i as f32 * 1.3);
+            let p = Vec3::from(sphere.center)
+                + Vec3::new(a.cos() * b.sin(), a.sin() * b.sin(), b.cos()) * sphere.radius;
+            let c = clip_from_world * p.extend(1.0);
+            let ndc = c.truncate().truncate() / c.w;
+            assert!(ndc.x >= rect.x && ndc.x <= rect.z && ndc.y >= rect.y && ndc.y <= rect.w);
+        }
+        // A sphere around the camera covers the whole view.
+        let around = bevy::camera::primitives::Sphere {
+            center: Vec3::new(0.0, 1.0, 6.0).into(),
+            radius: 1.0,
+        };
+        assert_eq!(screen_rect(&around, clip_from_world), Vec4::new(-1.0, -1.0, 1.0, 1.0));
+    }
 
     #[test]
     fn the_cone_bounds_hold_every_point_of_the_cone() {

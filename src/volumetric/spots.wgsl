@@ -19,6 +19,8 @@ struct Spot {
     // cos(outer), Bevy's spot scale and offset, the light's index in Bevy's clustered lights
     // (its shadow map; −1: none).
     cone: vec4<f32>,
+    // The NDC rectangle the cone can cover (min x, min y, max x, max y).
+    screen_rect: vec4<f32>,
 }
 
 struct Volumetric {
@@ -178,12 +180,19 @@ struct ViewRay {
     d: vec3<f32>,
     t_end: f32,
     ndc_depth: f32,
+    ndc: vec2<f32>,
+}
+
+// Whether the pixel lies where the spot's cone can be seen (its screen rectangle).
+fn may_cover(spot: Spot, r: ViewRay) -> bool {
+    return all(r.ndc >= spot.screen_rect.xy) && all(r.ndc <= spot.screen_rect.zw);
 }
 
 fn view_ray(pixel: vec2<f32>) -> ViewRay {
     var r: ViewRay;
     r.ndc_depth = prepass_utils::prepass_depth(vec4(pixel, 0.0, 0.0), 0u);
     let ndc = (pixel - view.viewport.xy) / view.viewport.zw * vec2(2.0, -2.0) + vec2(-1.0, 1.0);
+    r.ndc = ndc;
     let near = view.world_from_clip * vec4(ndc, 1.0, 1.0);
     let near_point = near.xyz / near.w;
     // Perspective: from the camera; orthographic: from the near plane.
@@ -215,6 +224,9 @@ fn unshadowed_closed_form(r: ViewRay) -> f32 {
     let count = u32(volumetric.medium.w);
     for (var i = 0u; i < count; i++) {
         let spot = volumetric.spots[i];
+        if !may_cover(spot, r) {
+            continue;
+        }
         let span = clip_to_light(spot, r.o, r.d, 0.0, r.t_end);
         if span.y <= span.x {
             continue;
@@ -233,7 +245,10 @@ fn in_scattered_all(r: ViewRay, frag_coord: vec2<f32>) -> vec3<f32> {
     var radiance = vec3(0.0);
     let count = u32(volumetric.medium.w);
     for (var i = 0u; i < count; i++) {
-        radiance += in_scattered(volumetric.spots[i], r.o, r.d, 0.0, r.t_end, frag_coord);
+        let spot = volumetric.spots[i];
+        if may_cover(spot, r) {
+            radiance += in_scattered(spot, r.o, r.d, 0.0, r.t_end, frag_coord);
+        }
     }
     return radiance * view.exposure;
 }
