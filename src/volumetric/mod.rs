@@ -22,8 +22,9 @@
 //! transmittance in front of them (a fullscreen fragment pass, timed as `volumetric/spots`; the
 //! sky is left undimmed). The pass is Bevy's deferred lighting pipeline of the view with this
 //! shader: the same mesh view bindings (lights, shadow maps, prepass depth). A spot whose cone
-//! is outside a camera's frustum is skipped for it; with none in view the pass does not run;
-//! pixels outside a spot's projected bounding rectangle skip it.
+//! is outside a camera's frustum is skipped for it, and pixels outside its projected bounding
+//! rectangle skip it; with no cone in view the pass only dims the surfaces (none at all in a
+//! transparent medium).
 //! **Not yet**: per-tile light culling, a reduced resolution, the seed's plane-slicing method and the
 //! comparison with Bevy's fog. Use an `Hdr` camera: the in-scatter is added in linear light.
 //! [`reference`] is the exact CPU ground truth.

@@ -136,8 +136,11 @@ pub struct VolumetricUniforms(pub DynamicUniformBuffer<VolumetricUniform>);
 pub struct ViewVolumetricUniformOffset {
     /// Dynamic offset.
     pub offset: u32,
-    /// Spots whose cones are in the view's frustum (0: the pass does not run).
+    /// Spots whose cones are in the view's frustum.
     pub spots: u32,
+    /// Whether the medium dims what lies behind it (σt > 0): then the pass runs even with no
+    /// cone in view, so that surfaces do not brighten when the last spot leaves the view.
+    pub dims: bool,
 }
 
 fn finite_at_least(v: f32, min: f32, default: f32) -> (f32, bool) {
@@ -348,6 +351,7 @@ pub fn prepare_volumetric_uniforms(
         commands.entity(entity).insert(ViewVolumetricUniformOffset {
             offset,
             spots: count as u32,
+            dims: m.scattering + m.absorption > 0.0,
         });
     }
 }
@@ -582,8 +586,8 @@ pub fn volumetric_spots_pass(
     mut ctx: RenderContext,
 ) {
     let (target, mesh_view, pipelines, offset, camera, in_scatter) = view.into_inner();
-    // Nothing to add where no cone is in view.
-    if spots.0.is_empty() || offset.spots == 0 {
+    // Nothing to add or dim: no cone in view and a transparent medium.
+    if (spots.0.is_empty() || offset.spots == 0) && !offset.dims {
         return;
     }
     let (Some(blend_pipeline), Some(volumetric)) = (

@@ -305,21 +305,46 @@ fn volumetric_pass_ran(app: &App) -> bool {
 }
 
 #[test]
-fn the_pass_costs_nothing_when_no_cone_is_in_view() {
+fn surfaces_are_dimmed_by_the_medium_with_or_without_a_cone_in_view() {
     if !gpu_or_skip() {
         return;
     }
-    // A spot whose range ends at the floor: its cone's bounding sphere stays near it.
+    // A spot whose range ends at the floor (its cone's bounding sphere stays near it), and a
+    // camera looking away from it at a white (unlit) wall 6 m away.
     let short = SpotLight {
         range: 6.0,
         ..reference_spot()
     };
-    // Looking away from it.
     let away = Transform::from_xyz(0.0, 1.6, 7.0).looking_at(Vec3::new(0.0, 1.6, 20.0), Vec3::Y);
-    let (mut app, _, _) = spot_scene(short, VolumetricSpot::default(), away);
+    let (mut app, _, target) = spot_scene(short, VolumetricSpot::default(), away);
+    let white = unlit(&mut app, Color::WHITE);
+    let wall = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(Plane3d::new(Vec3::NEG_Z, Vec2::splat(20.0)).mesh());
+    app.world_mut()
+        .spawn((Mesh3d(wall), white, Transform::from_xyz(0.0, 1.6, 13.0)));
+    run(&mut app, 3);
+    let gpu = red(&screenshot(&mut app, &target));
+    // The centre pixel looks straight at the wall: 6 m of medium, σt = 0.11.
+    let centre = gpu[((H / 2) * W + W / 2) as usize];
+    let expected = (-(spot_scene::SCATTERING + spot_scene::ABSORPTION) * 6.0).exp();
+    // Measured 0.5166 against 0.5169 (f16 output); margin 0.002.
+    assert!(
+        (centre - expected).abs() < 0.002,
+        "the wall is dimmed to {centre}, not e^(−σt·6) = {expected}"
+    );
+    assert!(volumetric_pass_ran(&app), "the pass dims with no cone in view");
+    // A transparent medium and no cone in view: nothing to do, no pass.
+    let (mut app, camera, _) = spot_scene(short, VolumetricSpot::default(), away);
+    app.world_mut().entity_mut(camera).insert(VolumetricMedium {
+        scattering: 0.0,
+        absorption: 0.0,
+        ..default()
+    });
     run(&mut app, 5);
-    assert!(!volumetric_pass_ran(&app), "the pass ran with no cone in view");
-    // Looking at it: it runs.
+    assert!(!volumetric_pass_ran(&app), "the pass ran with nothing to add or dim");
+    // Looking at the cone: it runs.
     let towards = Transform::from_xyz(0.0, 1.6, 7.0).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y);
     let (mut app, _, _) = spot_scene(short, VolumetricSpot::default(), towards);
     run(&mut app, 5);
