@@ -14,7 +14,7 @@
 //!
 //! Per pixel, the view ray from the camera to the depth buffer is clipped to each spot's cone
 //! and range, and its in-scatter integrated with `samples` points at **equal angles around the
-//! light** — the change of variable `t = t_c + h tan γ` of [`reference`], which cancels the 1/d²
+//! light** — the change of variable `t = t_c + h tan γ` of [`reference`](mod@reference), which cancels the 1/d²
 //! spike near the light — with extinction along the ray and from the light to each point,
 //! Bevy's angular fall-off and range window, the spot's own shadow map (where it has one) at
 //! every point, and a Henyey–Greenstein phase function; added to
@@ -27,7 +27,7 @@
 //! transparent medium).
 //! **Not yet**: per-tile light culling, a reduced resolution, the seed's plane-slicing method and the
 //! comparison with Bevy's fog. Use an `Hdr` camera: the in-scatter is added in linear light.
-//! [`reference`] is the exact CPU ground truth.
+//! [`reference`](mod@reference) is the exact CPU ground truth.
 
 pub mod reference;
 mod render;
