@@ -41,7 +41,7 @@ use bevy::{
 };
 use bevy_mesostructure::volumetric::{
     VolumetricMedium, VolumetricResolution, VolumetricSpot, VolumetricSpotsPlugin,
-    reference::{Occluder, Sampling},
+    reference::Occluder,
 };
 use spot_scene::{ABSORPTION, EV100, SCATTERING};
 
@@ -331,7 +331,7 @@ fn truth(size: UVec2, g: f32, shadowed: bool) -> (Vec<f64>, Vec<bool>) {
         g,
         occluders,
         Some(&volume),
-        (Sampling::EqualAngle, 1),
+        None,
     );
     (t.exact, t.tip)
 }

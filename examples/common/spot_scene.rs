@@ -79,9 +79,9 @@ fn slabs(o: DVec3, d: DVec3, b: &Occluder) -> (f64, f64) {
 }
 
 /// Per pixel of a `size` view from `eye` (`world_from_clip` its inverse view-projection): the
-/// exact fog-only radiance (exposure applied) in a medium of asymmetry `g`, the `n`-sample
-/// estimate with `sampling` (the CPU mirror of a pass), and whether the ray passes within 15°
-/// of the light.
+/// exact fog-only radiance (exposure applied) in a medium of asymmetry `g`, where asked the
+/// `n`-sample estimate with `sampling` (the CPU mirror of a pass; empty otherwise), and
+/// whether the ray passes within 15° of the light.
 pub struct Truth {
     pub exact: Vec<f64>,
     pub estimate: Vec<f64>,
@@ -95,7 +95,7 @@ pub fn truth(
     g: f32,
     occluders: &[Occluder],
     volume: Option<&Occluder>,
-    (sampling, n): (Sampling, u32),
+    estimator: Option<(Sampling, u32)>,
 ) -> Truth {
     let spot = reference::SpotLight {
         position: SPOT_POSITION.as_dvec3(),
@@ -136,8 +136,11 @@ pub fn truth(
             };
             t.exact
                 .push(reference::in_scattered(&ray, &spot, &medium, occluders) * exposure);
-            t.estimate
-                .push(reference::estimate(&ray, &spot, &medium, occluders, sampling, n) * exposure);
+            if let Some((sampling, n)) = estimator {
+                t.estimate.push(
+                    reference::estimate(&ray, &spot, &medium, occluders, sampling, n) * exposure,
+                );
+            }
             t.tip.push(dir.dot(to_light).acos().to_degrees() < 15.0);
         }
     }

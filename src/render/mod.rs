@@ -86,6 +86,35 @@ pub(crate) fn view_texture(
     )
 }
 
+/// A 1×1 image holding `data`: what a pass binds where a view has no image of its own (an
+/// "open" occlusion, "no mesostructure here", a write-only sink).
+pub(crate) fn one_texel(
+    device: &RenderDevice,
+    queue: &RenderQueue,
+    label: &'static str,
+    format: TextureFormat,
+    usage: TextureUsages,
+    data: &[u8],
+) -> TextureView {
+    device
+        .create_texture_with_data(
+            queue,
+            &TextureDescriptor {
+                label: Some(label),
+                size: UVec2::ONE.to_extents(),
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            },
+            TextureDataOrder::default(),
+            data,
+        )
+        .create_view(&TextureViewDescriptor::default())
+}
+
 /// Usage of an image a compute pass writes and later passes (and captures) read.
 pub(crate) const STORAGE_IMAGE: TextureUsages = TextureUsages::STORAGE_BINDING
     .union(TextureUsages::TEXTURE_BINDING)

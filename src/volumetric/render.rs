@@ -387,6 +387,7 @@ pub fn init_volumetric_pipeline(
     mut commands: Commands,
     asset_server: Res<AssetServer>,
     device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
 ) {
     let layout = BindGroupLayoutDescriptor::new(
         "volumetric_spots_layout",
@@ -398,18 +399,14 @@ pub fn init_volumetric_pipeline(
             ),
         ),
     );
-    let no_in_scatter = device
-        .create_texture(&TextureDescriptor {
-            label: Some("volumetric_no_in_scatter"),
-            size: Extent3d::default(),
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: TextureDimension::D2,
-            format: IN_SCATTER_FORMAT,
-            usage: TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        })
-        .create_view(&TextureViewDescriptor::default());
+    let no_in_scatter = crate::render::one_texel(
+        &device,
+        &queue,
+        "volumetric_no_in_scatter",
+        IN_SCATTER_FORMAT,
+        TextureUsages::TEXTURE_BINDING,
+        &[0u8; 8],
+    );
     commands.insert_resource(VolumetricSpotsPipeline {
         layout,
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "spots.wgsl"),

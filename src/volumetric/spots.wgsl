@@ -120,6 +120,30 @@ fn spot_visibility(spot: Spot, x: vec3<f32>, l: vec3<f32>, frag_coord: vec2<f32>
 }
 
 // In-scattered radiance of one spot along the ray over [t_a, t_b].
+// The ray over [t_a, t_b] in the spot's equal-angle variable, t = t_c + h tan γ: the closest
+// approach t_c, the distance h, and the angles of the part inside the cone and range (g_b ≤ g_a
+// where there is none).
+struct EqualAngleSpan {
+    t_c: f32,
+    h: f32,
+    g_a: f32,
+    g_b: f32,
+}
+
+fn equal_angle_span(spot: Spot, o: vec3<f32>, d: vec3<f32>, t_a: f32, t_b: f32) -> EqualAngleSpan {
+    var e: EqualAngleSpan;
+    let span = clip_to_light(spot, o, d, t_a, t_b);
+    if span.y <= span.x {
+        return e;
+    }
+    let p = spot.position_range.xyz;
+    e.t_c = dot(p - o, d);
+    e.h = max(length(p - o - d * e.t_c), 1e-5);
+    e.g_a = atan((span.x - e.t_c) / e.h);
+    e.g_b = atan((span.y - e.t_c) / e.h);
+    return e;
+}
+
 fn in_scattered(
     spot: Spot,
     o: vec3<f32>,
@@ -128,17 +152,16 @@ fn in_scattered(
     t_b: f32,
     frag_coord: vec2<f32>,
 ) -> vec3<f32> {
-    let span = clip_to_light(spot, o, d, t_a, t_b);
-    if span.y <= span.x {
+    let e = equal_angle_span(spot, o, d, t_a, t_b);
+    if e.g_b <= e.g_a {
         return vec3(0.0);
     }
     let p = spot.position_range.xyz;
-    let t_c = dot(p - o, d);
-    let h = max(length(p - o - d * t_c), 1e-5);
-    let g_a = atan((span.x - t_c) / h);
-    let g_b = atan((span.y - t_c) / h);
+    let t_c = e.t_c;
+    let h = e.h;
+    let g_a = e.g_a;
     let n = max(u32(spot.direction_samples.w), 1u);
-    let step = (g_b - g_a) / f32(n);
+    let step = (e.g_b - g_a) / f32(n);
     let sigma_s = volumetric.medium.x;
     let sigma_t = volumetric.medium.x + volumetric.medium.y;
     let range2 = spot.position_range.w * spot.position_range.w;
@@ -227,16 +250,12 @@ fn unshadowed_closed_form(r: ViewRay) -> f32 {
         if !may_cover(spot, r) {
             continue;
         }
-        let span = clip_to_light(spot, r.o, r.d, 0.0, r.t_end);
-        if span.y <= span.x {
+        let e = equal_angle_span(spot, r.o, r.d, 0.0, r.t_end);
+        if e.g_b <= e.g_a {
             continue;
         }
-        let p = spot.position_range.xyz;
-        let t_c = dot(p - r.o, r.d);
-        let h = max(length(p - r.o - r.d * t_c), 1e-5);
-        let angle = atan((span.y - t_c) / h) - atan((span.x - t_c) / h);
         let c = spot.color.rgb;
-        sum += max(c.r, max(c.g, c.b)) * angle / h;
+        sum += max(c.r, max(c.g, c.b)) * (e.g_b - e.g_a) / e.h;
     }
     return sum * volumetric.medium.x / (4.0 * PI) * view.exposure;
 }

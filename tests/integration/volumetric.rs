@@ -124,7 +124,7 @@ fn expected_with(
         G,
         occluders,
         None,
-        (sampling, n),
+        Some((sampling, n)),
     )
 }
 

@@ -111,27 +111,7 @@ pub fn init_lighting_pipeline(
         ),
     );
     let texel = |label, format, usage, data: &[u8]| {
-        device
-            .create_texture_with_data(
-                &queue,
-                &TextureDescriptor {
-                    label: Some(label),
-                    size: Extent3d {
-                        width: 1,
-                        height: 1,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: TextureDimension::D2,
-                    format,
-                    usage,
-                    view_formats: &[],
-                },
-                TextureDataOrder::default(),
-                data,
-            )
-            .create_view(&TextureViewDescriptor::default())
+        super::one_texel(&device, &queue, label, format, usage, data)
     };
     // For frames without a height pass: "no mesostructure here" (an MHM texel with object id
     // 0; all zeros also reads as no bump normal) and "open" occlusion.

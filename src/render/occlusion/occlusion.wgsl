@@ -175,8 +175,12 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     let n_form = n;
 #endif
     var maxima: surface::SectorMaxima;
+    // Eq. (6) with a record to store needs a second set of horizons, about n0; without one,
+    // n is n0 and `maxima` already holds them.
 #ifdef OCCLUSION_FORM_PAPER
+#ifdef SECTOR_HORIZONS
     var sin_h_core: array<vec4<f32>, 2>;
+#endif
 #endif
 #ifdef HORIZON_SEARCH
     // The baseline's AO needs no apex distances either.
@@ -204,7 +208,9 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
         let sector = sector_of(o);
         surface::raise_sector_horizon(&maxima, sector, clamp(dot(d, n) / len, 0.0, 1.0), i);
 #ifdef OCCLUSION_FORM_PAPER
+#ifdef SECTOR_HORIZONS
         surface::raise_sector_maximum(&sin_h_core, sector, clamp(dot(d, n0) / len, 0.0, 1.0));
+#endif
 #endif
     }
 #ifdef SECTOR_HORIZONS
@@ -215,7 +221,11 @@ fn occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
     textureStore(occlusion_out, p, vec4<f32>(horizon_search(p, size, sp, n_form)));
 #else
 #ifdef OCCLUSION_FORM_PAPER
+#ifdef SECTOR_HORIZONS
     var visibility = surface::sectors_visibility(sin_h_core, true);
+#else
+    var visibility = surface::sectors_visibility(maxima.sin_h, true);
+#endif
 #else
     var visibility = surface::sectors_visibility(maxima.sin_h, false);
 #endif
