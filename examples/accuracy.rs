@@ -649,13 +649,6 @@ fn read_rows(files: &[PathBuf], size: &mut u32) -> Vec<Row> {
 /// the mean FLIP of the shaded picture (right).
 fn draw_chart(rows: &[Row], path: &PathBuf) {
     use plotters::prelude::*;
-    plotters::style::register_font(
-        "sans-serif",
-        FontStyle::Normal,
-        epaint_default_fonts::UBUNTU_LIGHT,
-    )
-    .map_err(|_| ())
-    .expect("the font registers");
     let series_of = |metric: &dyn Fn(&Row) -> f64| {
         let mut series: Vec<(&str, Vec<(f64, f64)>)> = vec![];
         for method in ["none", "bevy-ssao", "horizon-search", "mesostructure"] {
@@ -683,11 +676,7 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
         }
         series
     };
-    let (w, h) = (1400u32, 520u32);
-    let mut buffer = vec![0u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
-        root.fill(&WHITE).expect("draw");
+    common::chart::save(1400, 520, path, |root| {
         let panels = root.split_evenly((1, 2));
         let metrics: [(&str, &str, &dyn Fn(&Row) -> f64); 2] = [
             (
@@ -729,32 +718,11 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
                 .expect("draw");
             for (i, (method, points)) in series.iter().enumerate() {
                 let color = [BLACK, BLUE, GREEN, RED][i % 4].to_rgba();
-                chart
-                    .draw_series(LineSeries::new(
-                        points.iter().copied(),
-                        color.stroke_width(2),
-                    ))
-                    .expect("draw")
-                    .label(*method)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
-                chart
-                    .draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))
-                    .expect("draw");
+                common::chart::line_with_points(&mut chart, method, points, color);
             }
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .label_font(("sans-serif", 14))
-                .draw()
-                .expect("draw");
+            common::chart::legend(&mut chart);
         }
-        root.present().expect("draw");
-    }
-    image::RgbImage::from_raw(w, h, buffer)
-        .expect("w × h pixels")
-        .save(path)
-        .expect("cannot write the chart");
+    });
 }
 
 /// The settings a `--variants` name stands for.

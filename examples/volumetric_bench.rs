@@ -14,10 +14,10 @@
 //! CSV header: `scene,method,setting,width,height,gpu_ms,rel_l1,rmse,tip_rel_l1,adapter`
 //! (`tip_rel_l1`: the pixels whose ray passes within 15° of the light).
 
+#[path = "common/mod.rs"]
+mod common;
 #[path = "common/frame_timer.rs"]
 mod frame_timer;
-#[path = "common/headless.rs"]
-mod headless;
 #[path = "common/spot_scene.rs"]
 mod spot_scene;
 
@@ -51,8 +51,8 @@ const EYE: Vec3 = Vec3::new(0.0, 1.6, 7.0);
 #[derive(clap::Parser)]
 #[command(long_about = None)]
 struct Cli {
-    /// Picture size, WxH
-    #[arg(long, default_value = "256x144", value_parser = parse_size)]
+    /// Picture size, N or WxH
+    #[arg(long, default_value = "256x144", value_parser = common::parse_size)]
     size: UVec2,
     /// Frames timed per run (after 5 of warm-up)
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..))]
@@ -79,18 +79,7 @@ struct Row {
 /// Per scene, GPU time against relative L1 (log scale) of each method's settings.
 fn draw_chart(rows: &[Row], path: &PathBuf) {
     use plotters::prelude::*;
-    plotters::style::register_font(
-        "sans-serif",
-        FontStyle::Normal,
-        epaint_default_fonts::UBUNTU_LIGHT,
-    )
-    .map_err(|_| ())
-    .expect("the font registers");
-    let (w, h) = (1200u32, 480u32);
-    let mut buffer = vec![0u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
-        root.fill(&WHITE).expect("draw");
+    common::chart::save(1200, 480, path, |root| {
         for (panel, scene) in root.split_evenly((1, 2)).iter().zip(["unshadowed", "shadowed"]) {
             let of_scene: Vec<&Row> = rows.iter().filter(|r| r.scene == scene).collect();
             let max_x = of_scene.iter().map(|r| r.gpu_ms).fold(1e-3, f64::max) * 1.1;
@@ -112,47 +101,18 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
                 .into_iter()
                 .enumerate()
             {
-                let color = [RED, MAGENTA, BLUE][i].to_rgba();
                 let mut points: Vec<(f64, f64)> = of_scene
                     .iter()
                     .filter(|r| r.method == method)
                     .map(|r| (r.gpu_ms.max(0.0), r.rel_l1.max(1e-4)))
                     .collect();
                 points.sort_by(|a, b| a.0.total_cmp(&b.0));
-                chart
-                    .draw_series(LineSeries::new(points.iter().copied(), color.stroke_width(2)))
-                    .expect("draw")
-                    .label(method)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
-                chart
-                    .draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))
-                    .expect("draw");
+                let color = [RED, MAGENTA, BLUE][i].to_rgba();
+                common::chart::line_with_points(&mut chart, method, &points, color);
             }
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .label_font(("sans-serif", 14))
-                .draw()
-                .expect("draw");
+            common::chart::legend(&mut chart);
         }
-        root.present().expect("draw");
-    }
-    image::RgbImage::from_raw(w, h, buffer)
-        .expect("w × h pixels")
-        .save(path)
-        .expect("cannot write the chart");
-}
-
-fn parse_size(s: &str) -> Result<UVec2, String> {
-    let (w, h) = s
-        .split_once('x')
-        .ok_or_else(|| format!("{s:?} is not WxH"))?;
-    let parse = |v: &str| v.parse::<u32>().ok().filter(|&n| n > 0);
-    match (parse(w), parse(h)) {
-        (Some(w), Some(h)) => Ok(UVec2::new(w, h)),
-        _ => Err(format!("{s:?} is not WxH with positive numbers")),
-    }
+    });
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -170,7 +130,7 @@ enum Method {
 fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec<f32>, f64, String) {
     let mut app = App::new();
     app.add_plugins((
-        headless::headless_plugins().disable::<bevy::log::LogPlugin>(),
+        common::headless_plugins().disable::<bevy::log::LogPlugin>(),
         VolumetricSpotsPlugin,
         frame_timer::FrameTimerPlugin,
     ))

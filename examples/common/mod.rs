@@ -5,6 +5,7 @@
 
 #![allow(dead_code)] // Each example uses its own part of it.
 
+pub mod chart;
 pub mod headless;
 pub mod meshes;
 pub mod panel;
