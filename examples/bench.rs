@@ -54,7 +54,8 @@ use bevy::{
 use bevy_mesostructure::prelude::*;
 
 /// The plugin's passes, in frame order.
-const PASSES: [&str; 7] = [
+const PASSES: [&str; 8] = [
+    "height_raster",
     "height",
     "gradient",
     "apex",
@@ -258,6 +259,12 @@ fn measure(config: Config, run: Run, frames: usize, warm_up: usize) -> (Vec<(Str
     }
     let times = app.world().resource::<frame_timer::FrameGpuTimes>();
     let times = times.0.lock().expect("frame timer lock");
+    if !times.lead_ms.is_empty() {
+        println!(
+            "  frame timer: lead {:.1} ms (median; the GPU idles on nothing inside the bracket)",
+            percentile(&tail(&times.lead_ms), 0.5)
+        );
+    }
     for (name, values) in [
         ("frame", &times.frame_ms),
         ("bevy/deferred_lighting", &times.deferred_lighting_ms),

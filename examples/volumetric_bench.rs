@@ -243,14 +243,15 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
             *s.lock().unwrap() = Some(ev.image.clone());
         });
     let mut shot = None;
-    for _ in 0..10 {
+    // (At 1920×1080 the screenshot's readback can take more than ten frames to arrive.)
+    for _ in 0..60 {
         app.update();
         if let Some(image) = slot.lock().unwrap().take() {
             shot = Some(image);
             break;
         }
     }
-    let shot = shot.expect("no screenshot after 10 frames");
+    let shot = shot.expect("no screenshot after 60 frames");
     let red = spot_scene::red(&shot);
     let mut times = app
         .world()

@@ -143,10 +143,13 @@ impl Plugin for MesostructurePlugin {
             .add_systems(
                 PostUpdate,
                 (
-                    material::prepare_mesostructure_materials,
-                    material::adapt_standard_materials,
-                )
-                    .chain(),
+                    (
+                        material::prepare_mesostructure_materials,
+                        material::adapt_standard_materials,
+                    )
+                        .chain(),
+                    render::bleeding::request_storage_main_textures,
+                ),
             );
         render::build(app);
     }

@@ -40,7 +40,7 @@ pub struct CapturedFrame {
     pub height: u32,
     /// MHM: (height·k, NDC depth, object id, dis) per pixel, row-major.
     pub mhm: Vec<[f32; 4]>,
-    /// Core normal n0 (world space) and 1.
+    /// Core normal n0 (world space) and the height pass's parameter set of the pixel.
     pub core_normal: Vec<[f32; 4]>,
     /// MHGM: (∂h/∂x, ∂h/∂y, h, flags).
     pub mhgm: Vec<[f32; 4]>,
@@ -412,16 +412,12 @@ pub fn map_captures(
             }
         });
         let floats = |bytes: Vec<u8>| -> Vec<[f32; 4]> { bytemuck::cast_slice(&bytes).to_vec() };
-        let halves: Vec<u16> = bytemuck::cast_slice(&read(&device, &readbacks[1], size.y)).to_vec();
         let stats: Vec<u32> = bytemuck::cast_slice(&read(&device, &readbacks[4], 1)).to_vec();
         let frame = CapturedFrame {
             width: size.x,
             height: size.y,
             mhm: floats(read(&device, &readbacks[0], size.y)),
-            core_normal: halves
-                .chunks_exact(4)
-                .map(|c| std::array::from_fn(|i| crate::height_map_import::half_to_f32(c[i])))
-                .collect(),
+            core_normal: floats(read(&device, &readbacks[1], size.y)),
             mhgm: floats(read(&device, &readbacks[2], size.y)),
             apex_sets: bytemuck::cast_slice(&read(&device, &readbacks[3], 1)).to_vec(),
             apex_stride,

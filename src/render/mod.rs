@@ -1,9 +1,11 @@
 //! The render-world side: per-view working images, the passes and their ordering.
 //!
 //! Per camera with [`Mesostructure`], each frame, between Bevy's prepass and main pass:
-//! [`height`] (raster, custom phase) → [`gradient`] (compute) → [`apex`] (compute) →
+//! [`height`] (a raster half in a custom phase, then a compute half) → [`gradient`] (compute) →
+//! [`apex`] (compute) →
 //! [`occlusion`] (compute); in the main pass, [`lighting`] before Bevy's deferred lighting and
-//! [`bleeding`] between the opaque and transparent passes; the [`debug_view`] pass draws over
+//! [`bleeding`] (compute; it writes the view's next main image) between the opaque and
+//! transparent passes; the [`debug_view`] pass draws over
 //! the output after tonemapping when a debug view is chosen.
 //!
 //! Each pass's folder owns its pipeline, the images it writes (a component per view, e.g.
@@ -260,6 +262,7 @@ pub(crate) fn build(app: &mut App) {
                     apex::prepare_apex_bind_group,
                     occlusion::prepare_occlusion_bind_group,
                     debug_view::prepare_debug_view_bind_group,
+                    height::prepare_height_bind_group,
                 )
                     .in_set(RenderSystems::PrepareBindGroups),
                 capture::map_captures
@@ -271,6 +274,7 @@ pub(crate) fn build(app: &mut App) {
             Core3d,
             (
                 height::height_pass,
+                height::height_compute_pass,
                 gradient::gradient_pass,
                 apex::apex_pass,
                 occlusion::occlusion_pass,

@@ -212,6 +212,50 @@ fn a_coloured_bump_tints_its_shadowed_groove_and_grey_stays_grey() {
     );
 }
 
+/// The gather writes lit + bleeding into the view's next main image itself (compute, Bevy's
+/// post-process ping-pong) where the camera's main images allow storage writes, which the plugin
+/// asks for; where a camera's usages leave that out, the fullscreen draw composites it. Both
+/// pictures match to one 8-bit step everywhere, and the fallback's picture still carries the
+/// bleeding (its grooves lose red when bleeding is turned off).
+#[test]
+fn the_compute_composite_and_its_raster_fallback_draw_the_same_picture() {
+    if !gpu_or_skip() {
+        return;
+    }
+    use bevy::camera::CameraMainTextureUsages;
+    use bevy::render::render_resource::TextureUsages;
+    let map = HeightMap::bricks(256, 4, 0.2);
+    let (mut app, camera, target, frame) = bricks_scene(
+        &map,
+        0.1,
+        25.0,
+        Some(([220, 20, 20], [255, 255, 255])),
+        Mesostructure::default(),
+    );
+    let usages = |app: &App| app.world().get::<CameraMainTextureUsages>(camera).unwrap().0;
+    assert!(usages(&app).contains(TextureUsages::STORAGE_BINDING), "the plugin asks for storage");
+    let compute = crate::lighting::pixels(&screenshot(&mut app, &target));
+    app.world_mut()
+        .entity_mut(camera)
+        .insert(CameraMainTextureUsages::default());
+    assert!(!usages(&app).contains(TextureUsages::STORAGE_BINDING));
+    run(&mut app, 2);
+    let (raster, off) =
+        crate::lighting::before_and_after(&mut app, camera, &target, |m| m.bleeding = false);
+    let worst = compute
+        .iter()
+        .zip(&raster)
+        .flat_map(|(a, b)| (0..3).map(move |c| (a[c] as i32 - b[c] as i32).abs()))
+        .max()
+        .unwrap();
+    eprintln!("compute against raster composite: largest difference {worst} (8-bit)");
+    assert!(worst <= 1, "the two composites differ by {worst}");
+    let (_, grooves) = groove_bleeding(&frame);
+    let red_gain: i32 = grooves.iter().map(|&i| raster[i][0] as i32 - off[i][0] as i32).sum();
+    eprintln!("raster composite: grooves gain R {red_gain} over {} pixels", grooves.len());
+    assert!(red_gain > 2 * grooves.len() as i32, "the fallback adds the bleeding");
+}
+
 #[test]
 fn bleeding_holds_its_measured_error_against_the_one_bounce_ground_truth() {
     if !gpu_or_skip() {

@@ -7,7 +7,9 @@
 // face away from P, or that nearer samples hide, give nothing. S's radiance is its lit colour in
 // the opaque image (one bounce: direct, ambient and emitted light of S). Written:
 // λd · ρ_P / π · E_P, the radiance added to P. Only blocked directions are gathered, which is
-// eq. (2)'s (1 − V).
+// eq. (2)'s (1 − V). With WRITE_VIEW_TARGET the pass also writes the view's next main image:
+// the lit image plus the bleeding, every pixel (Bevy's post-process ping-pong), so no
+// fullscreen fragment pass composites it (fragment work is the scarce kind on some GPUs).
 
 #import bevy_render::view::View
 #import bevy_pbr::pbr_deferred_types::{unpack_unorm4x8_, unpack_flags, DEFERRED_FLAGS_UNLIT_BIT}
@@ -29,6 +31,10 @@
 // The occlusion pass's sector record of each pixel (`surface.wgsl`): N', each sector's horizon
 // and the apex that sets it.
 @group(0) @binding(9) var sector_horizons: texture_2d<u32>;
+#ifdef WRITE_VIEW_TARGET
+// The view's other main image, which becomes its main image after this pass.
+@group(0) @binding(10) var view_out: texture_storage_2d<rgba16float, write>;
+#endif
 
 const PI: f32 = 3.141592653589793;
 
@@ -64,10 +70,21 @@ fn bleeding(@builtin(global_invocation_id) id: vec3<u32>) {
     if !on_screen(p, size) {
         return;
     }
+    var added = vec3(0.0);
     if textureLoad(mhm, p, 0).z == 0.0 {
         textureStore(bleeding_out, p, vec4(0.0));
-        return;
+    } else {
+        added = gather(p, size);
+        textureStore(bleeding_out, p, vec4(added, 1.0));
     }
+#ifdef WRITE_VIEW_TARGET
+    let here = textureLoad(lit, p, 0);
+    textureStore(view_out, p, vec4(here.rgb + added, here.a));
+#endif
+}
+
+// The bleeding radiance added to mesostructure pixel `p`.
+fn gather(p: vec2<i32>, size: vec2<i32>) -> vec3<f32> {
     let albedo = diffuse_albedo(p);
     let base = apex_base(settings, p, size);
     let apexes = apex_set_of(mhm, settings, p, apex_sets[base], base);
@@ -132,6 +149,5 @@ fn bleeding(@builtin(global_invocation_id) id: vec3<u32>) {
     if settings.texture_space_horizons != 0u && texture_space >= 0.0 && gathered > 1e-4 {
         irradiance *= max(1.0 - texture_space, 0.0) / gathered;
     }
-    let bleeding = settings.weights.z * albedo / PI * irradiance;
-    textureStore(bleeding_out, p, vec4(bleeding, 1.0));
+    return settings.weights.z * albedo / PI * irradiance;
 }

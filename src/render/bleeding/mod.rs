@@ -73,8 +73,12 @@ pub struct BleedingPipeline {
     /// Lit image, MHM, core normals, bump normals, apex sets, G-buffer, bleeding (storage),
     /// settings, view, sector records.
     pub gather_layout: BindGroupLayoutDescriptor,
-    /// The gather pipeline.
+    /// The gather pipeline, for views composited by the fullscreen draw.
     pub gather: CachedComputePipelineId,
+    /// `gather_layout` and the view's next main image (storage).
+    pub gather_to_view_layout: BindGroupLayoutDescriptor,
+    /// The gather that also writes the view's next main image (`WRITE_VIEW_TARGET`).
+    pub gather_to_view: CachedComputePipelineId,
     /// Bleeding, MHM.
     pub composite_layout: BindGroupLayoutDescriptor,
     fullscreen: FullscreenShader,
@@ -89,28 +93,47 @@ pub fn init_bleeding_pipeline(
     fullscreen: Res<FullscreenShader>,
 ) {
     let float = || texture_2d(TextureSampleType::Float { filterable: false });
+    let entries = (
+        float(),
+        float(),
+        float(),
+        float(),
+        storage_buffer_read_only_sized(false, None),
+        texture_2d(TextureSampleType::Uint),
+        texture_storage_2d(BLEEDING_FORMAT, StorageTextureAccess::WriteOnly),
+        uniform_buffer::<MesostructureUniform>(true),
+        uniform_buffer::<ViewUniform>(true),
+        texture_2d(TextureSampleType::Uint),
+    );
     let gather_layout = BindGroupLayoutDescriptor::new(
         "mesostructure_bleeding_gather_layout",
+        &BindGroupLayoutEntries::sequential(ShaderStages::COMPUTE, entries),
+    );
+    let gather_to_view_layout = BindGroupLayoutDescriptor::new(
+        "mesostructure_bleeding_gather_to_view_layout",
         &BindGroupLayoutEntries::sequential(
             ShaderStages::COMPUTE,
-            (
-                float(),
-                float(),
-                float(),
-                float(),
-                storage_buffer_read_only_sized(false, None),
-                texture_2d(TextureSampleType::Uint),
-                texture_storage_2d(BLEEDING_FORMAT, StorageTextureAccess::WriteOnly),
-                uniform_buffer::<MesostructureUniform>(true),
-                uniform_buffer::<ViewUniform>(true),
-                texture_2d(TextureSampleType::Uint),
-            ),
+            {
+                let (a, b, c, d, e, f, g, h, i, j) = entries;
+                let view_out =
+                    texture_storage_2d(VIEW_TARGET_FORMAT, StorageTextureAccess::WriteOnly);
+                (a, b, c, d, e, f, g, h, i, j, view_out)
+            },
         ),
     );
+    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "bleeding.wgsl");
     let gather = pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
         label: Some("mesostructure_bleeding_gather_pipeline".into()),
         layout: vec![gather_layout.clone()],
-        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "bleeding.wgsl"),
+        shader: shader.clone(),
+        entry_point: Some("bleeding".into()),
+        ..default()
+    });
+    let gather_to_view = pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
+        label: Some("mesostructure_bleeding_gather_to_view_pipeline".into()),
+        layout: vec![gather_to_view_layout.clone()],
+        shader,
+        shader_defs: vec!["WRITE_VIEW_TARGET".into()],
         entry_point: Some("bleeding".into()),
         ..default()
     });
@@ -121,6 +144,8 @@ pub fn init_bleeding_pipeline(
     commands.insert_resource(BleedingPipeline {
         gather_layout,
         gather,
+        gather_to_view_layout,
+        gather_to_view,
         composite_layout,
         fullscreen: fullscreen.clone(),
         composite_shader: bevy::asset::load_embedded_asset!(
@@ -217,8 +242,14 @@ pub fn bleeding_pass(
     {
         return;
     }
+    let to_view = composites_in_compute(target);
+    let gather_id = if to_view {
+        pipeline.gather_to_view
+    } else {
+        pipeline.gather
+    };
     let (Some(gather), Some(_), Some(settings), Some(view_binding), Some(gbuffer)) = (
-        pipeline_cache.get_compute_pipeline(pipeline.gather),
+        pipeline_cache.get_compute_pipeline(gather_id),
         pipeline_cache.get_render_pipeline(composite.0),
         uniforms.0.binding(),
         view_uniforms.uniforms.binding(),
@@ -227,22 +258,39 @@ pub fn bleeding_pass(
         return;
     };
     let device = ctx.render_device().clone();
-    let gather_group = device.create_bind_group(
-        "mesostructure_bleeding_gather_bind_group",
-        &pipeline_cache.get_bind_group_layout(&pipeline.gather_layout),
-        &BindGroupEntries::sequential((
-            target.main_texture_view(),
+    let entries = |lit| {
+        (
+            lit,
             &height.mhm.default_view,
             &height.core_normal.default_view,
             &height.bump_normal.default_view,
             apex.sets.as_entire_binding(),
             gbuffer,
             &bleeding.0.default_view,
-            settings,
-            view_binding,
+            settings.clone(),
+            view_binding.clone(),
             &occlusion_outputs.sector_horizons.default_view,
-        )),
-    );
+        )
+    };
+    let gather_group = if to_view {
+        // Bevy's post-process ping-pong: read the lit image, write lit + bleeding into the
+        // other main image, which becomes the view's main image.
+        let post = target.post_process_write();
+        device.create_bind_group(
+            "mesostructure_bleeding_gather_to_view_bind_group",
+            &pipeline_cache.get_bind_group_layout(&pipeline.gather_to_view_layout),
+            &BindGroupEntries::sequential({
+                let (a, b, c, d, e, f, g, h, i, j) = entries(post.source);
+                (a, b, c, d, e, f, g, h, i, j, post.destination)
+            }),
+        )
+    } else {
+        device.create_bind_group(
+            "mesostructure_bleeding_gather_bind_group",
+            &pipeline_cache.get_bind_group_layout(&pipeline.gather_layout),
+            &BindGroupEntries::sequential(entries(target.main_texture_view())),
+        )
+    };
     dispatch_per_pixel(
         &mut ctx,
         "mesostructure/bleeding",
@@ -254,6 +302,33 @@ pub fn bleeding_pass(
     );
     if let Some(capture) = capture {
         super::capture::copy_bleeding(&mut ctx, &device, &mut pending, capture, &bleeding.0);
+    }
+}
+
+/// The format of the view's main image that the gather can write itself (Bevy's HDR format).
+const VIEW_TARGET_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
+
+/// Whether the gather writes the view's main image itself (compute) rather than a fullscreen
+/// draw adding the bleeding to it: where the main images are HDR and allow storage writes
+/// (the plugin asks for that on its cameras: [`request_storage_main_textures`]).
+fn composites_in_compute(target: &ViewTarget) -> bool {
+    target.main_texture_format() == VIEW_TARGET_FORMAT
+        && target.main_texture().usage().contains(TextureUsages::STORAGE_BINDING)
+        && target.main_texture_other().usage().contains(TextureUsages::STORAGE_BINDING)
+}
+
+/// Main world, for each camera given [`Mesostructure`](crate::Mesostructure): lets its main
+/// images be written by compute passes, so that the bleeding gather composites itself. Once,
+/// when the component is added: a camera whose usages are set afterwards without
+/// `STORAGE_BINDING` keeps the fullscreen composite.
+pub fn request_storage_main_textures(
+    mut cameras: Query<
+        &mut bevy::camera::CameraMainTextureUsages,
+        Added<crate::Mesostructure>,
+    >,
+) {
+    for mut usages in &mut cameras {
+        usages.0 |= TextureUsages::STORAGE_BINDING;
     }
 }
 
@@ -275,9 +350,11 @@ pub fn bleeding_composite_pass(
     mut ctx: RenderContext,
 ) {
     let (extracted_view, target, height, bleeding, composite, occlusion) = view.into_inner();
-    // As the gather: nothing to add before the sector records exist.
+    // As the gather: nothing to add before the sector records exist; nothing left to add
+    // where the gather wrote the view's image itself.
     if !view_has_mesostructure(&phases, extracted_view)
         || !sector_records_stored(&pipeline_cache, occlusion)
+        || composites_in_compute(target)
     {
         return;
     }

@@ -1,31 +1,51 @@
-// Height pass (paper §2.1, eq. 7): per visible pixel of a mesostructure mesh, the height
-// `dis · k` fetched through the UVs, the NDC depth, the object id and the core normal n0.
-// The vertex stage is Bevy's mesh vertex shader, so skinned, morphed and CPU-deformed meshes
-// land exactly on their prepass depth.
+// Height pass, compute half (paper §2.1, eq. 7; seed 003): per mesostructure pixel, the height
+// `dis · k` fetched through the UVs the raster half stored, the Blinn bump normal N', and the
+// texture-space occlusion and light visibility from the material's horizon map. All the
+// texture work runs here, not in the raster half's fragment shader: on GPUs with few pixel-
+// shader units (an H100 runs fragment work ~30x slower than compute) it had cost 15-43 ms a
+// 1080p frame (docs/bench.md). The screen derivatives the fragment stage had from its quads are
+// taken here from neighbouring pixels of the same object (the quad partner, as hardware coarse
+// derivatives do; the other side where the partner is another object or across a UV seam).
+// One dispatch per parameter set (height map, horizon map, k, bump flag); the first also
+// clears the MHM of pixels without a mesostructure surface.
 
-#import bevy_pbr::forward_io::VertexOutput
-#import bevy_pbr::mesh_view_bindings::lights
+#import bevy_render::view::View
+#import bevy_pbr::mesh_view_types::Lights
 
-struct HeightMaterial {
-    // Columns of the 2×2 UV matrix: (x_axis.x, x_axis.y, y_axis.x, y_axis.y).
-    uv_axes: vec4<f32>,
-    uv_translation: vec2<f32>,
+// (u, v, NDC depth, object id) from the raster half; id 0: no mesostructure.
+@group(0) @binding(0) var surface: texture_2d<f32>;
+// (n0 in world space, parameter set index) from the raster half.
+@group(0) @binding(1) var core_normal: texture_2d<f32>;
+// MHM: (dis · k in world units, NDC depth, object id, dis).
+@group(0) @binding(2) var mhm_out: texture_storage_2d<rgba32float, write>;
+// (N' by Blinn bump mapping in world space, or 0 where the material has a normal map;
+// texture-space occlusion, or −1 where none).
+@group(0) @binding(3) var bump_out: texture_storage_2d<rgba16float, write>;
+// Texture-space visibility of the first directional light, or −1 where none.
+@group(0) @binding(4) var visibility_out: texture_storage_2d<r32float, write>;
+@group(0) @binding(5) var<uniform> view: View;
+@group(0) @binding(6) var<uniform> lights: Lights;
+
+struct HeightParameters {
+    // k, world units.
     scale: f32,
-    object_id: f32,
     // 1: write the Blinn bump normal; 0: the material has its own normal map.
     bump: f32,
+    // The index the raster half writes into the core normal's w for this set.
+    index: f32,
+    spare: f32,
 }
 
-@group(3) @binding(0) var height_mips: texture_2d<f32>;
-@group(3) @binding(1) var<uniform> material: HeightMaterial;
+@group(1) @binding(0) var height_mips: texture_2d<f32>;
 // Texture-space horizon map (`HorizonMap` in height_map_import.rs), HORIZON_BLOCKS blocks wide:
 // the highest slope towards azimuths 4b … 4b + 3 in block b (i · 360° / HORIZON_AZIMUTHS in
 // texel space; height per UV unit of distance), per distance band (see `HorizonMap::to_image`),
 // then the height gradient per UV unit.
-@group(3) @binding(2) var horizons: texture_2d<f32>;
+@group(1) @binding(1) var horizons: texture_2d<f32>;
 // The texel steps (1 … 32) at which those slopes are reached, one byte each, laid out as the
 // slopes but without the gradient block (`HorizonMap::distance_image`).
-@group(3) @binding(3) var horizon_distances: texture_2d<u32>;
+@group(1) @binding(2) var horizon_distances: texture_2d<u32>;
+@group(1) @binding(3) var<uniform> material: HeightParameters;
 
 const PI: f32 = 3.141592653589793;
 // Azimuths of the horizon map (`height_map_import::HORIZON_AZIMUTHS`, a multiple of 4): per
@@ -35,16 +55,6 @@ const AZIMUTH_BLOCKS: i32 = i32(HORIZON_AZIMUTHS / 4u);
 // Distance bands (`height_map_import::HORIZON_BANDS`).
 const HORIZON_BANDS: i32 = #{HORIZON_BANDS};
 const HORIZON_BLOCKS: i32 = HORIZON_BANDS * AZIMUTH_BLOCKS + 1;
-
-struct HeightOutput {
-    // (dis · k in world units, NDC depth, object id, dis)
-    @location(0) mhm: vec4<f32>,
-    // (n0 in world space, texture-space visibility of the first directional light, or −1)
-    @location(1) core_normal: vec4<f32>,
-    // (N' by Blinn bump mapping in world space, or 0 where the material has a normal map;
-    // texture-space occlusion, or −1)
-    @location(2) bump_normal: vec4<f32>,
-}
 
 fn height_texel(p: vec2<i32>, level: i32, size: vec2<i32>) -> f32 {
     // Repeat addressing: height maps tile. The UVs come in wrapped to [0, 1), so a tap is at
@@ -325,17 +335,89 @@ fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_p
     return mix(magnified_terms, minified_terms, minified);
 }
 
-@fragment
-fn fragment(in: VertexOutput) -> HeightOutput {
-#ifdef VERTEX_UVS_A
-    let uv = mat2x2<f32>(material.uv_axes.xy, material.uv_axes.zw) * in.uv + material.uv_translation;
-#else
-    let uv = vec2<f32>(0.0);
-#endif
+// The core point of pixel `p` (no height): its NDC depth back to the world.
+fn core_point(p: vec2<i32>, depth: f32) -> vec3<f32> {
+    let uv = (vec2<f32>(p) + 0.5 - view.viewport.xy) / view.viewport.zw;
+    let world = view.world_from_clip * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
+    return world.xyz / world.w;
+}
+
+// What the fragment stage's dpdx/dpdy gave: the change of the UV, the core point and the core
+// normal from pixel `p` to the next along screen axis `axis`.
+struct Difference {
+    uv: vec2<f32>,
+    position: vec3<f32>,
+    normal: vec3<f32>,
+    valid: bool,
+}
+
+// The difference towards neighbour `q` (forward when `sign` is 1, backward when −1), valid
+// where `q` is on screen and of the same object.
+fn difference_to(p: vec2<i32>, q: vec2<i32>, sign: f32, here: vec4<f32>, n: vec3<f32>, sp: vec3<f32>) -> Difference {
+    var d: Difference;
+    let size = vec2<i32>(textureDimensions(surface));
+    if any(q < vec2(0)) || any(q >= size) {
+        return d;
+    }
+    let there = textureLoad(surface, q, 0);
+    if there.w != here.w {
+        return d;
+    }
+    d.uv = (there.xy - here.xy) * sign;
+    d.position = (core_point(q, there.z) - sp) * sign;
+    d.normal = (textureLoad(core_normal, q, 0).xyz - n) * sign;
+    d.valid = true;
+    return d;
+}
+
+// The screen derivative along `axis` ((1, 0) or (0, 1)): towards the quad partner, as hardware
+// coarse derivatives are taken, unless the partner is another object or lies across a UV seam
+// (a UV step over 4× the other side's); then towards the other side.
+fn screen_derivative(p: vec2<i32>, axis: vec2<i32>, here: vec4<f32>, n: vec3<f32>, sp: vec3<f32>) -> Difference {
+    // Even pixels' partner is the next one, odd pixels' the previous one.
+    let odd = (dot(p, axis) & 1) == 1;
+    let partner_sign = select(1.0, -1.0, odd);
+    let partner = difference_to(p, p + axis * i32(partner_sign), partner_sign, here, n, sp);
+    let other = difference_to(p, p - axis * i32(partner_sign), -partner_sign, here, n, sp);
+    if partner.valid && (!other.valid || dot(partner.uv, partner.uv) <= 16.0 * dot(other.uv, other.uv)) {
+        return partner;
+    }
+    return other;
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn height(@builtin(global_invocation_id) id: vec3<u32>) {
+    let p = vec2<i32>(id.xy);
+    let size = vec2<i32>(textureDimensions(surface));
+    if any(p >= size) {
+        return;
+    }
+    let here = textureLoad(surface, p, 0);
+    let normal = textureLoad(core_normal, p, 0);
+    if here.w == 0.0 {
+        // No mesostructure: the MHM needs no clear of its own, the first set's dispatch writes
+        // "none" (id 0) here.
+        if material.index == 0.0 {
+            textureStore(mhm_out, p, vec4(0.0));
+        }
+        return;
+    }
+    if normal.w != material.index {
+        return;
+    }
+    let uv = here.xy;
+    let n = normal.xyz;
+    let has_normal = dot(n, n) > 0.5;
+    let sp = core_point(p, here.z);
+    let x = screen_derivative(p, vec2(1, 0), here, n, sp);
+    let y = screen_derivative(p, vec2(0, 1), here, n, sp);
+    let duv1 = x.uv;
+    let duv2 = y.uv;
+
     // Mip selection from the pixel footprint in texels (trilinear), as the hardware would.
     let size0 = vec2<f32>(textureDimensions(height_mips, 0));
-    let dx = dpdx(uv) * size0;
-    let dy = dpdy(uv) * size0;
+    let dx = duv1 * size0;
+    let dy = duv2 * size0;
     let rho2 = max(dot(dx, dx), dot(dy, dy));
     let last = f32(textureNumLevels(height_mips) - 1u);
     let lod = clamp(0.5 * log2(max(rho2, 1e-12)), 0.0, last);
@@ -356,59 +438,52 @@ fn fragment(in: VertexOutput) -> HeightOutput {
     // − Fv (n × Pu), oriented like n. Pu and Pv, the surface's derivatives along the texture
     // axes, come from the screen derivatives of the position and the UVs (no tangents needed);
     // Fu and Fv from central differences of neighbouring texels at the level sampled.
-    let dp1 = dpdx(in.world_position.xyz);
-    let dp2 = dpdy(in.world_position.xyz);
-    let duv1 = dpdx(uv);
-    let duv2 = dpdy(uv);
     var bump = vec3<f32>(0.0);
     // The texture-space occlusion and first directional light's visibility; −1 where they
     // could not be computed (no UV derivatives), which the later passes read as "none".
     var texture_occlusion = -1.0;
     var texture_visibility = -1.0;
-#ifdef VERTEX_NORMALS
-    let n = normalize(in.world_normal);
-    // The normal's change per UV unit, from its screen derivatives like pu and pv: the core's
-    // curvature, which lowers (convex) or raises (concave) the texture-space horizons.
-    let dn1 = dpdx(n);
-    let dn2 = dpdy(n);
     let det = duv1.x * duv2.y - duv1.y * duv2.x;
-    // Texels of level 0 per pixel along the footprint's longer axis.
-    let texels_per_pixel = sqrt(rho2);
-    // The surface's derivatives along the texture axes (world per UV unit), for the bump and
-    // the texture-space horizons alike.
-    let pu = (dp1 * duv2.y - dp2 * duv1.y) / det;
-    let pv = (dp2 * duv1.x - dp1 * duv2.x) / det;
+    if has_normal && x.valid && y.valid && abs(det) > 1e-12 {
+        let dp1 = x.position;
+        let dp2 = y.position;
+        // The surface's derivatives along the texture axes (world per UV unit), for the bump
+        // and the texture-space horizons alike.
+        // Kept in the core's tangent plane: positions rebuilt from depth carry rounding that
+        // would tilt Pu × Pv off n (most at grazing views), which the fragment stage's exact
+        // interpolants did not.
+        let pu_raw = (dp1 * duv2.y - dp2 * duv1.y) / det;
+        let pv_raw = (dp2 * duv1.x - dp1 * duv2.x) / det;
+        let pu = pu_raw - n * dot(pu_raw, n);
+        let pv = pv_raw - n * dot(pv_raw, n);
 #ifdef TEXTURE_SPACE_HORIZONS
-    if abs(det) > 1e-12 {
+        // The normal's change per UV unit: the core's curvature, which lowers (convex) or
+        // raises (concave) the texture-space horizons.
+        let dn1 = x.normal;
+        let dn2 = y.normal;
         let has_light = lights.n_directional_lights > 0u;
         let to_light = select(vec3(0.0, 0.0, 1.0), lights.directional_lights[0].direction_to_light, has_light);
         let nu = (dn1 * duv2.y - dn2 * duv1.y) / det;
         let nv = (dn2 * duv1.x - dn1 * duv2.x) / det;
         let core = CoreFrame(n, pu, pv, nu, nv, material.scale);
+        // Texels of level 0 per pixel along the footprint's longer axis.
+        let texels_per_pixel = sqrt(rho2);
         let terms = footprint_terms(uv, duv1, duv2, texels_per_pixel, core, has_light, to_light);
         texture_occlusion = terms.x;
         texture_visibility = select(-1.0, terms.y, has_light);
-    }
 #endif
-    if material.bump > 0.0 && abs(det) > 1e-12 {
-        // Central differences over two texels of level l0, per UV unit.
-        let fu = material.scale * taps.across.x * taps.size.x * 0.5;
-        let fv = material.scale * taps.across.y * taps.size.y * 0.5;
-        let bumped = blinn_normal(n, pu, pv, fu, fv);
-        let len = length(bumped);
-        if len > 0.0 {
-            bump = bumped / len;
+        if material.bump > 0.0 {
+            // Central differences over two texels of level l0, per UV unit.
+            let fu = material.scale * taps.across.x * taps.size.x * 0.5;
+            let fv = material.scale * taps.across.y * taps.size.y * 0.5;
+            let bumped = blinn_normal(n, pu, pv, fu, fv);
+            let len = length(bumped);
+            if len > 0.0 {
+                bump = bumped / len;
+            }
         }
     }
-#endif
-
-    var out: HeightOutput;
-    out.bump_normal = vec4<f32>(bump, texture_occlusion);
-    out.mhm = vec4<f32>(dis * material.scale, in.position.z, material.object_id, dis);
-#ifdef VERTEX_NORMALS
-    out.core_normal = vec4<f32>(normalize(in.world_normal), texture_visibility);
-#else
-    out.core_normal = vec4<f32>(0.0, 0.0, 0.0, -1.0);
-#endif
-    return out;
+    textureStore(mhm_out, p, vec4<f32>(dis * material.scale, here.z, here.w, dis));
+    textureStore(bump_out, p, vec4<f32>(bump, texture_occlusion));
+    textureStore(visibility_out, p, vec4<f32>(texture_visibility));
 }

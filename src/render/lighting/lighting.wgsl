@@ -36,6 +36,8 @@
 @group(2) @binding(4) var<uniform> settings: MesostructureUniform;
 @group(2) @binding(5) var bump_normal: texture_2d<f32>;
 @group(2) @binding(6) var micro_shadow_out: texture_storage_2d<r32float, write>;
+// The height pass's texture-space visibility of the first directional light (−1: none).
+@group(2) @binding(7) var texture_visibility: texture_2d<f32>;
 
 // What the micro-shadow test needs of a pixel, whatever the light: its surface point, and the
 // normal N' with the horizon of each azimuth sector, as the occlusion pass stored them.
@@ -184,7 +186,8 @@ fn direct_terms(in: PbrInput, p: vec2<i32>) -> DirectTerms {
         add_light(&terms, lighting::spot_light(id, &input, true), shadow, visible);
     }
     // The height pass's texture-space visibility of the first directional light (−1: none).
-    let texture_visible = textureLoad(core_normal, p, 0).w;
+    let visibility_size = vec2<i32>(textureDimensions(texture_visibility));
+    let texture_visible = textureLoad(texture_visibility, min(p, visibility_size - 1), 0).r;
     for (var i = 0u; i < lights.n_directional_lights; i++) {
         var visible = micro_shadow(h, lights.directional_lights[i].direction_to_light);
         if micro && i == 0u && settings.texture_space_horizons != 0u && texture_visible >= 0.0 {

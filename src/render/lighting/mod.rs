@@ -107,6 +107,7 @@ pub fn init_lighting_pipeline(
                 uniform_buffer::<crate::render::view_settings::MesostructureUniform>(true),
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 texture_storage_2d(MICRO_SHADOW_FORMAT, StorageTextureAccess::WriteOnly),
+                texture_2d(TextureSampleType::Float { filterable: false }),
             ),
         ),
     );
@@ -227,6 +228,7 @@ pub fn lighting_pass(
         Res<super::gradient::GradientPipeline>,
         Res<super::apex::ApexPipeline>,
     ),
+    height_compute: Res<super::height::HeightComputePipeline>,
     mut ctx: RenderContext,
 ) {
     let (
@@ -272,13 +274,21 @@ pub fn lighting_pass(
         Some(o) if settings.0.needs_sector_horizons() => &o.sector_horizons.default_view,
         _ => &lighting.open_horizons,
     };
-    let (mhm, core_normal, bump_normal) = match height {
-        Some(h) => (
+    // The height pass's compute half (texture-space visibility) compiles in the background
+    // too: until it has, "visible".
+    let height_computed = compiled(if settings.0.texture_space_horizons {
+        height_compute.texture_space_horizons
+    } else {
+        height_compute.screen_space_only
+    });
+    let (mhm, core_normal, bump_normal, texture_visibility) = match height {
+        Some(h) if height_computed => (
             &h.mhm.default_view,
             &h.core_normal.default_view,
             &h.bump_normal.default_view,
+            &h.texture_visibility.default_view,
         ),
-        None => (&lighting.empty, &lighting.empty, &lighting.empty),
+        _ => (&lighting.empty, &lighting.empty, &lighting.empty, &lighting.open),
     };
     let micro_shadow = micro_shadow.map_or(&lighting.no_micro_shadow, |t| &t.0.default_view);
     let group_2 = ctx.render_device().create_bind_group(
@@ -292,6 +302,7 @@ pub fn lighting_pass(
             settings_binding,
             bump_normal,
             micro_shadow,
+            texture_visibility,
         )),
     );
     let diagnostics = ctx.diagnostic_recorder();
