@@ -7,7 +7,9 @@
 // taken here from neighbouring pixels of the same object (the quad partner, as hardware coarse
 // derivatives do; the other side where the partner is another object or across a UV seam).
 // One dispatch per parameter set (height map, horizon map, k, bump flag); the first also
-// clears the MHM of pixels without a mesostructure surface.
+// writes "none" into the MHM of pixels without a mesostructure surface. Nothing is cleared:
+// a texel of the raster half is this frame's where Bevy's prepass left a mesostructure
+// material (its deferred lighting pass id) at that texel's depth.
 
 #import bevy_render::view::View
 #import bevy_pbr::mesh_view_types::Lights
@@ -25,6 +27,9 @@
 @group(0) @binding(4) var visibility_out: texture_storage_2d<r32float, write>;
 @group(0) @binding(5) var<uniform> view: View;
 @group(0) @binding(6) var<uniform> lights: Lights;
+// Bevy's prepass depth and deferred lighting pass ids: which raster texels are this frame's.
+@group(0) @binding(7) var prepass_depth: texture_depth_2d;
+@group(0) @binding(8) var lighting_pass_id: texture_2d<u32>;
 
 struct HeightParameters {
     // k, world units.
@@ -335,6 +340,17 @@ fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_p
     return mix(magnified_terms, minified_terms, minified);
 }
 
+// Whether the raster half drew texel `s` of pixel `q` this frame (it is never cleared): Bevy's
+// prepass left a mesostructure material there, at this depth (the raster half passes only
+// where its depth is the prepass's; a hair of slack for vertex shaders compiled apart).
+fn drawn_this_frame(q: vec2<i32>, s: vec4<f32>) -> bool {
+    if s.w == 0.0 || textureLoad(lighting_pass_id, q, 0).r != #{MESOSTRUCTURE_LIGHTING_PASS_ID}u {
+        return false;
+    }
+    let d = textureLoad(prepass_depth, q, 0);
+    return s.z >= d && s.z - d <= d * 1.0e-5 + 1.0e-12;
+}
+
 // The core point of pixel `p` (no height): its NDC depth back to the world.
 fn core_point(p: vec2<i32>, depth: f32) -> vec3<f32> {
     let uv = (vec2<f32>(p) + 0.5 - view.viewport.xy) / view.viewport.zw;
@@ -360,7 +376,7 @@ fn difference_to(p: vec2<i32>, q: vec2<i32>, sign: f32, here: vec4<f32>, n: vec3
         return d;
     }
     let there = textureLoad(surface, q, 0);
-    if there.w != here.w {
+    if there.w != here.w || !drawn_this_frame(q, there) {
         return d;
     }
     d.uv = (there.xy - here.xy) * sign;
@@ -394,7 +410,7 @@ fn height(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let here = textureLoad(surface, p, 0);
     let normal = textureLoad(core_normal, p, 0);
-    if here.w == 0.0 {
+    if !drawn_this_frame(p, here) {
         // No mesostructure: the MHM needs no clear of its own, the first set's dispatch writes
         // "none" (id 0) here.
         if material.index == 0.0 {

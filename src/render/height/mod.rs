@@ -54,6 +54,7 @@ use bevy::{
 use nonmax::NonMaxU32;
 
 use super::{STORAGE_IMAGE, view_texture, working_size};
+use bevy::core_pipeline::prepass::ViewPrepassTextures;
 use crate::{
     material::PreparedMesostructure, render::view_settings::ExtractedMesostructure,
     warn_once::WarnedOnce,
@@ -65,7 +66,8 @@ pub(super) fn embed_shaders(app: &mut App) {
     bevy::asset::embedded_asset!(app, "height.wgsl");
 }
 
-/// The raster half's surface image: (u, v, NDC depth, object id); id 0 where no mesostructure.
+/// The raster half's surface image: (u, v, NDC depth, object id). Never cleared: a texel is
+/// this frame's where Bevy's prepass left a mesostructure material at its depth (`height.wgsl`).
 pub const SURFACE_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
 /// MHM: (height·k, NDC depth, object id, dis).
 pub const MHM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
@@ -271,6 +273,8 @@ pub fn init_height_pass_pipeline(
                 texture_storage_2d(TEXTURE_VISIBILITY_FORMAT, StorageTextureAccess::WriteOnly),
                 uniform_buffer::<ViewUniform>(true),
                 uniform_buffer::<GpuLights>(true),
+                texture_depth_2d(),
+                texture_2d(TextureSampleType::Uint),
             ),
         ),
     );
@@ -300,6 +304,10 @@ pub fn init_height_pass_pipeline(
                 "HORIZON_BANDS".into(),
                 crate::height_map_import::HORIZON_BANDS as i32,
             ),
+            bevy::shader::ShaderDefVal::UInt(
+                "MESOSTRUCTURE_LIGHTING_PASS_ID".into(),
+                crate::render::lighting::MESOSTRUCTURE_LIGHTING_PASS_ID as u32,
+            ),
         ];
         if texture_space_horizons {
             shader_defs.push("TEXTURE_SPACE_HORIZONS".into());
@@ -328,7 +336,8 @@ pub struct HeightComputePipeline {
     pub screen_space_only: CachedComputePipelineId,
     /// With them (`Mesostructure::texture_space_horizons`).
     pub texture_space_horizons: CachedComputePipelineId,
-    /// Group 0: surface, core normal, MHM, bump normal and visibility out, view, lights.
+    /// Group 0: surface, core normal, MHM, bump normal and visibility out, view, lights,
+    /// prepass depth, deferred lighting pass ids.
     pub view_layout: BindGroupLayoutDescriptor,
     /// Group 1: one parameter set.
     pub parameter_layout: BindGroupLayoutDescriptor,
@@ -680,8 +689,8 @@ pub fn queue_height_phase(
     }
 }
 
-/// The height pass's raster half: clears the surface image and draws the phase into it and
-/// the core-normal image.
+/// The height pass's raster half: draws the phase into the surface and core-normal images
+/// (clearing neither).
 pub fn height_pass(
     world: &World,
     view: ViewQuery<(
@@ -721,15 +730,14 @@ pub fn height_pass(
                 },
             })
         };
-        // Only the surface image is cleared: its object id (0 = no mesostructure) is what the
-        // compute half checks before it reads a pixel's normal, and this pass writes both
-        // targets wherever it writes an id, so stale normals elsewhere are never read. (The
-        // clears were ~1.2 ms of a 1080p frame on an H100, issue 11.)
-        let clear = LoadOp::Clear(Default::default());
+        // Nothing is cleared (clears were ~1.2 ms of a 1080p frame on an H100, issue 11): the
+        // compute half takes a texel as this frame's only where Bevy's prepass left a
+        // mesostructure material at the texel's depth, and this pass writes both targets
+        // wherever it writes at all.
         let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
             label: Some("mesostructure_height_raster_pass"),
             color_attachments: &[
-                attachment(&textures.surface.default_view, clear),
+                attachment(&textures.surface.default_view, LoadOp::Load),
                 attachment(&textures.core_normal.default_view, LoadOp::Load),
             ],
             depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
@@ -772,7 +780,7 @@ pub fn prepare_height_bind_group(
     pipeline: Res<HeightComputePipeline>,
     view_uniforms: Res<ViewUniforms>,
     light_meta: Res<LightMeta>,
-    views: Query<(Entity, &ViewHeightTextures)>,
+    views: Query<(Entity, &ViewHeightTextures, &ViewPrepassTextures)>,
 ) {
     let (Some(view_binding), Some(lights_binding)) = (
         view_uniforms.uniforms.binding(),
@@ -780,7 +788,17 @@ pub fn prepare_height_bind_group(
     ) else {
         return;
     };
-    for (entity, textures) in &views {
+    for (entity, textures, prepass) in &views {
+        let (Some(depth), Some(pass_ids)) = (
+            prepass.depth_view(),
+            prepass
+                .deferred_lighting_pass_id
+                .as_ref()
+                .map(|t| &t.texture.default_view),
+        ) else {
+            commands.entity(entity).remove::<ViewHeightBindGroup>();
+            continue;
+        };
         let bind_group = device.create_bind_group(
             "mesostructure_height_view_bind_group",
             &pipeline_cache.get_bind_group_layout(&pipeline.view_layout),
@@ -792,6 +810,8 @@ pub fn prepare_height_bind_group(
                 &textures.texture_visibility.default_view,
                 view_binding.clone(),
                 lights_binding.clone(),
+                depth,
+                pass_ids,
             )),
         );
         commands.entity(entity).insert(ViewHeightBindGroup(bind_group));
