@@ -154,20 +154,24 @@ fn groove_bleeding(frame: &CapturedFrame) -> (Vec3, Vec<usize>) {
     (sum / grooves.len().max(1) as f32, grooves)
 }
 
+/// Red bricks, white mortar, a light low enough to shadow the mortar; defaults.
+fn red_bricks_scene(map: &HeightMap) -> (App, Entity, Handle<Image>, CapturedFrame) {
+    bricks_scene(
+        map,
+        0.1,
+        25.0,
+        Some(([220, 20, 20], [255, 255, 255])),
+        Mesostructure::default(),
+    )
+}
+
 #[test]
 fn a_coloured_bump_tints_its_shadowed_groove_and_grey_stays_grey() {
     if !gpu_or_skip() {
         return;
     }
     let map = HeightMap::bricks(256, 4, 0.2);
-    // Red bricks, white mortar, light low enough to shadow the mortar.
-    let (mut app, camera, target, frame) = bricks_scene(
-        &map,
-        0.1,
-        25.0,
-        Some(([220, 20, 20], [255, 255, 255])),
-        Mesostructure::default(),
-    );
+    let (mut app, camera, target, frame) = red_bricks_scene(&map);
     let (red, grooves) = groove_bleeding(&frame);
     eprintln!(
         "red bricks: mean bleeding in {} shadowed groove pixels {red:.4}",
@@ -225,13 +229,7 @@ fn the_compute_composite_and_its_raster_fallback_draw_the_same_picture() {
     use bevy::camera::CameraMainTextureUsages;
     use bevy::render::render_resource::TextureUsages;
     let map = HeightMap::bricks(256, 4, 0.2);
-    let (mut app, camera, target, frame) = bricks_scene(
-        &map,
-        0.1,
-        25.0,
-        Some(([220, 20, 20], [255, 255, 255])),
-        Mesostructure::default(),
-    );
+    let (mut app, camera, target, frame) = red_bricks_scene(&map);
     let usages = |app: &App| app.world().get::<CameraMainTextureUsages>(camera).unwrap().0;
     assert!(usages(&app).contains(TextureUsages::STORAGE_BINDING), "the plugin asks for storage");
     let compute = crate::lighting::pixels(&screenshot(&mut app, &target));
