@@ -28,6 +28,13 @@ struct MesostructureUniform {
     directions: array<vec4<f32>, 8>,
 }
 
+// P0 of pixel p: the core point (no height), its NDC depth back to the world.
+fn core_point(world_from_clip: mat4x4<f32>, viewport: vec4<f32>, p: vec2<i32>, depth: f32) -> vec3<f32> {
+    let uv = (vec2<f32>(p) + 0.5 - viewport.xy) / viewport.zw;
+    let world = world_from_clip * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
+    return world.xyz / world.w;
+}
+
 const FLAG_VALID: u32 = 1u;
 const FLAG_SCREEN_EDGE: u32 = 2u;
 const FLAG_OBJECT_EDGE: u32 = 4u;

@@ -219,6 +219,7 @@ pub(crate) fn build(app: &mut App) {
             RenderStartup,
             (
                 height::init_height_pass_pipeline.after(MeshPipelineSystems),
+                height::init_height_compute_pipeline,
                 gradient::init_gradient_pipeline,
                 apex::init_apex_pipeline,
                 occlusion::init_occlusion_pipeline,

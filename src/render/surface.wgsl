@@ -4,7 +4,7 @@
 // view are parameters, so each pass binds them where its layout has them.
 #define_import_path bevy_mesostructure::surface
 
-#import bevy_mesostructure::common::is_connected
+#import bevy_mesostructure::common::{is_connected, core_point}
 
 // Azimuth sectors of the horizons (`reference::OCCLUSION_SECTORS`).
 const SECTORS: u32 = 8u;
@@ -19,9 +19,7 @@ fn surface_point(
     p: vec2<i32>,
 ) -> vec3<f32> {
     let m = textureLoad(mhm, p, 0);
-    let uv = (vec2<f32>(p) + 0.5 - viewport.xy) / viewport.zw;
-    let world = world_from_clip * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, m.y, 1.0);
-    return world.xyz / world.w + textureLoad(core_normal, p, 0).xyz * m.x;
+    return core_point(world_from_clip, viewport, p, m.y) + textureLoad(core_normal, p, 0).xyz * m.x;
 }
 
 // Derivative of the surface point along one screen axis: central where both neighbours are

@@ -13,6 +13,7 @@
 
 #import bevy_render::view::View
 #import bevy_pbr::mesh_view_types::Lights
+#import bevy_mesostructure::common::core_point
 
 // (u, v, NDC depth, object id) from the raster half; id 0: no mesostructure.
 @group(0) @binding(0) var surface: texture_2d<f32>;
@@ -351,13 +352,6 @@ fn drawn_this_frame(q: vec2<i32>, s: vec4<f32>) -> bool {
     return s.z >= d && s.z - d <= d * 1.0e-5 + 1.0e-12;
 }
 
-// The core point of pixel `p` (no height): its NDC depth back to the world.
-fn core_point(p: vec2<i32>, depth: f32) -> vec3<f32> {
-    let uv = (vec2<f32>(p) + 0.5 - view.viewport.xy) / view.viewport.zw;
-    let world = view.world_from_clip * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
-    return world.xyz / world.w;
-}
-
 // What the fragment stage's dpdx/dpdy gave: the change of the UV, the core point and the core
 // normal from pixel `p` to the next along screen axis `axis`.
 struct Difference {
@@ -380,7 +374,7 @@ fn difference_to(p: vec2<i32>, q: vec2<i32>, sign: f32, here: vec4<f32>, n: vec3
         return d;
     }
     d.uv = (there.xy - here.xy) * sign;
-    d.position = (core_point(q, there.z) - sp) * sign;
+    d.position = (core_point(view.world_from_clip, view.viewport, q, there.z) - sp) * sign;
     d.normal = (textureLoad(core_normal, q, 0).xyz - n) * sign;
     d.valid = true;
     return d;
@@ -409,7 +403,6 @@ fn height(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let here = textureLoad(surface, p, 0);
-    let normal = textureLoad(core_normal, p, 0);
     if !drawn_this_frame(p, here) {
         // No mesostructure: the MHM needs no clear of its own, the first set's dispatch writes
         // "none" (id 0) here.
@@ -418,13 +411,14 @@ fn height(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         return;
     }
+    let normal = textureLoad(core_normal, p, 0);
     if normal.w != material.index {
         return;
     }
     let uv = here.xy;
     let n = normal.xyz;
     let has_normal = dot(n, n) > 0.5;
-    let sp = core_point(p, here.z);
+    let sp = core_point(view.world_from_clip, view.viewport, p, here.z);
     let x = screen_derivative(p, vec2(1, 0), here, n, sp);
     let y = screen_derivative(p, vec2(0, 1), here, n, sp);
     let duv1 = x.uv;

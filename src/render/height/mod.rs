@@ -21,8 +21,7 @@ use bevy::{
     math::FloatOrd,
     mesh::MeshVertexBufferLayoutRef,
     pbr::{
-        DrawMesh, GpuLights, LightMeta, MeshPipeline, MeshPipelineKey, RenderMeshInstances,
-        SetMeshBindGroup, ViewLightsUniformOffset,
+        DrawMesh, MeshPipeline, MeshPipelineKey, RenderMeshInstances, SetMeshBindGroup,
         SetMeshViewBindGroup, SetMeshViewBindingArrayBindGroup, ViewKeyCache,
     },
     platform::collections::{HashMap, HashSet},
@@ -45,16 +44,18 @@ use bevy::{
         renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
         sync_world::MainEntity,
         texture::{CachedTexture, GpuImage, TextureCache},
-        view::{
-            ExtractedView, RenderVisibleEntities, ViewDepthTexture, ViewUniform,
-            ViewUniformOffset, ViewUniforms,
-        },
+        view::{ExtractedView, RenderVisibleEntities, ViewDepthTexture},
     },
 };
 use nonmax::NonMaxU32;
 
 use super::{STORAGE_IMAGE, view_texture, working_size};
-use bevy::core_pipeline::prepass::ViewPrepassTextures;
+
+mod compute;
+pub use compute::{
+    HeightComputePipeline, HeightParameterSet, HeightParametersUniform, height_compute_pass,
+    init_height_compute_pipeline, prepare_height_bind_group,
+};
 use crate::{
     material::PreparedMesostructure, render::view_settings::ExtractedMesostructure,
     warn_once::WarnedOnce,
@@ -218,32 +219,10 @@ pub struct HeightMaterialUniform {
     pub parameter_set: f32,
 }
 
-/// What the compute half samples for one group of meshes (`HeightParameters` in
-/// `height.wgsl`): meshes sharing a height map, horizon map, `k` and bump flag share a set and
-/// one dispatch.
-#[derive(Clone, Copy, ShaderType)]
-pub struct HeightParametersUniform {
-    /// `k`, world units.
-    pub scale: f32,
-    /// 1: write the Blinn bump normal; 0: the material has a normal map of its own.
-    pub bump: f32,
-    /// The set's index, as the raster half writes it into the core normal's `w`.
-    pub index: f32,
-    /// Padding.
-    pub spare: f32,
-}
-
-/// One parameter set of the compute half: its bind group (height mips, horizon map, distances,
-/// parameters).
-pub struct HeightParameterSet {
-    bind_group: BindGroup,
-}
-
 /// Builds the height-pass pipeline from Bevy's mesh pipeline (render startup).
 pub fn init_height_pass_pipeline(
     mut commands: Commands,
     mesh_pipeline: Res<MeshPipeline>,
-    pipeline_cache: Res<PipelineCache>,
     asset_server: Res<AssetServer>,
 ) {
     let material_layout = BindGroupLayoutDescriptor::new(
@@ -261,86 +240,6 @@ pub fn init_height_pass_pipeline(
         ),
         material_layout,
     });
-    let view_layout = BindGroupLayoutDescriptor::new(
-        "mesostructure_height_view_layout",
-        &BindGroupLayoutEntries::sequential(
-            ShaderStages::COMPUTE,
-            (
-                texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_storage_2d(MHM_FORMAT, StorageTextureAccess::WriteOnly),
-                texture_storage_2d(BUMP_NORMAL_FORMAT, StorageTextureAccess::WriteOnly),
-                texture_storage_2d(TEXTURE_VISIBILITY_FORMAT, StorageTextureAccess::WriteOnly),
-                uniform_buffer::<ViewUniform>(true),
-                uniform_buffer::<GpuLights>(true),
-                texture_depth_2d(),
-                texture_2d(TextureSampleType::Uint),
-            ),
-        ),
-    );
-    let parameter_layout = BindGroupLayoutDescriptor::new(
-        "mesostructure_height_parameter_layout",
-        &BindGroupLayoutEntries::sequential(
-            ShaderStages::COMPUTE,
-            (
-                texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_2d(TextureSampleType::Uint),
-                uniform_buffer::<HeightParametersUniform>(false),
-            ),
-        ),
-    );
-    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "height.wgsl");
-    // One pipeline per key (as Bevy keys its SSAO): the texture-space horizons compiled in or
-    // out.
-    let specialize = |texture_space_horizons: bool| {
-        let mut shader_defs = vec![
-            // The horizon map's layout, from the one definition in `height_map_import`.
-            bevy::shader::ShaderDefVal::UInt(
-                "HORIZON_AZIMUTHS".into(),
-                crate::height_map_import::HORIZON_AZIMUTHS as u32,
-            ),
-            bevy::shader::ShaderDefVal::Int(
-                "HORIZON_BANDS".into(),
-                crate::height_map_import::HORIZON_BANDS as i32,
-            ),
-            bevy::shader::ShaderDefVal::UInt(
-                "MESOSTRUCTURE_LIGHTING_PASS_ID".into(),
-                crate::render::lighting::MESOSTRUCTURE_LIGHTING_PASS_ID as u32,
-            ),
-        ];
-        if texture_space_horizons {
-            shader_defs.push("TEXTURE_SPACE_HORIZONS".into());
-        }
-        pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
-            label: Some("mesostructure_height_pipeline".into()),
-            layout: vec![view_layout.clone(), parameter_layout.clone()],
-            shader: shader.clone(),
-            shader_defs,
-            entry_point: Some("height".into()),
-            ..default()
-        })
-    };
-    commands.insert_resource(HeightComputePipeline {
-        screen_space_only: specialize(false),
-        texture_space_horizons: specialize(true),
-        view_layout,
-        parameter_layout,
-    });
-}
-
-/// The height pass's compute pipelines and layouts.
-#[derive(Resource)]
-pub struct HeightComputePipeline {
-    /// Without the texture-space horizons.
-    pub screen_space_only: CachedComputePipelineId,
-    /// With them (`Mesostructure::texture_space_horizons`).
-    pub texture_space_horizons: CachedComputePipelineId,
-    /// Group 0: surface, core normal, MHM, bump normal and visibility out, view, lights,
-    /// prepass depth, deferred lighting pass ids.
-    pub view_layout: BindGroupLayoutDescriptor,
-    /// Group 1: one parameter set.
-    pub parameter_layout: BindGroupLayoutDescriptor,
 }
 
 /// The raster half's key: Bevy's mesh key (vertex layout, view).
@@ -530,24 +429,19 @@ pub fn prepare_height_material_bind_groups(
         );
         let parameter_set = *set_of.entry(key).or_insert_with(|| {
             let index = groups.parameter_sets.len();
-            let mut parameters = UniformBuffer::from(HeightParametersUniform {
-                scale: prepared.scale,
-                bump: prepared.bump as u32 as f32,
-                index: index as f32,
-                spare: 0.0,
-            });
-            parameters.write_buffer(&device, &queue);
-            let bind_group = device.create_bind_group(
-                "mesostructure_height_parameter_bind_group",
+            let set = HeightParameterSet::new(
+                &device,
+                &queue,
                 &parameter_layout,
-                &BindGroupEntries::sequential((
-                    &image.texture_view,
-                    &horizons.texture_view,
-                    &distances.texture_view,
-                    parameters.binding().expect("written above"),
-                )),
+                [image, horizons, distances],
+                HeightParametersUniform {
+                    scale: prepared.scale,
+                    bump: prepared.bump as u32 as f32,
+                    index: index as f32,
+                    spare: 0.0,
+                },
             );
-            groups.parameter_sets.push(HeightParameterSet { bind_group });
+            groups.parameter_sets.push(set);
             index
         });
         let t = prepared.uv_transform;
@@ -766,107 +660,4 @@ pub fn height_pass(
         span.end(&mut pass);
     }
     ctx.command_encoder().pop_debug_group();
-}
-
-/// The compute half's per-view bind group (render `PrepareBindGroups`).
-#[derive(Component)]
-pub struct ViewHeightBindGroup(pub BindGroup);
-
-/// Binds each view's surface, core normal and outputs, its view and lights uniforms.
-pub fn prepare_height_bind_group(
-    mut commands: Commands,
-    device: Res<RenderDevice>,
-    pipeline_cache: Res<PipelineCache>,
-    pipeline: Res<HeightComputePipeline>,
-    view_uniforms: Res<ViewUniforms>,
-    light_meta: Res<LightMeta>,
-    views: Query<(Entity, &ViewHeightTextures, &ViewPrepassTextures)>,
-) {
-    let (Some(view_binding), Some(lights_binding)) = (
-        view_uniforms.uniforms.binding(),
-        light_meta.view_gpu_lights.binding(),
-    ) else {
-        return;
-    };
-    for (entity, textures, prepass) in &views {
-        let (Some(depth), Some(pass_ids)) = (
-            prepass.depth_view(),
-            prepass
-                .deferred_lighting_pass_id
-                .as_ref()
-                .map(|t| &t.texture.default_view),
-        ) else {
-            commands.entity(entity).remove::<ViewHeightBindGroup>();
-            continue;
-        };
-        let bind_group = device.create_bind_group(
-            "mesostructure_height_view_bind_group",
-            &pipeline_cache.get_bind_group_layout(&pipeline.view_layout),
-            &BindGroupEntries::sequential((
-                &textures.surface.default_view,
-                &textures.core_normal.default_view,
-                &textures.mhm.default_view,
-                &textures.bump_normal.default_view,
-                &textures.texture_visibility.default_view,
-                view_binding.clone(),
-                lights_binding.clone(),
-                depth,
-                pass_ids,
-            )),
-        );
-        commands.entity(entity).insert(ViewHeightBindGroup(bind_group));
-    }
-}
-
-/// The height pass's compute half: one dispatch per parameter set over the view, timed as
-/// `mesostructure/height`. (Its own system, so its own command encoder: lavapipe crashes on
-/// debug groups around a render and a compute pass in one encoder.)
-pub fn height_compute_pass(
-    view: ViewQuery<(
-        &ExtractedView,
-        &ViewHeightTextures,
-        &ViewHeightBindGroup,
-        &ViewUniformOffset,
-        &ViewLightsUniformOffset,
-        &ExtractedMesostructure,
-    )>,
-    phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
-    groups: Res<HeightMaterialBindGroups>,
-    pipeline: Res<HeightComputePipeline>,
-    pipeline_cache: Res<PipelineCache>,
-    mut ctx: RenderContext,
-) {
-    let (extracted_view, textures, bind_group, view_offset, lights_offset, settings) =
-        view.into_inner();
-    if !settings.0.needs_height_map() || !super::view_has_mesostructure(&phases, extracted_view) {
-        return;
-    }
-    let id = if settings.0.texture_space_horizons {
-        pipeline.texture_space_horizons
-    } else {
-        pipeline.screen_space_only
-    };
-    let Some(compute) = pipeline_cache.get_compute_pipeline(id) else {
-        return;
-    };
-    let diagnostics = ctx.diagnostic_recorder();
-    let diagnostics = diagnostics.as_deref();
-    let span = diagnostics.time_span(ctx.command_encoder(), "mesostructure/height");
-    let encoder = ctx.command_encoder();
-    encoder.push_debug_group("mesostructure/height");
-    {
-        let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
-            label: Some("mesostructure/height"),
-            timestamp_writes: None,
-        });
-        pass.set_pipeline(compute);
-        pass.set_bind_group(0, &bind_group.0, &[view_offset.offset, lights_offset.offset]);
-        let size = textures.size;
-        for set in &groups.parameter_sets {
-            pass.set_bind_group(1, &set.bind_group, &[]);
-            pass.dispatch_workgroups(size.x.div_ceil(8), size.y.div_ceil(8), 1);
-        }
-    }
-    encoder.pop_debug_group();
-    span.end(ctx.command_encoder());
 }
