@@ -55,6 +55,9 @@
 //! ## Sub-plugins
 //! [`volumetric::VolumetricSpotsPlugin`]: spot lights seen in a homogeneous medium, by
 //! equal-angle single scattering (seed 004), with or without the mesostructure plugin.
+//! [`translucency`]: translucent objects lit globally by seed 001's radiosity with dipole
+//! subsurface transport — so far the CPU precompute (patches, sparse transport with ray-traced
+//! form factors) and its iteration; no plugin yet.
 //!
 //! ## Bad input
 //! Missing or still-loading height maps, unsupported formats, meshes without UVs or normals,
@@ -90,6 +93,7 @@ pub mod material;
 pub mod reference;
 mod render;
 pub mod settings;
+pub mod translucency;
 pub mod volumetric;
 mod warn_once;
 

@@ -228,7 +228,7 @@ fn sphere_crossings(ray: &Ray, p: DVec3, r: f64, (a, b): (f64, f64)) -> Vec<f64>
 }
 
 /// 64-point Gauss–Legendre nodes and weights on [−1, 1] (Newton on the Legendre polynomial).
-fn gauss_legendre_64() -> &'static [(f64, f64)] {
+pub(crate) fn gauss_legendre_64() -> &'static [(f64, f64)] {
     static NODES: std::sync::OnceLock<Vec<(f64, f64)>> = std::sync::OnceLock::new();
     NODES.get_or_init(|| {
         let n = 64;

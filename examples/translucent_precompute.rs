@@ -1,0 +1,143 @@
+//! What seed 001's precompute costs on the CPU, per patch budget: issue 13's scene (a marble
+//! bunny and a skin sphere in a closed room) resampled into patches, the sparse transport built
+//! (form factors with ray-traced visibility, dipole transfer), one frame's light injected and
+//! iterated to convergence. One CSV row per budget.
+//!
+//! ```text
+//! cargo run --example translucent_precompute -- [--budgets 1000,5000] [--kernel dipole|burley]
+//!     [--cutoff 1e-5] [--out docs/translucent-precompute.csv]
+//! ```
+//!
+//! CSV header: `patches,budget,precompute_s,memory_mb,form_factor_entries,scattering_entries,
+//! rays,dropped_form_factor_mean,dropped_form_factor_max,diffusion_kept_r,diffusion_kept_g,
+//! diffusion_kept_b,iterations,solve_ms,threads`
+//! (`memory_mb`: the two CSR matrices as the GPU would hold them; `solve_ms`: the CPU iteration
+//! to a threshold of 1e-3, one thread).
+
+// Only `read_obj` and `asset_path` are used here.
+#[allow(dead_code)]
+#[path = "common/meshes.rs"]
+mod meshes;
+#[path = "common/translucent_scene.rs"]
+mod translucent_scene;
+
+use std::{io::Write, path::PathBuf, time::Instant};
+
+use bevy::prelude::*;
+use bevy_mesostructure::translucency::{
+    DiffusionKernel, EnergyTransport, PatchLight, PatchObject, SceneRays, TransportSettings,
+    direct_irradiance, resample_into_patches,
+};
+
+/// Precompute cost of the translucency transport per patch budget, into a CSV.
+#[derive(clap::Parser)]
+#[command(long_about = None)]
+struct Cli {
+    /// Patch budgets, comma-separated
+    #[arg(long, value_delimiter = ',', default_value = "500,1000,2000,5000",
+          value_parser = clap::value_parser!(u32).range(1..=200_000))]
+    budgets: Vec<u32>,
+    /// Diffusion profile
+    #[arg(long, value_enum, default_value_t = Kernel::Dipole)]
+    kernel: Kernel,
+    /// Form factors below this are dropped (before visibility)
+    #[arg(long, default_value_t = 1e-5)]
+    cutoff: f32,
+    /// CSV to write (stdout as well)
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Kernel {
+    Dipole,
+    Burley,
+}
+
+fn main() {
+    let cli: Cli = clap::Parser::parse();
+    if !(cli.cutoff.is_finite() && cli.cutoff >= 0.0) {
+        eprintln!("error: --cutoff must be a finite number ≥ 0");
+        std::process::exit(2);
+    }
+    let scene = translucent_scene::translucent_room(&meshes::asset_path("meshes/bunny.obj"));
+    let views: Vec<PatchObject> = scene.iter().map(|o| o.view()).collect();
+    let surfaces: Vec<_> = scene.iter().map(|o| o.surface).collect();
+    let settings = TransportSettings {
+        kernel: match cli.kernel {
+            Kernel::Dipole => DiffusionKernel::Dipole,
+            Kernel::Burley => DiffusionKernel::Burley,
+        },
+        form_factor_cutoff: cli.cutoff,
+        ..default()
+    };
+    // A spot from the front-left, aimed at the bunny.
+    let position = Vec3::new(0.2, 0.45, 0.25);
+    let lights = [PatchLight::Spot {
+        position,
+        direction: (Vec3::new(-0.03, 0.04, 0.0) - position).normalize(),
+        intensity: Vec3::splat(800.0 / (4.0 * std::f32::consts::PI)),
+        inner_angle: 0.3,
+        outer_angle: 0.5,
+        range: 10.0,
+    }];
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let header = "patches,budget,precompute_s,memory_mb,form_factor_entries,scattering_entries,rays,\
+dropped_form_factor_mean,dropped_form_factor_max,diffusion_kept_r,diffusion_kept_g,diffusion_kept_b,\
+iterations,solve_ms,threads";
+    let mut lines = vec![header.to_string()];
+    println!("{header}");
+    for &budget in &cli.budgets {
+        let start = Instant::now();
+        let patches = resample_into_patches(&views, budget as usize);
+        let rays = SceneRays::new(&views);
+        let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
+        let precompute = start.elapsed().as_secs_f32();
+        let n = patches.patches.len();
+        let per_object: Vec<String> = scene
+            .iter()
+            .enumerate()
+            .map(|(o, object)| {
+                let count = patches
+                    .patches
+                    .iter()
+                    .filter(|p| p.object == o as u32)
+                    .count();
+                format!("{} {count}", object.name)
+            })
+            .collect();
+        eprintln!("budget {budget}: {}", per_object.join(", "));
+        // CSR as uploaded: offsets + columns (u32) and values (f32 for F, vec4 for K).
+        let bytes = 4 * (2 * (n + 1))
+            + 8 * transport.form_factors.entries()
+            + 20 * transport.scattering.entries();
+        let direct = direct_irradiance(&patches, &lights, &rays);
+        let solve_start = Instant::now();
+        let solution = transport.solve(&direct, 1e-3, 200);
+        let solve_ms = solve_start.elapsed().as_secs_f32() * 1e3;
+        let r = &transport.report;
+        let line = format!(
+            "{n},{budget},{precompute:.3},{:.2},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{solve_ms:.2},{threads}",
+            bytes as f32 / 1e6,
+            r.form_factor_entries,
+            r.scattering_entries,
+            r.rays,
+            r.dropped_form_factor_mean,
+            r.dropped_form_factor_max,
+            r.diffusion_kept_mean.x,
+            r.diffusion_kept_mean.y,
+            r.diffusion_kept_mean.z,
+            solution.iterations,
+        );
+        println!("{line}");
+        lines.push(line);
+    }
+    if let Some(out) = cli.out {
+        let written = std::fs::File::create(&out)
+            .and_then(|mut f| f.write_all((lines.join("\n") + "\n").as_bytes()));
+        if let Err(e) = written {
+            eprintln!("error: cannot write {}: {e}", out.display());
+            std::process::exit(1);
+        }
+    }
+}

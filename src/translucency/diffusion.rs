@@ -1,0 +1,237 @@
+//! Diffusion profiles: the radiant exitance a point of a translucent surface gives off per
+//! unit flux entering at distance `r`, `R_d(r)` (mm⁻²), for a semi-infinite slab of the medium.
+//!
+//! - **Dipole** (Jensen et al. 2001, eq. 4 there; seed 001's kernel): a real source at depth
+//!   `z_r = 1/σt′` and a negative virtual one at `z_v = z_r (1 + 4A/3)` above the surface,
+//!   `R_d(r) = α′/(4π) Σ_{z ∈ {z_r, z_v}} z (σtr d + 1) e^(−σtr d) / d³`, `d = √(r² + z²)`,
+//!   with `σt′ = σa + σs′`, `α′ = σs′/σt′`, `σtr = √(3 σa σt′)`, `A = (1 + F_dr)/(1 − F_dr)`
+//!   and Jensen's fit `F_dr(η) = −1.440/η² + 0.710/η + 0.668 + 0.0636 η`.
+//!   Since `z (σ d + 1) e^(−σ d) / d³ · r = −z · d/dr [e^(−σ d)/d]`, the exitance within a disc
+//!   of radius `R` is closed form: `W(R) = α′/2 Σ z (e^(−σtr z)/z − e^(−σtr d(R))/d(R))`, and
+//!   `W(∞) = α′/2 (e^(−σtr z_r) + e^(−σtr z_v))` is the paper's total diffuse reflectance.
+//! - **Burley** (Christensen and Burley 2015): `R(r) = A s (e^(−s r) + e^(−s r/3)) / (8π r)`,
+//!   `W(R) = A/4 (1 − e^(−s R) + 3 (1 − e^(−s R/3)))`. Here `A` is the dipole's total diffuse
+//!   reflectance (both kernels carry the same energy; they differ in its spread) and
+//!   `s = (3.5 + 100 (A − 0.33)⁴) / ℓ` with `ℓ = 1/σt′` (their fit for the mean free path).
+//!
+//! Light enters through the boundary with the hemispherical transmittance `1 − F_dr,ext(η)`,
+//! integrated from Fresnel's equations ([`diffuse_fresnel_reflectance`]): every light the
+//! transport sees arrives as irradiance, whose directional form the patches do not keep.
+
+use bevy::prelude::*;
+use std::f64::consts::PI;
+
+use super::medium::TranslucentMedium;
+
+/// Which diffusion profile carries light under a translucent surface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Reflect, Default)]
+pub enum DiffusionKernel {
+    /// Jensen et al. 2001's dipole, as seed 001 uses it.
+    #[default]
+    Dipole,
+    /// Christensen and Burley 2015's sum of two exponentials, with the dipole's total
+    /// reflectance.
+    Burley,
+}
+
+/// One colour channel's profile.
+#[derive(Clone, Copy, Debug)]
+enum Channel {
+    Dipole {
+        /// α′ / 2.
+        half_albedo: f64,
+        sigma_tr: f64,
+        z_real: f64,
+        z_virtual: f64,
+    },
+    Burley {
+        albedo: f64,
+        /// Shape `s`, mm⁻¹.
+        s: f64,
+    },
+}
+
+impl Channel {
+    fn reflectance(&self, r: f64) -> f64 {
+        match *self {
+            Channel::Dipole {
+                half_albedo,
+                sigma_tr,
+                z_real,
+                z_virtual,
+            } => {
+                let source = |z: f64| {
+                    let d = (r * r + z * z).sqrt();
+                    z * (sigma_tr * d + 1.0) * (-sigma_tr * d).exp() / (d * d * d)
+                };
+                half_albedo / (2.0 * PI) * (source(z_real) + source(z_virtual))
+            }
+            Channel::Burley { albedo, s } => {
+                let r = r.max(1e-9);
+                albedo * s * ((-s * r).exp() + (-s * r / 3.0).exp()) / (8.0 * PI * r)
+            }
+        }
+    }
+
+    fn within(&self, radius: f64) -> f64 {
+        let radius = radius.max(0.0);
+        match *self {
+            Channel::Dipole {
+                half_albedo,
+                sigma_tr,
+                z_real,
+                z_virtual,
+            } => {
+                let part = |z: f64| {
+                    let d = (radius * radius + z * z).sqrt();
+                    (-sigma_tr * z).exp() - z * (-sigma_tr * d).exp() / d
+                };
+                half_albedo * (part(z_real) + part(z_virtual))
+            }
+            Channel::Burley { albedo, s } => {
+                albedo / 4.0
+                    * ((1.0 - (-s * radius).exp()) + 3.0 * (1.0 - (-s * radius / 3.0).exp()))
+            }
+        }
+    }
+
+    fn total(&self) -> f64 {
+        match *self {
+            Channel::Dipole {
+                half_albedo,
+                sigma_tr,
+                z_real,
+                z_virtual,
+            } => half_albedo * ((-sigma_tr * z_real).exp() + (-sigma_tr * z_virtual).exp()),
+            Channel::Burley { albedo, .. } => albedo,
+        }
+    }
+}
+
+/// Jensen's polynomial fit of the diffuse Fresnel reflectance seen from inside a medium of
+/// relative index `eta` (used for the dipole's boundary condition).
+pub fn jensen_internal_diffuse_reflectance(eta: f64) -> f64 {
+    -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta
+}
+
+/// Unpolarised Fresnel reflectance of a smooth boundary, light arriving from the side of index
+/// 1 at `cos_i` onto index `eta`.
+pub fn fresnel_reflectance(cos_i: f64, eta: f64) -> f64 {
+    let cos_i = cos_i.clamp(0.0, 1.0);
+    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
+    if sin_t2 >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin_t2).sqrt();
+    let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    0.5 * (rs * rs + rp * rp)
+}
+
+/// Hemispherical (cosine-weighted) Fresnel reflectance `2 ∫ F(μ) μ dμ` for light arriving
+/// from the side of index 1 onto index `eta`: the share of diffuse light the boundary turns
+/// away before it enters.
+pub fn diffuse_fresnel_reflectance(eta: f64) -> f64 {
+    // Midpoint rule in μ²; F is smooth for eta > 1 (no critical angle from outside).
+    let n = 4096;
+    (0..n)
+        .map(|k| {
+            let mu2 = (k as f64 + 0.5) / n as f64;
+            fresnel_reflectance(mu2.sqrt(), eta)
+        })
+        .sum::<f64>()
+        / n as f64
+}
+
+/// A medium's diffusion profile per RGB channel, distances in mm.
+#[derive(Clone, Copy, Debug)]
+pub struct DiffusionProfile {
+    channels: [Channel; 3],
+    /// Share of diffuse irradiance that crosses the boundary into the medium.
+    pub entrance_transmittance: f64,
+}
+
+impl DiffusionProfile {
+    /// The profile of `medium` (assumed valid: see [`TranslucentMedium::invalid_reason`]).
+    pub fn new(medium: &TranslucentMedium, kernel: DiffusionKernel) -> Self {
+        let eta = medium.index_of_refraction as f64;
+        let f_dr = jensen_internal_diffuse_reflectance(eta);
+        let a_boundary = (1.0 + f_dr) / (1.0 - f_dr);
+        let channels = std::array::from_fn(|c| {
+            let sigma_a = medium.absorption[c] as f64;
+            let sigma_s = medium.reduced_scattering[c] as f64;
+            let sigma_t = sigma_a + sigma_s;
+            let alpha = sigma_s / sigma_t;
+            let z_real = 1.0 / sigma_t;
+            let dipole = Channel::Dipole {
+                half_albedo: alpha / 2.0,
+                sigma_tr: (3.0 * sigma_a * sigma_t).sqrt(),
+                z_real,
+                z_virtual: z_real * (1.0 + 4.0 * a_boundary / 3.0),
+            };
+            match kernel {
+                DiffusionKernel::Dipole => dipole,
+                DiffusionKernel::Burley => {
+                    let albedo = dipole.total();
+                    Channel::Burley {
+                        albedo,
+                        s: (3.5 + 100.0 * (albedo - 0.33).powi(4)) * sigma_t,
+                    }
+                }
+            }
+        });
+        Self {
+            channels,
+            entrance_transmittance: 1.0 - diffuse_fresnel_reflectance(eta),
+        }
+    }
+
+    /// `R_d(r)`, mm⁻² (exitance per unit flux entering at distance `r` mm).
+    pub fn reflectance(&self, r: f64) -> [f64; 3] {
+        self.channels.map(|c| c.reflectance(r))
+    }
+
+    /// `W(R) = ∫₀^R 2π r R_d(r) dr`: the share of the entering flux that leaves within a disc
+    /// of radius `R` mm about the entry point.
+    pub fn reflectance_within(&self, radius: f64) -> [f64; 3] {
+        self.channels.map(|c| c.within(radius))
+    }
+
+    /// `W(∞)`: the total diffuse reflectance of a semi-infinite slab, per channel.
+    pub fn total_reflectance(&self) -> [f64; 3] {
+        self.channels.map(|c| c.total())
+    }
+
+    /// The smallest radius (mm) within which every channel gives off at least `fraction` of
+    /// its total exitance: the reach of the sparse transport beyond which pairs are dropped.
+    pub fn radius_holding(&self, fraction: f64) -> f64 {
+        let total = self.total_reflectance();
+        let holds = |r: f64| (0..3).all(|c| self.channels[c].within(r) >= fraction * total[c]);
+        let mut hi = 1.0;
+        while !holds(hi) && hi < 1e9 {
+            hi *= 2.0;
+        }
+        let mut lo = 0.0;
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if holds(mid) { hi = mid } else { lo = mid }
+        }
+        hi
+    }
+
+    /// The share of the flux entering at one point that leaves through a patch of area
+    /// `area` (mm²) whose centre is `r` mm away: `W` over the annulus `[r − ρ, r + ρ]` that
+    /// the patch's equal-area disc (radius `ρ`) sweeps, times the patch's part of that annulus,
+    /// `area / (4π r ρ)`. Unlike `R_d(r) · area`, it stays bounded and keeps the energy of
+    /// patches as wide as the profile; at `r ≤ ρ` it is the disc's own `W(ρ)` share.
+    pub fn patch_transfer(&self, r: f64, area: f64) -> [f64; 3] {
+        let rho = (area / PI).sqrt();
+        if r <= rho {
+            return self.reflectance_within(rho);
+        }
+        let outer = self.reflectance_within(r + rho);
+        let inner = self.reflectance_within(r - rho);
+        let share = area / (4.0 * PI * r * rho);
+        std::array::from_fn(|c| (outer[c] - inner[c]) * share)
+    }
+}
