@@ -11,16 +11,102 @@
 //!    below a threshold.
 //! 3. Turn each patch's exitance into the picture.
 //!
-//! What exists so far is the CPU side of steps 1 and 2 — patches, profiles, the sparse
-//! operators and their iteration, the direct light with ray-traced visibility — tested against
-//! the profiles' closed forms, reciprocity, energy conservation in a closed box and a dense
-//! solve. The GPU injection and iteration, the step into Bevy's lighting and the
-//! `TranslucencyPlugin` are not built yet (`docs/translucent.md` says what is measured).
+//! [`TranslucencyPlugin`] runs it in an app: meshes with [`Translucent`] (and opaque ones with
+//! [`RadiosityReceiver`]) are resampled and their transport precomputed on a background task
+//! ([`TranslucencyStatus`]); when a light changes, the direct irradiance of each patch is
+//! found on the CPU (one shadow ray per patch and light; the seed rasterises patch ids in the
+//! light's view instead) and the iteration runs on the GPU (`iteration/`); cameras with
+//! [`TranslucencyCamera`] gather the patches' light per pixel (`gather/`).
+//! `docs/translucent.md` says what is measured and what is not built yet.
 
 pub mod diffusion;
+pub mod gather;
+pub mod iteration;
 pub mod medium;
 pub mod patches;
+mod plugin;
 pub mod transport;
+
+use bevy::{
+    core_pipeline::{
+        Core3dSystems,
+        core_3d::{main_opaque_pass_3d, main_transparent_pass_3d},
+        schedule::Core3d,
+    },
+    prelude::*,
+    render::{
+        Render, RenderApp, RenderStartup, RenderSystems, extract_component::ExtractComponentPlugin,
+        extract_resource::ExtractResourcePlugin, render_resource::SpecializedRenderPipelines,
+    },
+};
+
+pub use gather::TranslucencyCamera;
+pub use plugin::{
+    MAX_PATCH_BUDGET, RadiosityReceiver, Translucent, TranslucencyFrame, TranslucencyScene,
+    TranslucencySettings, TranslucencyStatus, TranslucentMaterials, precompute_elapsed,
+};
+
+/// Translucent objects lit globally (seed 001): [`Translucent`] on static meshes,
+/// [`RadiosityReceiver`] on the opaque ones that bounce light, [`TranslucencyCamera`] on the
+/// cameras that show it, [`TranslucencySettings`] for the scene.
+#[derive(Default)]
+pub struct TranslucencyPlugin;
+
+impl Plugin for TranslucencyPlugin {
+    fn build(&self, app: &mut App) {
+        crate::warn_once::install(app);
+        bevy::asset::embedded_asset!(app, "gather/gather.wgsl");
+        app.register_type::<Translucent>()
+            .register_type::<RadiosityReceiver>()
+            .register_type::<TranslucencyCamera>()
+            .register_type::<TranslucencySettings>()
+            .init_resource::<TranslucencySettings>()
+            .init_resource::<TranslucencyStatus>()
+            .init_resource::<TranslucencyFrame>()
+            .init_resource::<plugin::Precompute>()
+            .add_plugins((
+                ExtractComponentPlugin::<TranslucencyCamera>::default(),
+                ExtractResourcePlugin::<TranslucencyFrame>::default(),
+            ))
+            .add_systems(
+                PostUpdate,
+                (
+                    plugin::prepare_translucent_materials,
+                    plugin::run_precompute,
+                    plugin::inject_direct_light,
+                    plugin::swap_translucent_materials,
+                )
+                    .chain()
+                    .after(TransformSystems::Propagate),
+            );
+        let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+            return;
+        };
+        render_app
+            .init_resource::<gather::TranslucencyGpu>()
+            .init_resource::<SpecializedRenderPipelines<gather::GatherPipeline>>()
+            .add_systems(RenderStartup, gather::init_gather_pipeline)
+            .add_systems(
+                Render,
+                (
+                    gather::prepare_gather_pipelines.in_set(RenderSystems::Prepare),
+                    gather::prepare_translucency.in_set(RenderSystems::PrepareResources),
+                ),
+            )
+            .add_systems(
+                Core3d,
+                (
+                    gather::translucency_iteration_pass
+                        .in_set(Core3dSystems::MainPass)
+                        .before(main_opaque_pass_3d),
+                    gather::translucency_gather_pass
+                        .in_set(Core3dSystems::MainPass)
+                        .after(main_opaque_pass_3d)
+                        .before(main_transparent_pass_3d),
+                ),
+            );
+    }
+}
 
 #[cfg(test)]
 mod tests;

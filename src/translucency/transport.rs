@@ -547,9 +547,10 @@ impl EnergyTransport {
         let mut irradiance = direct.to_vec();
         let mut delta = self.scattering.mul_vec(direct);
         let mut exitance = delta.clone();
-        let first = self.flux(&exitance).max(f32::MIN_POSITIVE);
+        let first = self.flux(&exitance);
         let mut iterations = 0;
-        let mut energy_left = 1.0;
+        // Nothing lit: nothing to iterate.
+        let mut energy_left = if first > 0.0 { 1.0 } else { 0.0 };
         while iterations < max_iterations && energy_left > threshold {
             let gathered = self.gather(&delta);
             for (e, g) in irradiance.iter_mut().zip(&gathered) {

@@ -57,6 +57,11 @@ pub fn bare_app() -> App {
     build_app(false, |_| {})
 }
 
+/// [`bare_app`], with more plugins added by `more` before the app is finished.
+pub fn bare_app_with(more: impl FnOnce(&mut App)) -> App {
+    build_app(false, more)
+}
+
 /// [`app`] on a device created with `limits` as the upper bound of its limits (a smaller GPU).
 pub fn app_with_limits(limits: bevy::render::settings::WgpuLimits) -> App {
     build_app_with(

@@ -13,4 +13,5 @@ mod lighting;
 mod micro_shadows;
 mod stability;
 mod unseen;
+mod translucency;
 mod volumetric;

@@ -1,0 +1,93 @@
+// Seed 001's last step, by per-pixel interpolation of the patches' outgoing radiance: each
+// pixel (world position from the depth prepass, normal from the normal prepass) gathers the
+// patches within a radius R about it through a hashed grid, weighted by distance,
+// (1 − d²/R²)², and by how far their normals agree with its own; translucent patches give
+// their whole exitance B/π (their mesh's material has no diffuse), opaque patches the light
+// they bounce, (B − ρE⁰)/π = ρ(E − E⁰)/π (their direct light is Bevy's). Added to the lit
+// view (additive blending), times the view's exposure as Bevy's lighting is.
+
+#import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
+#import bevy_render::view::View
+
+struct GatherParams {
+    cell_size: f32,
+    radius: f32,
+    table_mask: u32,
+    patches: u32,
+    // Offsets in `vectors` (vec4s) and `grid` (u32 words).
+    direct: u32,
+    exitance: u32,
+    table: u32,
+    members: u32,
+}
+
+struct GatherPatch {
+    centre: vec4<f32>,
+    normal: vec4<f32>,
+    albedo: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> view: View;
+@group(0) @binding(1) var depth_prepass: texture_depth_2d;
+@group(0) @binding(2) var normal_prepass: texture_2d<f32>;
+@group(0) @binding(3) var<uniform> params: GatherParams;
+@group(0) @binding(4) var<storage, read> patches: array<GatherPatch>;
+@group(0) @binding(5) var<storage, read> vectors: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read> grid: array<u32>;
+
+// The grid cell's bucket: `PatchGrid::bucket` in gather/mod.rs.
+fn bucket(cell: vec3<i32>) -> u32 {
+    let c = bitcast<vec3<u32>>(cell);
+    return ((c.x * 73856093u) ^ (c.y * 19349663u) ^ (c.z * 83492791u)) & params.table_mask;
+}
+
+@fragment
+fn gather(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    let p = vec2<i32>(floor(in.position.xy));
+    let depth = textureLoad(depth_prepass, p, 0);
+    if depth <= 0.0 {
+        discard;
+    }
+    let uv = (in.position.xy - view.viewport.xy) / view.viewport.zw;
+    let ndc = vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
+    let world = view.world_from_clip * ndc;
+    let x = world.xyz / world.w;
+    let n = normalize(textureLoad(normal_prepass, p, 0).xyz * 2.0 - 1.0);
+
+    let centre_cell = vec3<i32>(floor(x / params.cell_size));
+    let r2 = params.radius * params.radius;
+    var sum = vec3(0.0);
+    var weights = 0.0;
+    for (var dz = -1; dz <= 1; dz += 1) {
+        for (var dy = -1; dy <= 1; dy += 1) {
+            for (var dx = -1; dx <= 1; dx += 1) {
+                let b = bucket(centre_cell + vec3(dx, dy, dz));
+                let start = grid[params.table + b];
+                let end = grid[params.table + b + 1u];
+                for (var k = start; k < end; k += 1u) {
+                    let i = grid[params.members + k];
+                    let record = patches[i];
+                    let d = record.centre.xyz - x;
+                    let d2 = dot(d, d);
+                    if d2 >= r2 {
+                        continue;
+                    }
+                    let agree = smoothstep(0.3, 0.9, dot(n, record.normal.xyz));
+                    let falloff = 1.0 - d2 / r2;
+                    let w = falloff * falloff * agree;
+                    if w <= 0.0 {
+                        continue;
+                    }
+                    let b_i = vectors[params.exitance + i].rgb;
+                    let e0 = vectors[params.direct + i].rgb;
+                    sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) / 3.14159265358979;
+                    weights += w;
+                }
+            }
+        }
+    }
+    if weights <= 0.0 {
+        discard;
+    }
+    return vec4(sum / weights * view.exposure, 0.0);
+}

@@ -1,0 +1,363 @@
+//! The translucency's render-world passes: the iteration (once a frame, when the lights
+//! changed; `iteration/`) and the gather that puts the patches' light into each view
+//! (`gather.wgsl`, a fullscreen pass added to the lit image).
+
+use std::sync::Arc;
+
+use bevy::{
+    core_pipeline::{FullscreenShader, prepass::ViewPrepassTextures},
+    prelude::*,
+    render::{
+        diagnostic::RecordDiagnostics,
+        render_resource::{binding_types::*, *},
+        renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
+        view::{ViewTarget, ViewUniform, ViewUniformOffset, ViewUniforms},
+    },
+};
+use bytemuck::{Pod, Zeroable};
+
+use super::{
+    iteration::{GpuTransport, IterationLimits},
+    plugin::{TranslucencyFrame, TranslucencyScene},
+};
+
+/// The patches in a hashed grid of cells as wide as the gather radius: a pixel looks in the
+/// 27 cells about it.
+#[derive(Clone, Debug, Default)]
+pub struct PatchGrid {
+    /// Cell width (world units).
+    pub cell_size: f32,
+    /// Bucket `b`'s patches are `members[offsets[b]..offsets[b + 1]]`.
+    pub offsets: Vec<u32>,
+    /// Patch indices by bucket.
+    pub members: Vec<u32>,
+}
+
+impl PatchGrid {
+    /// Buckets a power of two ≥ 4 × the patches (few collisions among the 27 cells looked at).
+    pub fn new(centres: &[Vec3], cell_size: f32) -> Self {
+        let buckets = (centres.len() * 4).next_power_of_two().max(64) as u32;
+        let mask = buckets - 1;
+        let bucket_of: Vec<u32> = centres
+            .iter()
+            .map(|c| Self::bucket((*c / cell_size).floor().as_ivec3(), mask))
+            .collect();
+        let mut offsets = vec![0u32; buckets as usize + 1];
+        for &b in &bucket_of {
+            offsets[b as usize + 1] += 1;
+        }
+        for b in 0..buckets as usize {
+            offsets[b + 1] += offsets[b];
+        }
+        let mut fill = offsets.clone();
+        let mut members = vec![0u32; centres.len()];
+        for (i, &b) in bucket_of.iter().enumerate() {
+            members[fill[b as usize] as usize] = i as u32;
+            fill[b as usize] += 1;
+        }
+        Self { cell_size, offsets, members }
+    }
+
+    /// A cell's bucket: `bucket` in `gather.wgsl`.
+    pub fn bucket(cell: IVec3, mask: u32) -> u32 {
+        let c = cell.as_uvec3();
+        (c.x.wrapping_mul(73_856_093) ^ c.y.wrapping_mul(19_349_663) ^ c.z.wrapping_mul(83_492_791))
+            & mask
+    }
+}
+
+/// `GatherParams` in `gather.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable, ShaderType)]
+struct GatherParams {
+    cell_size: f32,
+    radius: f32,
+    table_mask: u32,
+    patches: u32,
+    direct: u32,
+    exitance: u32,
+    table: u32,
+    members: u32,
+}
+
+/// The gather radius in patch sizes: about two rings of neighbours.
+pub const GATHER_RADIUS_IN_PATCHES: f32 = 1.5;
+
+/// The render world's copy of the scene: the transport on the GPU and the gather's buffers.
+#[derive(Resource, Default)]
+pub struct TranslucencyGpu {
+    scene_generation: u64,
+    direct_generation: u64,
+    /// The lights changed since the last iteration ran.
+    iteration_pending: bool,
+    transport: Option<GpuTransport>,
+    gather: Option<(Buffer, Buffer, Buffer)>,
+}
+
+/// Uploads a new scene and each frame's new direct light (render `PrepareResources`).
+pub fn prepare_translucency(
+    frame: Res<TranslucencyFrame>,
+    mut gpu: ResMut<TranslucencyGpu>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+) {
+    let Some((generation, scene)) = &frame.scene else {
+        *gpu = TranslucencyGpu::default();
+        return;
+    };
+    if gpu.scene_generation != *generation || gpu.transport.is_none() {
+        let limits = IterationLimits {
+            threshold: frame.settings.iteration_threshold.clamp(1e-6, 0.5),
+            max_iterations: frame.settings.max_iterations.clamp(1, 256),
+        };
+        let transport = GpuTransport::new(&device, &scene.transport, limits);
+        gpu.gather = Some(gather_buffers(&device, scene, &transport));
+        gpu.transport = Some(transport);
+        gpu.scene_generation = *generation;
+        gpu.direct_generation = 0;
+    }
+    if let (Some((direct_generation, direct)), Some(transport)) = (&frame.direct, &gpu.transport)
+        && *direct_generation != gpu.direct_generation
+    {
+        transport.write_direct(&queue, direct);
+        gpu.direct_generation = *direct_generation;
+        gpu.iteration_pending = true;
+    }
+}
+
+fn gather_buffers(
+    device: &RenderDevice,
+    scene: &Arc<TranslucencyScene>,
+    transport: &GpuTransport,
+) -> (Buffer, Buffer, Buffer) {
+    let patches = &scene.patches;
+    let size = if patches.patch_size.is_finite() { patches.patch_size } else { 1.0 };
+    let radius = GATHER_RADIUS_IN_PATCHES * size;
+    let centres: Vec<Vec3> = patches.patches.iter().map(|p| p.surface_point).collect();
+    let grid = PatchGrid::new(&centres, radius);
+    let records: Vec<[f32; 12]> = patches
+        .patches
+        .iter()
+        .zip(&scene.albedo)
+        .map(|(p, a)| {
+            [
+                p.surface_point.x, p.surface_point.y, p.surface_point.z, 0.0,
+                p.normal.x, p.normal.y, p.normal.z, 0.0,
+                a.x, a.y, a.z, 0.0,
+            ]
+        })
+        .collect();
+    let mut words = grid.offsets.clone();
+    let members_at = words.len() as u32;
+    words.extend(&grid.members);
+    words.push(0);
+    let (direct, exitance) = transport.vector_offsets();
+    let params = GatherParams {
+        cell_size: radius,
+        radius,
+        table_mask: (grid.offsets.len() - 2) as u32,
+        patches: patches.patches.len() as u32,
+        direct,
+        exitance,
+        table: 0,
+        members: members_at,
+    };
+    let patch_buffer = device.create_buffer_with_data(&BufferInitDescriptor {
+        label: Some("translucency_gather_patches"),
+        contents: bytemuck::cast_slice(&records),
+        usage: BufferUsages::STORAGE,
+    });
+    let grid_buffer = device.create_buffer_with_data(&BufferInitDescriptor {
+        label: Some("translucency_gather_grid"),
+        contents: bytemuck::cast_slice(&words),
+        usage: BufferUsages::STORAGE,
+    });
+    let params_buffer = device.create_buffer_with_data(&BufferInitDescriptor {
+        label: Some("translucency_gather_params"),
+        contents: bytemuck::bytes_of(&params),
+        usage: BufferUsages::UNIFORM,
+    });
+    (patch_buffer, grid_buffer, params_buffer)
+}
+
+/// Core3d system before the opaque pass: iterates the transport when the lights changed (the
+/// first view of the frame does it), timed as `translucency/iteration`.
+pub fn translucency_iteration_pass(
+    _view: ViewQuery<&TranslucencyCamera>,
+    mut gpu: ResMut<TranslucencyGpu>,
+    mut ctx: RenderContext,
+) {
+    if !gpu.iteration_pending {
+        return;
+    }
+    let Some(transport) = &gpu.transport else {
+        return;
+    };
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let span = diagnostics.time_span(ctx.command_encoder(), "translucency/iteration");
+    transport.record(ctx.command_encoder());
+    span.end(ctx.command_encoder());
+    gpu.iteration_pending = false;
+}
+
+/// A camera that shows the translucency: put on a `Camera3d` (with `Msaa::Off`). Brings the
+/// depth and normal prepasses the gather reads.
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, bevy::render::extract_component::ExtractComponent)]
+#[reflect(Component, Default)]
+#[require(
+    bevy::core_pipeline::prepass::DepthPrepass,
+    bevy::core_pipeline::prepass::NormalPrepass
+)]
+pub struct TranslucencyCamera;
+
+/// The gather's bind group layout and shader, specialised per view target format.
+#[derive(Resource)]
+pub struct GatherPipeline {
+    layout: BindGroupLayoutDescriptor,
+    fullscreen: FullscreenShader,
+    shader: Handle<Shader>,
+}
+
+/// Render startup.
+pub fn init_gather_pipeline(
+    mut commands: Commands,
+    asset_server: Res<AssetServer>,
+    fullscreen: Res<FullscreenShader>,
+) {
+    let layout = BindGroupLayoutDescriptor::new(
+        "translucency_gather_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::FRAGMENT,
+            (
+                uniform_buffer::<ViewUniform>(true),
+                texture_depth_2d(),
+                texture_2d(TextureSampleType::Float { filterable: false }),
+                uniform_buffer::<GatherParams>(false),
+                storage_buffer_read_only_sized(false, None),
+                storage_buffer_read_only_sized(false, None),
+                storage_buffer_read_only_sized(false, None),
+            ),
+        ),
+    );
+    commands.insert_resource(GatherPipeline {
+        layout,
+        fullscreen: fullscreen.clone(),
+        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "gather.wgsl"),
+    });
+}
+
+impl SpecializedRenderPipeline for GatherPipeline {
+    type Key = TextureFormat;
+
+    fn specialize(&self, format: TextureFormat) -> RenderPipelineDescriptor {
+        RenderPipelineDescriptor {
+            label: Some("translucency_gather_pipeline".into()),
+            layout: vec![self.layout.clone()],
+            vertex: self.fullscreen.to_vertex_state(),
+            fragment: Some(FragmentState {
+                shader: self.shader.clone(),
+                entry_point: Some("gather".into()),
+                targets: vec![Some(ColorTargetState {
+                    format,
+                    // Added to the lit colour; alpha kept.
+                    blend: Some(BlendState {
+                        color: BlendComponent {
+                            src_factor: BlendFactor::One,
+                            dst_factor: BlendFactor::One,
+                            operation: BlendOperation::Add,
+                        },
+                        alpha: BlendComponent {
+                            src_factor: BlendFactor::Zero,
+                            dst_factor: BlendFactor::One,
+                            operation: BlendOperation::Add,
+                        },
+                    }),
+                    write_mask: ColorWrites::ALL,
+                })],
+                ..default()
+            }),
+            ..default()
+        }
+    }
+}
+
+/// The gather pipeline of a view.
+#[derive(Component)]
+pub struct ViewGatherPipeline(CachedRenderPipelineId);
+
+/// Specialises the gather for each translucency camera's target format (render `Prepare`).
+pub fn prepare_gather_pipelines(
+    mut commands: Commands,
+    pipeline_cache: Res<PipelineCache>,
+    mut pipelines: ResMut<SpecializedRenderPipelines<GatherPipeline>>,
+    pipeline: Res<GatherPipeline>,
+    views: Query<(Entity, &ViewTarget), With<TranslucencyCamera>>,
+) {
+    for (entity, target) in &views {
+        let id = pipelines.specialize(&pipeline_cache, &pipeline, target.main_texture_format());
+        commands.entity(entity).insert(ViewGatherPipeline(id));
+    }
+}
+
+/// Core3d system between the opaque and transparent passes: adds the patches' light to the
+/// view, timed as `translucency/gather`.
+pub fn translucency_gather_pass(
+    view: ViewQuery<(&ViewTarget, &ViewPrepassTextures, &ViewUniformOffset, &ViewGatherPipeline)>,
+    gpu: Res<TranslucencyGpu>,
+    pipeline: Res<GatherPipeline>,
+    pipeline_cache: Res<PipelineCache>,
+    view_uniforms: Res<ViewUniforms>,
+    mut ctx: RenderContext,
+) {
+    let (target, prepass, view_offset, gather) = view.into_inner();
+    let (Some(transport), Some((patches, grid, params))) = (&gpu.transport, &gpu.gather) else {
+        return;
+    };
+    // Nothing lit yet.
+    if gpu.direct_generation == 0 {
+        return;
+    }
+    let (Some(render_pipeline), Some(view_binding), Some(depth), Some(normal)) = (
+        pipeline_cache.get_render_pipeline(gather.0),
+        view_uniforms.uniforms.binding(),
+        prepass.depth_view(),
+        prepass.normal_view(),
+    ) else {
+        return;
+    };
+    let device = ctx.render_device().clone();
+    let (vectors, _) = transport.exitance();
+    let bind_group = device.create_bind_group(
+        "translucency_gather_bind_group",
+        &pipeline_cache.get_bind_group_layout(&pipeline.layout),
+        &BindGroupEntries::sequential((
+            view_binding,
+            depth,
+            normal,
+            params.as_entire_binding(),
+            patches.as_entire_binding(),
+            vectors.as_entire_binding(),
+            grid.as_entire_binding(),
+        )),
+    );
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    ctx.command_encoder().push_debug_group("translucency/gather");
+    {
+        let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+            label: Some("translucency_gather_pass"),
+            color_attachments: &[Some(target.get_color_attachment())],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        let span = diagnostics.pass_span(&mut pass, "translucency/gather");
+        pass.set_render_pipeline(render_pipeline);
+        pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
+        pass.draw(0..3, 0..1);
+        span.end(&mut pass);
+    }
+    ctx.command_encoder().pop_debug_group();
+}

@@ -1,0 +1,320 @@
+//! The per-frame transport on the GPU: [`EnergyTransport`]'s matrices uploaded once, the
+//! iteration recorded into a command encoder each frame (`iterate.wgsl`, beside this file).
+//!
+//! All of `K`, `F` and the cluster means live in one `u32` storage buffer (values as bit
+//! patterns) and all vectors in one `vec4<f32>` buffer, so the pass needs four storage
+//! buffers whatever the device's per-stage limit. The loop is recorded `max_iterations` times
+//! with indirect dispatches whose group counts the GPU zeroes once the energy still moving is
+//! below the threshold: the CPU never waits for the GPU to know when to stop.
+
+use bevy::{
+    math::Vec3,
+    render::{
+        render_resource::{
+            BindGroup, BindGroupEntry, BindGroupLayoutEntry, BindingType, Buffer,
+            BufferBindingType, BufferDescriptor, BufferInitDescriptor, BufferUsages,
+            CommandEncoder, ComputePassDescriptor, ComputePipeline, PipelineCompilationOptions,
+            PipelineLayoutDescriptor, RawComputePipelineDescriptor, ShaderModuleDescriptor,
+            ShaderSource, ShaderStages,
+        },
+        renderer::{RenderDevice, RenderQueue},
+    },
+};
+use bytemuck::{Pod, Zeroable};
+
+use super::transport::EnergyTransport;
+
+const WORKGROUP: u32 = 64;
+
+/// Offsets of every array in the two packed buffers; `Layout` in `iterate.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable, Debug)]
+struct Layout {
+    patches: u32,
+    clusters: u32,
+    threshold: f32,
+    max_iterations: u32,
+    f_offsets: u32,
+    f_columns: u32,
+    f_values: u32,
+    k_offsets: u32,
+    k_columns: u32,
+    k_values: u32,
+    c_offsets: u32,
+    c_columns: u32,
+    c_values: u32,
+    areas: u32,
+    direct: u32,
+    exitance: u32,
+    irradiance: u32,
+    delta_exitance: u32,
+    delta_irradiance: u32,
+    _pad0: u32,
+}
+
+/// `State` in `iterate.wgsl` (indirect arguments first, as dispatches read them).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable, Debug, Default)]
+struct State {
+    patch_groups: [u32; 3],
+    cluster_groups: [u32; 3],
+    iterations: u32,
+    first_flux: f32,
+    energy_left: f32,
+}
+
+/// How the GPU iteration stops.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IterationLimits {
+    /// Stop once the flux of the last increment is at most this share of the first bounce's.
+    pub threshold: f32,
+    /// And at most this many iterations (each one `F` and one `K` product).
+    pub max_iterations: u32,
+}
+
+/// One static scene's transport on the GPU.
+pub struct GpuTransport {
+    layout: Layout,
+    vectors: Buffer,
+    state: Buffer,
+    bind_group: BindGroup,
+    state_bind_group: BindGroup,
+    seed: ComputePipeline,
+    scatter: ComputePipeline,
+    decide: ComputePipeline,
+    restrict: ComputePipeline,
+    gather: ComputePipeline,
+}
+
+/// Appends `values` to `words`, returning where they start.
+fn push(words: &mut Vec<u32>, values: impl IntoIterator<Item = u32>) -> u32 {
+    let at = words.len() as u32;
+    words.extend(values);
+    at
+}
+
+impl GpuTransport {
+    /// Uploads `transport` and builds the pipelines.
+    pub fn new(device: &RenderDevice, transport: &EnergyTransport, limits: IterationLimits) -> Self {
+        let n = transport.areas.len() as u32;
+        let clusters = transport.cluster_means.rows() as u32;
+        let (f, k, c) = (&transport.form_factors, &transport.scattering, &transport.cluster_means);
+        let mut words = Vec::new();
+        let mut layout = Layout {
+            patches: n,
+            clusters,
+            threshold: limits.threshold,
+            max_iterations: limits.max_iterations,
+            f_offsets: push(&mut words, f.row_offsets.iter().copied()),
+            f_columns: push(&mut words, f.columns.iter().copied()),
+            f_values: push(&mut words, f.values.iter().map(|v| v.to_bits())),
+            k_offsets: push(&mut words, k.row_offsets.iter().copied()),
+            k_columns: push(&mut words, k.columns.iter().copied()),
+            // Three words per RGB value.
+            k_values: push(&mut words, k.values.iter().flat_map(|v| v.to_array().map(f32::to_bits))),
+            ..Zeroable::zeroed()
+        };
+        // An empty cluster matrix still has one offset (0) for the shader to find.
+        layout.c_offsets = if c.row_offsets.is_empty() {
+            push(&mut words, [0])
+        } else {
+            push(&mut words, c.row_offsets.iter().copied())
+        };
+        layout.c_columns = push(&mut words, c.columns.iter().copied());
+        layout.c_values = push(&mut words, c.values.iter().map(|v| v.to_bits()));
+        layout.areas = push(&mut words, transport.areas.iter().map(|a| a.to_bits()));
+
+        layout.direct = 0;
+        layout.exitance = n;
+        layout.irradiance = 2 * n;
+        layout.delta_exitance = 3 * n;
+        layout.delta_irradiance = 4 * n + clusters;
+        let vector_count = (5 * n + clusters).max(1) as u64;
+
+        let matrices = device.create_buffer_with_data(&BufferInitDescriptor {
+            label: Some("translucency_matrices"),
+            contents: bytemuck::cast_slice(&words),
+            usage: BufferUsages::STORAGE,
+        });
+        let vectors = device.create_buffer(&BufferDescriptor {
+            label: Some("translucency_vectors"),
+            size: vector_count * 16,
+            usage: BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let partials = device.create_buffer(&BufferDescriptor {
+            label: Some("translucency_partial_fluxes"),
+            size: (n.div_ceil(WORKGROUP).max(1) as u64) * 4,
+            usage: BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let state = device.create_buffer(&BufferDescriptor {
+            label: Some("translucency_iteration_state"),
+            size: size_of::<State>() as u64,
+            usage: BufferUsages::STORAGE | BufferUsages::INDIRECT | BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let uniform = device.create_buffer_with_data(&BufferInitDescriptor {
+            label: Some("translucency_layout"),
+            contents: bytemuck::bytes_of(&layout),
+            usage: BufferUsages::UNIFORM,
+        });
+
+        let storage = |binding, read_only| BindGroupLayoutEntry {
+            binding,
+            visibility: ShaderStages::COMPUTE,
+            ty: BindingType::Buffer {
+                ty: BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let bind_group_layout = device.create_bind_group_layout(
+            Some("translucency_iteration_layout"),
+            &[
+                BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: ShaderStages::COMPUTE,
+                    ty: BindingType::Buffer {
+                        ty: BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                storage(1, true),
+                storage(2, false),
+                storage(3, false),
+            ],
+        );
+        let state_layout =
+            device.create_bind_group_layout(Some("translucency_state_layout"), &[storage(0, false)]);
+        let state_bind_group = device.create_bind_group(
+            Some("translucency_state"),
+            &state_layout,
+            &[BindGroupEntry { binding: 0, resource: state.as_entire_binding() }],
+        );
+        let bind_group = device.create_bind_group(
+            Some("translucency_iteration"),
+            &bind_group_layout,
+            &[
+                BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
+                BindGroupEntry { binding: 1, resource: matrices.as_entire_binding() },
+                BindGroupEntry { binding: 2, resource: vectors.as_entire_binding() },
+                BindGroupEntry { binding: 3, resource: partials.as_entire_binding() },
+            ],
+        );
+        let module = device.create_and_validate_shader_module(ShaderModuleDescriptor {
+            label: Some("translucency_iterate"),
+            source: ShaderSource::Wgsl(include_str!("iterate.wgsl").into()),
+        });
+        // The products see only group 0; `seed` and `decide` also the state.
+        let products = device.create_pipeline_layout(&PipelineLayoutDescriptor {
+            label: Some("translucency_products"),
+            bind_group_layouts: &[Some(&bind_group_layout)],
+            immediate_size: 0,
+        });
+        let control = device.create_pipeline_layout(&PipelineLayoutDescriptor {
+            label: Some("translucency_control"),
+            bind_group_layouts: &[Some(&bind_group_layout), Some(&state_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |entry: &str, layout| {
+            device.create_compute_pipeline(&RawComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: PipelineCompilationOptions::default(),
+                cache: None,
+            })
+        };
+        Self {
+            layout,
+            vectors,
+            state,
+            bind_group,
+            state_bind_group,
+            seed: pipeline("seed", &control),
+            scatter: pipeline("scatter", &products),
+            decide: pipeline("decide", &control),
+            restrict: pipeline("cluster_means", &products),
+            gather: pipeline("gather", &products),
+        }
+    }
+
+    /// Number of patches.
+    pub fn patches(&self) -> u32 {
+        self.layout.patches
+    }
+
+    /// Writes this frame's direct irradiance `E⁰` (one per patch).
+    pub fn write_direct(&self, queue: &RenderQueue, direct: &[Vec3]) {
+        let n = self.layout.patches as usize;
+        let data: Vec<[f32; 4]> = (0..n)
+            .map(|i| direct.get(i).map_or([0.0; 4], |e| [e.x, e.y, e.z, 0.0]))
+            .collect();
+        if !data.is_empty() {
+            queue.write_buffer(&self.vectors, self.layout.direct as u64 * 16, bytemuck::cast_slice(&data));
+        }
+    }
+
+    /// Records one frame's iteration from the direct irradiance last written.
+    pub fn record(&self, encoder: &mut CommandEncoder) {
+        let n = self.layout.patches;
+        if n == 0 {
+            return;
+        }
+        encoder.push_debug_group("translucency_iteration");
+        {
+            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
+                label: Some("translucency_iteration"),
+                timestamp_writes: None,
+            });
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.set_bind_group(1, &self.state_bind_group, &[]);
+            let groups = n.div_ceil(WORKGROUP);
+            pass.set_pipeline(&self.seed);
+            pass.dispatch_workgroups(groups, 1, 1);
+            pass.set_pipeline(&self.scatter);
+            pass.dispatch_workgroups(groups, 1, 1);
+            pass.set_pipeline(&self.decide);
+            pass.dispatch_workgroups(1, 1, 1);
+            let patch_args = 0;
+            let cluster_args = 12;
+            for _ in 0..self.layout.max_iterations {
+                if self.layout.clusters > 0 {
+                    pass.set_pipeline(&self.restrict);
+                    pass.dispatch_workgroups_indirect(&self.state, cluster_args);
+                }
+                pass.set_pipeline(&self.gather);
+                pass.dispatch_workgroups_indirect(&self.state, patch_args);
+                pass.set_pipeline(&self.scatter);
+                pass.dispatch_workgroups_indirect(&self.state, patch_args);
+                pass.set_pipeline(&self.decide);
+                pass.dispatch_workgroups(1, 1, 1);
+            }
+        }
+        encoder.pop_debug_group();
+    }
+
+    /// The buffer holding every vector, and the byte range of the exitance `B` in it
+    /// (`vec4<f32>` per patch, `w` unused): what the picture reads.
+    pub fn exitance(&self) -> (&Buffer, std::ops::Range<u64>) {
+        let start = self.layout.exitance as u64 * 16;
+        (&self.vectors, start..start + self.layout.patches as u64 * 16)
+    }
+
+    /// Where the direct irradiance `E⁰` and the exitance `B` start in the vectors buffer
+    /// (in `vec4<f32>`s).
+    pub fn vector_offsets(&self) -> (u32, u32) {
+        (self.layout.direct, self.layout.exitance)
+    }
+
+    /// The buffer holding the iteration's state (`iterations: u32` at byte 24,
+    /// `energy_left: f32` at byte 32).
+    pub fn state(&self) -> &Buffer {
+        &self.state
+    }
+}

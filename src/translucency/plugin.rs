@@ -1,0 +1,423 @@
+//! The main-world side of [`TranslucencyPlugin`](super::TranslucencyPlugin): what takes part,
+//! the precompute on a background task, the lights' direct irradiance per patch when they
+//! change, and the translucent objects' materials.
+
+use std::{
+    sync::Arc,
+    time::{Duration, Instant},
+};
+
+use bevy::{
+    prelude::*,
+    render::extract_resource::ExtractResource,
+    tasks::{AsyncComputeTaskPool, Task, block_on, poll_once},
+};
+
+use super::{
+    medium::TranslucentMedium,
+    patches::{Patches, resample_into_patches, world_triangles},
+    transport::{
+        EnergyTransport, PatchLight, PatchSurface, SceneRays, TransportReport, TransportSettings,
+        direct_irradiance,
+    },
+};
+use crate::warn_once::WarnedOnce;
+
+/// A static mesh whose light diffuses through it (seed 001's subsurface patches). Needs a
+/// `Mesh3d` with a `MeshMaterial3d<StandardMaterial>`; while its transport is ready the
+/// plugin shades its diffuse part (the material's base colour is set aside; specular stays).
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default)]
+pub struct Translucent {
+    /// What it is made of (coefficients in mm⁻¹).
+    pub medium: TranslucentMedium,
+    /// World units per millimetre (> 0): 0.001 for a scene in metres (Bevy's default scale).
+    pub world_units_per_mm: f32,
+}
+
+impl Default for Translucent {
+    /// Marble in a scene in metres.
+    fn default() -> Self {
+        Self {
+            medium: TranslucentMedium::default(),
+            world_units_per_mm: 0.001,
+        }
+    }
+}
+
+/// A static opaque mesh that takes part in the radiosity: it receives light from the
+/// translucent objects and the other patches and bounces it (Lambertian, with its
+/// `StandardMaterial`'s base colour as albedo). Its direct light stays Bevy's; the plugin adds
+/// the bounced light.
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Component, Default)]
+pub struct RadiosityReceiver;
+
+/// The scene-wide settings of the translucency transport.
+#[derive(Resource, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Resource, Default)]
+pub struct TranslucencySettings {
+    /// Patches over every participating mesh (16 – 200 000; more is capped with a warning).
+    pub patch_budget: u32,
+    /// The iteration stops once the energy still moving is below this share of the first
+    /// bounce's (1e-6 – 0.5).
+    pub iteration_threshold: f32,
+    /// And after at most this many bounces (1 – 256).
+    pub max_iterations: u32,
+    /// How the transport is built.
+    pub transport: TransportSettings,
+}
+
+impl Default for TranslucencySettings {
+    /// 4000 patches: a precompute of ~0.4 s on two CPU cores for a small room
+    /// (`docs/translucent.md`); a threshold of 1e-3 (15 iterations in that room); at most 32.
+    fn default() -> Self {
+        Self {
+            patch_budget: 4000,
+            iteration_threshold: 1e-3,
+            max_iterations: 32,
+            transport: TransportSettings::default(),
+        }
+    }
+}
+
+/// The most patches the budget may ask for.
+pub const MAX_PATCH_BUDGET: u32 = 200_000;
+
+/// Where the precompute stands.
+#[derive(Resource, Clone, Debug, Default)]
+pub enum TranslucencyStatus {
+    /// Nothing takes part.
+    #[default]
+    Idle,
+    /// Waiting for meshes or materials to load.
+    Loading,
+    /// The precompute is running on a background task, started this long ago.
+    Precomputing {
+        /// When it started.
+        since: Instant,
+    },
+    /// Ready.
+    Ready {
+        /// Patches.
+        patches: usize,
+        /// What the transport kept and cost.
+        report: TransportReport,
+    },
+}
+
+/// One precomputed static scene: its patches, transport and visibility, and what the gather
+/// needs.
+pub struct TranslucencyScene {
+    /// The patches.
+    pub patches: Patches,
+    /// `K` and `F`.
+    pub transport: EnergyTransport,
+    /// Visibility for the lights' injection.
+    pub rays: SceneRays,
+    /// Albedo per patch (zero on translucent patches: all their light is the transport's).
+    pub albedo: Vec<Vec3>,
+}
+
+/// What the render world takes each frame.
+#[derive(Resource, Clone, Default, ExtractResource)]
+pub struct TranslucencyFrame {
+    /// The scene and its generation (changes when it is rebuilt).
+    pub scene: Option<(u64, Arc<TranslucencyScene>)>,
+    /// This frame's direct irradiance per patch, and its generation (changes when a light
+    /// does).
+    pub direct: Option<(u64, Arc<Vec<Vec3>>)>,
+    /// The settings.
+    pub settings: TranslucencySettings,
+}
+
+/// The signature of what takes part: when it changes, the precompute runs again.
+#[derive(Resource, Default)]
+pub(crate) struct Precompute {
+    signature: Vec<u64>,
+    task: Option<Task<TranslucencyScene>>,
+    generation: u64,
+    direct_signature: Vec<u64>,
+    direct_generation: u64,
+}
+
+type Participant<'a> = (
+    Entity,
+    &'a Mesh3d,
+    &'a MeshMaterial3d<StandardMaterial>,
+    &'a GlobalTransform,
+    Option<&'a Translucent>,
+    Option<&'a TranslucentMaterials>,
+);
+
+/// The original material of a translucent mesh and the copy without diffuse shown while its
+/// transport is ready.
+#[derive(Component, Clone, Debug)]
+pub struct TranslucentMaterials {
+    /// The material as the user gave it.
+    pub original: Handle<StandardMaterial>,
+    /// Its copy with a black base colour (the diffuse comes from the patches).
+    pub without_diffuse: Handle<StandardMaterial>,
+}
+
+fn hash_of(value: impl std::hash::Hash) -> u64 {
+    use std::hash::Hasher;
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    value.hash(&mut hasher);
+    hasher.finish()
+}
+
+fn hash_f32s(values: impl IntoIterator<Item = f32>) -> u64 {
+    values.into_iter().fold(0xcbf2_9ce4_8422_2325, |h, v| {
+        (h ^ v.to_bits() as u64).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// Gives each new translucent mesh its material without diffuse.
+pub(crate) fn prepare_translucent_materials(
+    mut commands: Commands,
+    new: Query<(Entity, &MeshMaterial3d<StandardMaterial>), (With<Translucent>, Without<TranslucentMaterials>)>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+) {
+    for (entity, material) in &new {
+        let Some(original) = materials.get(&material.0).cloned() else {
+            continue;
+        };
+        let without_diffuse = materials.add(StandardMaterial {
+            base_color: Color::BLACK,
+            base_color_texture: None,
+            diffuse_transmission: 0.0,
+            ..original
+        });
+        commands.entity(entity).insert(TranslucentMaterials {
+            original: material.0.clone(),
+            without_diffuse,
+        });
+    }
+}
+
+/// Starts the precompute when what takes part changes; collects it when done.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_precompute(
+    participants: Query<Participant, Or<(With<Translucent>, With<RadiosityReceiver>)>>,
+    meshes: Res<Assets<Mesh>>,
+    materials: Res<Assets<StandardMaterial>>,
+    mut settings: ResMut<TranslucencySettings>,
+    mut state: ResMut<Precompute>,
+    mut status: ResMut<TranslucencyStatus>,
+    mut frame: ResMut<TranslucencyFrame>,
+    mut warned: ResMut<WarnedOnce>,
+) {
+    if settings.patch_budget > MAX_PATCH_BUDGET || settings.patch_budget < 16 {
+        let capped = settings.patch_budget.clamp(16, MAX_PATCH_BUDGET);
+        warned.warn("translucency-budget", || {
+            format!(
+                "translucency: a patch budget of {} is outside 16 – {MAX_PATCH_BUDGET}; using {capped}",
+                settings.patch_budget
+            )
+        });
+        settings.patch_budget = capped;
+    }
+    let mut list: Vec<Participant> = participants.iter().collect();
+    list.sort_by_key(|p| p.0);
+    // The signature: entities, meshes, transforms, media and albedos.
+    let mut signature = vec![settings.patch_budget as u64, hash_f32s([
+        settings.transport.diffusion_energy_kept,
+        settings.transport.form_factor_cutoff,
+        settings.transport.far_field_ratio,
+        settings.transport.cluster_size as f32,
+        settings.transport.kernel as u32 as f32,
+    ])];
+    for (entity, mesh, material, transform, translucent, _) in &list {
+        signature.push(entity.to_bits());
+        signature.push(hash_of(mesh.0.id()));
+        signature.push(hash_f32s(transform.to_matrix().to_cols_array()));
+        if translucent.is_none() {
+            let albedo = materials.get(&material.0).map(|m| m.base_color.to_linear().to_f32_array());
+            signature.push(hash_f32s(albedo.unwrap_or([-1.0; 4])));
+        }
+        if let Some(t) = translucent {
+            signature.push(hash_f32s(
+                t.medium.absorption.to_array().into_iter()
+                    .chain(t.medium.reduced_scattering.to_array())
+                    .chain([t.medium.index_of_refraction, t.world_units_per_mm]),
+            ));
+        }
+    }
+    if signature != state.signature {
+        state.signature = signature;
+        state.task = None;
+        frame.scene = None;
+        frame.direct = None;
+        if list.iter().all(|p| p.4.is_none()) {
+            *status = TranslucencyStatus::Idle;
+            return;
+        }
+        // Every mesh loaded and a triangle list; translucent media valid.
+        let mut objects = Vec::new();
+        for (entity, mesh, material, transform, translucent, swapped) in &list {
+            // Translucent meshes may show their copy without diffuse: read the original.
+            let material = swapped.map_or(&material.0, |m| &m.original);
+            let (Some(mesh), Some(material)) = (meshes.get(&mesh.0), materials.get(material)) else {
+                *status = TranslucencyStatus::Loading;
+                state.signature.clear();
+                return;
+            };
+            let Some((positions, indices)) = world_triangles(mesh, transform) else {
+                warned.warn(format!("translucency-mesh-{entity}"), || {
+                    format!("translucency: the mesh of {entity} is not a triangle list with positions; it takes no part")
+                });
+                continue;
+            };
+            let surface = match translucent {
+                Some(t) => {
+                    if let Some(reason) = t.medium.invalid_reason() {
+                        warned.warn(format!("translucency-medium-{entity}"), || {
+                            format!("translucency: {entity}'s medium is unusable ({reason}); it is shaded by Bevy")
+                        });
+                        continue;
+                    }
+                    if !(t.world_units_per_mm.is_finite() && t.world_units_per_mm > 0.0) {
+                        warned.warn(format!("translucency-units-{entity}"), || {
+                            format!("translucency: {entity}'s world_units_per_mm {} must be positive; it is shaded by Bevy", t.world_units_per_mm)
+                        });
+                        continue;
+                    }
+                    PatchSurface::Translucent { medium: t.medium, world_units_per_mm: t.world_units_per_mm }
+                }
+                None => {
+                    let c = material.base_color.to_linear();
+                    PatchSurface::Opaque { albedo: Vec3::new(c.red, c.green, c.blue) }
+                }
+            };
+            objects.push((positions, indices, surface));
+        }
+        let budget = settings.patch_budget as usize;
+        let transport_settings = settings.transport;
+        state.task = Some(AsyncComputeTaskPool::get().spawn(async move {
+            let views: Vec<_> = objects
+                .iter()
+                .map(|(p, i, _)| super::patches::PatchObject { positions: p, indices: i })
+                .collect();
+            let surfaces: Vec<PatchSurface> = objects.iter().map(|o| o.2).collect();
+            let patches = resample_into_patches(&views, budget);
+            let rays = SceneRays::new(&views);
+            let transport = EnergyTransport::build(&patches, &surfaces, &rays, &transport_settings);
+            let albedo = patches
+                .patches
+                .iter()
+                .map(|p| match surfaces[p.object as usize] {
+                    PatchSurface::Opaque { albedo } => albedo,
+                    PatchSurface::Translucent { .. } => Vec3::ZERO,
+                })
+                .collect();
+            TranslucencyScene { patches, transport, rays, albedo }
+        }));
+        *status = TranslucencyStatus::Precomputing { since: Instant::now() };
+    }
+    if let Some(task) = state.task.as_mut()
+        && let Some(scene) = block_on(poll_once(task))
+    {
+        state.task = None;
+        state.generation += 1;
+        state.direct_signature.clear();
+        *status = TranslucencyStatus::Ready {
+            patches: scene.patches.patches.len(),
+            report: scene.transport.report.clone(),
+        };
+        frame.scene = Some((state.generation, Arc::new(scene)));
+    }
+    frame.settings = *settings;
+}
+
+/// The lights as the transport injects them, when they change.
+pub(crate) fn inject_direct_light(
+    directional: Query<(&DirectionalLight, &GlobalTransform)>,
+    points: Query<(&PointLight, &GlobalTransform)>,
+    spots: Query<(&SpotLight, &GlobalTransform)>,
+    mut state: ResMut<Precompute>,
+    mut frame: ResMut<TranslucencyFrame>,
+) {
+    let Some((_, scene)) = frame.scene.clone() else {
+        return;
+    };
+    let colour = |c: Color, scale: f32| {
+        let c = c.to_linear();
+        Vec3::new(c.red, c.green, c.blue) * scale
+    };
+    let candela = 1.0 / (4.0 * std::f32::consts::PI);
+    let mut lights = Vec::new();
+    for (light, transform) in &directional {
+        lights.push(PatchLight::Directional {
+            direction: transform.forward().as_vec3(),
+            illuminance: colour(light.color, light.illuminance),
+        });
+    }
+    for (light, transform) in &points {
+        lights.push(PatchLight::Point {
+            position: transform.translation(),
+            intensity: colour(light.color, light.intensity * candela),
+            range: light.range,
+        });
+    }
+    for (light, transform) in &spots {
+        lights.push(PatchLight::Spot {
+            position: transform.translation(),
+            direction: transform.forward().as_vec3(),
+            intensity: colour(light.color, light.intensity * candela),
+            inner_angle: light.inner_angle,
+            outer_angle: light.outer_angle,
+            range: light.range,
+        });
+    }
+    let signature: Vec<u64> = lights.iter().map(|l| hash_f32s(light_numbers(l))).collect();
+    if signature == state.direct_signature && frame.direct.is_some() {
+        return;
+    }
+    state.direct_signature = signature;
+    state.direct_generation += 1;
+    let direct = direct_irradiance(&scene.patches, &lights, &scene.rays);
+    frame.direct = Some((state.direct_generation, Arc::new(direct)));
+}
+
+fn light_numbers(light: &PatchLight) -> Vec<f32> {
+    match *light {
+        PatchLight::Directional { direction, illuminance } => {
+            [direction.to_array(), illuminance.to_array()].concat()
+        }
+        PatchLight::Point { position, intensity, range } => {
+            [position.to_array().as_slice(), &intensity.to_array(), &[range]].concat()
+        }
+        PatchLight::Spot { position, direction, intensity, inner_angle, outer_angle, range } => [
+            position.to_array().as_slice(),
+            &direction.to_array(),
+            &intensity.to_array(),
+            &[inner_angle, outer_angle, range],
+        ]
+        .concat(),
+    }
+}
+
+/// Shows each translucent mesh without its diffuse while its transport is ready, and with
+/// its own material otherwise (loading, precomputing, or taking no part).
+pub(crate) fn swap_translucent_materials(
+    mut meshes: Query<(&mut MeshMaterial3d<StandardMaterial>, &TranslucentMaterials, Has<Translucent>)>,
+    frame: Res<TranslucencyFrame>,
+    status: Res<TranslucencyStatus>,
+) {
+    let ready = frame.scene.is_some() && matches!(*status, TranslucencyStatus::Ready { .. });
+    for (mut material, materials, translucent) in &mut meshes {
+        let wanted = if ready && translucent { &materials.without_diffuse } else { &materials.original };
+        if material.0 != *wanted {
+            material.0 = wanted.clone();
+        }
+    }
+}
+
+/// How long ago the precompute started, if it runs.
+pub fn precompute_elapsed(status: &TranslucencyStatus) -> Option<Duration> {
+    match status {
+        TranslucencyStatus::Precomputing { since } => Some(since.elapsed()),
+        _ => None,
+    }
+}
