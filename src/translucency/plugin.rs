@@ -81,6 +81,11 @@ impl Default for TranslucencySettings {
     }
 }
 
+/// Frames a changed scene must stay the same before its transport is rebuilt (after the
+/// first): moving or deforming participants are shaded by Bevy meanwhile instead of
+/// precomputing every frame.
+pub const SETTLE_FRAMES: u32 = 10;
+
 /// The most patches the budget may ask for.
 pub const MAX_PATCH_BUDGET: u32 = 200_000;
 
@@ -117,6 +122,8 @@ pub struct TranslucencyScene {
     pub rays: SceneRays,
     /// Albedo per patch (zero on translucent patches: all their light is the transport's).
     pub albedo: Vec<Vec3>,
+    /// The entity of each object (`Patch::object` indexes it).
+    pub entities: Vec<Entity>,
 }
 
 /// What the render world takes each frame.
@@ -135,6 +142,9 @@ pub struct TranslucencyFrame {
 #[derive(Resource, Default)]
 pub(crate) struct Precompute {
     signature: Vec<u64>,
+    /// A changed signature waiting to stay the same for [`SETTLE_FRAMES`] before a rebuild,
+    /// and for how many frames it has.
+    settling: Option<(Vec<u64>, u32)>,
     task: Option<Task<TranslucencyScene>>,
     generation: u64,
     direct_signature: Vec<u64>,
@@ -245,6 +255,34 @@ pub(crate) fn run_precompute(
         }
     }
     if signature != state.signature {
+        // After a first transport: static only. Back to Bevy's shading until the scene has
+        // stayed the same for a few frames, then rebuilt.
+        if state.generation > 0 {
+            let frames = match &state.settling {
+                Some((pending, frames)) if *pending == signature => frames + 1,
+                _ => 0,
+            };
+            if frames == 0 {
+                if frame.scene.is_some() || state.task.is_some() {
+                    warned.warn("translucency-moved", || {
+                        "translucency: a translucent or radiosity mesh moved, deformed or changed; \
+                         the transport is for static scenes: Bevy shades them until they stay \
+                         still, then the transport is rebuilt"
+                            .to_string()
+                    });
+                }
+                state.task = None;
+                frame.scene = None;
+                frame.direct = None;
+                *status = TranslucencyStatus::Loading;
+            }
+            if frames < SETTLE_FRAMES {
+                state.settling = Some((signature, frames));
+                frame.settings = *settings;
+                return;
+            }
+        }
+        state.settling = None;
         state.signature = signature;
         state.task = None;
         frame.scene = None;
@@ -255,6 +293,7 @@ pub(crate) fn run_precompute(
         }
         // Every mesh loaded and a triangle list; translucent media valid.
         let mut objects = Vec::new();
+        let mut entities = Vec::new();
         for (entity, mesh, material, transform, translucent, swapped) in &list {
             // Translucent meshes may show their copy without diffuse: read the original.
             let material = swapped.map_or(&material.0, |m| &m.original);
@@ -291,6 +330,7 @@ pub(crate) fn run_precompute(
                 }
             };
             objects.push((positions, indices, surface));
+            entities.push(*entity);
         }
         let budget = settings.patch_budget as usize;
         let transport_settings = settings.transport;
@@ -311,7 +351,7 @@ pub(crate) fn run_precompute(
                     PatchSurface::Translucent { .. } => Vec3::ZERO,
                 })
                 .collect();
-            TranslucencyScene { patches, transport, rays, albedo }
+            TranslucencyScene { patches, transport, rays, albedo, entities }
         }));
         *status = TranslucencyStatus::Precomputing { since: Instant::now() };
     }
@@ -401,13 +441,15 @@ fn light_numbers(light: &PatchLight) -> Vec<f32> {
 /// Shows each translucent mesh without its diffuse while its transport is ready, and with
 /// its own material otherwise (loading, precomputing, or taking no part).
 pub(crate) fn swap_translucent_materials(
-    mut meshes: Query<(&mut MeshMaterial3d<StandardMaterial>, &TranslucentMaterials, Has<Translucent>)>,
+    mut meshes: Query<(Entity, &mut MeshMaterial3d<StandardMaterial>, &TranslucentMaterials, Has<Translucent>)>,
     frame: Res<TranslucencyFrame>,
     status: Res<TranslucencyStatus>,
 ) {
-    let ready = frame.scene.is_some() && matches!(*status, TranslucencyStatus::Ready { .. });
-    for (mut material, materials, translucent) in &mut meshes {
-        let wanted = if ready && translucent { &materials.without_diffuse } else { &materials.original };
+    let ready = matches!(*status, TranslucencyStatus::Ready { .. });
+    let scene = frame.scene.as_ref().filter(|_| ready).map(|(_, s)| s);
+    for (entity, mut material, materials, translucent) in &mut meshes {
+        let takes_part = translucent && scene.is_some_and(|s| s.entities.contains(&entity));
+        let wanted = if takes_part { &materials.without_diffuse } else { &materials.original };
         if material.0 != *wanted {
             material.0 = wanted.clone();
         }

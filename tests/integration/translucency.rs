@@ -246,3 +246,78 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     // black: measured 91 pixels at ≥ 3/255.
     assert!(glowing_in_shade >= 45, "{glowing_in_shade}");
 }
+
+#[test]
+fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
+    use bevy_mesostructure::translucency::{
+        Translucent, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings,
+        TranslucencyStatus, TranslucentMaterials, TranslucentMedium,
+    };
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = bare_app_with(|app| {
+        app.add_plugins(TranslucencyPlugin);
+    });
+    // A budget below the least (16); a NaN medium, a zero scale and a good one.
+    app.insert_resource(TranslucencySettings { patch_budget: 0, ..default() });
+    sun(&mut app, Vec3::new(-1.0, -1.0, -1.0), 2000.0);
+    let ball = mesh(&mut app, Sphere::new(0.05).mesh().ico(2).unwrap());
+    let material = app.world_mut().resource_mut::<Assets<StandardMaterial>>().add(Color::WHITE);
+    let nan = TranslucentMedium { absorption: Vec3::new(f32::NAN, 0.1, 0.1), ..default() };
+    let bad = app
+        .world_mut()
+        .spawn((ball.clone(), MeshMaterial3d(material.clone()), Translucent { medium: nan, ..default() }, Transform::from_xyz(-0.2, 0.0, 0.0)))
+        .id();
+    app.world_mut().spawn((
+        ball.clone(),
+        MeshMaterial3d(material.clone()),
+        Translucent { world_units_per_mm: 0.0, ..default() },
+        Transform::from_xyz(0.2, 0.0, 0.0),
+    ));
+    let good = app
+        .world_mut()
+        .spawn((ball, MeshMaterial3d(material.clone()), Translucent::default(), Transform::IDENTITY))
+        .id();
+    let image = target(&mut app, 32, 32);
+    app.world_mut().spawn((
+        Camera3d::default(),
+        bevy::camera::RenderTarget::Image(image.into()),
+        Msaa::Off,
+        TranslucencyCamera,
+        Transform::from_xyz(0.0, 0.0, 0.6).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    let ready = |app: &App| matches!(app.world().resource::<TranslucencyStatus>(), TranslucencyStatus::Ready { .. });
+    let wait_ready = |app: &mut App| {
+        for _ in 0..600 {
+            run(app, 1);
+            if ready(app) {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        panic!("never ready");
+    };
+    wait_ready(&mut app);
+    let causes = warnings(&app);
+    for key in ["translucency-budget", &format!("translucency-medium-{bad}"), "translucency-units-"] {
+        assert!(causes.iter().any(|c| c.starts_with(key)), "no warning {key}: {causes:?}");
+    }
+    assert_eq!(app.world().resource::<TranslucencySettings>().patch_budget, 16);
+    // The good ball shows its copy without diffuse; the bad one keeps its own material.
+    let shown = |app: &mut App, e: Entity| app.world().get::<MeshMaterial3d<StandardMaterial>>(e).unwrap().0.clone();
+    let good_materials = app.world().get::<TranslucentMaterials>(good).unwrap().clone();
+    assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
+    assert_eq!(shown(&mut app, bad), material);
+
+    // Moving a participant: one warning, Bevy's shading while it moves, rebuilt once still.
+    for step in 0..5 {
+        app.world_mut().get_mut::<Transform>(good).unwrap().translation.y = 0.01 * (step + 1) as f32;
+        run(&mut app, 1);
+        assert!(!ready(&app));
+        assert_eq!(shown(&mut app, good), good_materials.original);
+    }
+    assert!(warnings(&app).iter().any(|c| c == "translucency-moved"));
+    wait_ready(&mut app);
+    assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
+}
