@@ -62,3 +62,8 @@ fi
 run volumetric_spots -- --frames 20 --out "$out/volumetric" --headless
 cp "$out/volumetric/volumetric_spots.png" docs/images/volumetric_spots.png
 cp "$out/volumetric/volumetric_spots_no-haze.png" docs/images/volumetric_spots_no-haze.png
+
+# Translucent objects (seed 001): lit from the front, from behind, and from behind as Bevy
+# shades it without the transport.
+run translucent -- --out "$out/translucent" --size 384x288 --headless
+cp "$out"/translucent/translucent_*.png docs/images/

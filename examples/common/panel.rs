@@ -124,6 +124,16 @@ fn panel(world: &mut World) {
             if let Some(ms) = span_time(store, "volumetric/spots") {
                 ui.label(format!("  volumetric spots: {ms:.3} ms"));
             }
+            for span in ["translucency/iteration", "translucency/gather"] {
+                if let Some(ms) = span_time(store, span) {
+                    ui.label(format!("  {span}: {ms:.3} ms"));
+                }
+            }
+            if let Some(status) =
+                world.get_resource::<bevy_mesostructure::translucency::TranslucencyStatus>()
+            {
+                ui.label(format!("translucency: {}", translucency_status(status)));
+            }
             egui::ScrollArea::vertical().show(ui, |ui| {
                 let cameras: Vec<Entity> = world
                     .query_filtered::<Entity, With<Mesostructure>>()
@@ -158,6 +168,16 @@ fn panel(world: &mut World) {
                 }
                 edit_all::<bevy_mesostructure::volumetric::VolumetricMedium>(ui, world, "camera");
                 edit_all::<bevy_mesostructure::volumetric::VolumetricSpot>(ui, world, "spot");
+                edit_all::<bevy_mesostructure::translucency::Translucent>(ui, world, "mesh");
+                if world
+                    .contains_resource::<bevy_mesostructure::translucency::TranslucencySettings>()
+                {
+                    ui.collapsing("TranslucencySettings (a change precomputes again)", |ui| {
+                        bevy_inspector_egui::bevy_inspector::ui_for_resource::<
+                            bevy_mesostructure::translucency::TranslucencySettings,
+                        >(world, ui);
+                    });
+                }
                 let meshes: Vec<Entity> = world
                     .query_filtered::<Entity, With<MesostructureMaterial>>()
                     .iter(world)
@@ -177,6 +197,22 @@ fn panel(world: &mut World) {
                 }
             });
         });
+}
+
+fn translucency_status(status: &bevy_mesostructure::translucency::TranslucencyStatus) -> String {
+    use bevy_mesostructure::translucency::{TranslucencyStatus, precompute_elapsed};
+    match status {
+        TranslucencyStatus::Idle => "nothing takes part".into(),
+        TranslucencyStatus::Loading => "waiting for meshes (or for them to stay still)".into(),
+        TranslucencyStatus::Precomputing { .. } => format!(
+            "precomputing ({:.1} s)",
+            precompute_elapsed(status).unwrap_or_default().as_secs_f32()
+        ),
+        TranslucencyStatus::Ready { patches, report } => format!(
+            "{patches} patches, {} + {} entries, precomputed in {:.2} s",
+            report.form_factor_entries, report.scattering_entries, report.seconds
+        ),
+    }
 }
 
 /// A collapsible inspector for component `C` of every entity that has it.
@@ -245,7 +281,11 @@ pub fn print_timings(world: &World) {
     let times: Vec<String> = PASSES
         .iter()
         .filter_map(|p| pass_time(store, p).map(|ms| format!("{p} {ms:.2} ms")))
-        .chain(span_time(store, "volumetric/spots").map(|ms| format!("volumetric/spots {ms:.2} ms")))
+        .chain(
+            ["volumetric/spots", "translucency/iteration", "translucency/gather"]
+                .into_iter()
+                .filter_map(|span| span_time(store, span).map(|ms| format!("{span} {ms:.2} ms"))),
+        )
         .collect();
     if !times.is_empty() {
         println!("average time per pass: {}", times.join(", "));

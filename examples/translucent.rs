@@ -1,0 +1,178 @@
+//! Translucent objects lit globally (seed 001): a marble bunny and a skin-like sphere in a
+//! small room with a red and a green wall, a spot light moving from in front of them to
+//! behind them.
+//!
+//! Where there is a display it opens a window with the tuning panel (each object's
+//! `Translucent`, the scene's `TranslucencySettings`, the precompute's status, the GPU time
+//! of the iteration and the gather). Where there is none (or with `--headless`) it renders
+//! headless and writes PNG screenshots: lit from the front, from behind, and the back-lit
+//! frame as Bevy shades it without the plugin's transport.
+//!
+//! ```text
+//! cargo run --example translucent -- [--frames N] [--out DIR] [--size WxH] [--headless]
+//!     [--patches N]
+//! ```
+
+#[path = "common/mod.rs"]
+mod common;
+// Only `obj_mesh` and `asset_path` are used here.
+#[allow(dead_code)]
+#[path = "common/meshes.rs"]
+mod meshes;
+
+use bevy::{camera::Exposure, camera::Hdr, prelude::*};
+use bevy_mesostructure::translucency::{
+    RadiosityReceiver, Translucent, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings,
+    TranslucentPreset,
+};
+
+/// A marble bunny and a skin sphere lit through; a window with the tuning panel, or headless
+/// PNGs lit from the front, from behind, and from behind without the transport.
+#[derive(clap::Parser)]
+#[command(long_about = None)]
+struct Cli {
+    #[command(flatten)]
+    common: common::CommonArgs,
+    /// Patch budget of the scene (16 – 200000)
+    #[arg(long, default_value_t = 4000, value_parser = clap::value_parser!(u32).range(16..=200_000))]
+    patches: u32,
+}
+
+/// Where the spot is: `0` in front of the objects, `1` behind them (headless shots set it;
+/// in a window it swings between the two).
+#[derive(Resource)]
+struct SpotPlace {
+    fixed: Option<f32>,
+}
+
+fn main() {
+    use clap::Parser;
+    let cli = Cli::parse();
+    let args = common::ExampleArgs::from_cli("translucent", cli.common);
+    let shots = vec![
+        common::Shot {
+            file: "translucent_front.png".into(),
+            apply: Box::new(|world: &mut World| {
+                world.resource_mut::<SpotPlace>().fixed = Some(0.0);
+            }),
+        },
+        common::Shot {
+            file: "translucent_back.png".into(),
+            apply: Box::new(|world: &mut World| {
+                world.resource_mut::<SpotPlace>().fixed = Some(1.0);
+            }),
+        },
+        common::Shot {
+            file: "translucent_back_bevy.png".into(),
+            apply: Box::new(|world: &mut World| {
+                let mut q = world.query_filtered::<Entity, With<Translucent>>();
+                for e in q.iter(world).collect::<Vec<_>>() {
+                    world.entity_mut(e).remove::<Translucent>();
+                }
+            }),
+        },
+    ];
+    let windowed = args.windowed();
+    let mut app = common::app(&args, "bevy_mesostructure: translucent", shots);
+    app.add_plugins(TranslucencyPlugin)
+        .insert_resource(ClearColor(Color::BLACK))
+        .insert_resource(bevy::light::GlobalAmbientLight {
+            brightness: 0.0,
+            ..default()
+        })
+        .insert_resource(TranslucencySettings {
+            patch_budget: cli.patches,
+            ..default()
+        })
+        .insert_resource(SpotPlace {
+            fixed: (!windowed).then_some(0.0),
+        })
+        .add_systems(Update, move_spot);
+    setup(app.world_mut());
+    common::run(app);
+}
+
+fn setup(world: &mut World) {
+    let target = world.resource::<common::Output>().target();
+    world.spawn((
+        Camera3d::default(),
+        target,
+        Hdr,
+        Msaa::Off,
+        // A dim room lit by one small spot: exposed for it.
+        Exposure { ev100: 7.0 },
+        TranslucencyCamera,
+        Transform::from_xyz(0.0, 0.12, 0.42).looking_at(Vec3::new(0.0, 0.05, 0.0), Vec3::Y),
+    ));
+    let mut mesh = |m: Mesh| world.resource_mut::<Assets<Mesh>>().add(m);
+    let bunny = mesh(meshes::obj_mesh(&meshes::asset_path("meshes/bunny.obj"), 1.0));
+    let sphere = mesh(Sphere::new(0.03).mesh().ico(5).expect("a valid subdivision"));
+    let half = 0.3;
+    let wall = mesh(Plane3d::new(Vec3::Y, Vec2::splat(half)).mesh().build());
+    let mut material = |base_color: Color, roughness: f32| {
+        world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+            base_color,
+            perceptual_roughness: roughness,
+            ..default()
+        })
+    };
+    let white = material(Color::srgb(0.75, 0.75, 0.75), 0.9);
+    let red = material(Color::srgb(0.75, 0.1, 0.1), 0.9);
+    let green = material(Color::srgb(0.1, 0.75, 0.1), 0.9);
+    let marble = material(Color::WHITE, 0.3);
+    let skin = material(Color::srgb(0.9, 0.7, 0.6), 0.5);
+    world.spawn((
+        Mesh3d(bunny),
+        MeshMaterial3d(marble),
+        // Longest side 1.6 → 10 cm, resting on the floor.
+        Transform::from_xyz(-0.06, 0.05, 0.0).with_scale(Vec3::splat(0.0625)),
+        Translucent {
+            medium: TranslucentPreset::Marble.medium(),
+            world_units_per_mm: 0.001,
+        },
+    ));
+    world.spawn((
+        Mesh3d(sphere),
+        MeshMaterial3d(skin),
+        Transform::from_xyz(0.08, 0.03, 0.02),
+        Translucent {
+            medium: TranslucentPreset::Skin1.medium(),
+            world_units_per_mm: 0.001,
+        },
+    ));
+    // The room, inside out: each plane's normal faces inwards.
+    let quarter = std::f32::consts::FRAC_PI_2;
+    for (material, transform) in [
+        (white.clone(), Transform::IDENTITY),
+        (
+            white.clone(),
+            Transform::from_xyz(0.0, 2.0 * half, 0.0).with_rotation(Quat::from_rotation_x(2.0 * quarter)),
+        ),
+        (red, Transform::from_xyz(-half, half, 0.0).with_rotation(Quat::from_rotation_z(-quarter))),
+        (green, Transform::from_xyz(half, half, 0.0).with_rotation(Quat::from_rotation_z(quarter))),
+        (white.clone(), Transform::from_xyz(0.0, half, -half).with_rotation(Quat::from_rotation_x(quarter))),
+    ] {
+        world.spawn((Mesh3d(wall.clone()), MeshMaterial3d(material), transform, RadiosityReceiver));
+    }
+    world.spawn((
+        SpotLight {
+            intensity: 800.0,
+            range: 5.0,
+            inner_angle: 0.3,
+            outer_angle: 0.5,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_xyz(0.0, 0.2, 0.25).looking_at(Vec3::new(0.0, 0.04, 0.0), Vec3::Y),
+    ));
+}
+
+/// The spot circles the objects at a fixed height, from in front (`0`) to behind (`1`).
+fn move_spot(clock: Res<common::Clock>, place: Res<SpotPlace>, mut spots: Query<&mut Transform, With<SpotLight>>) {
+    let s = place.fixed.unwrap_or_else(|| 0.5 - 0.5 * (clock.t * 0.5).cos());
+    let angle = s * std::f32::consts::PI;
+    let position = Vec3::new(0.25 * angle.sin(), 0.2, 0.25 * angle.cos());
+    for mut transform in &mut spots {
+        *transform = Transform::from_translation(position).looking_at(Vec3::new(0.0, 0.04, 0.0), Vec3::Y);
+    }
+}
