@@ -26,7 +26,7 @@ use std::{io::Write, path::PathBuf, time::Instant};
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     DiffusionKernel, EnergyTransport, PatchLight, PatchObject, SceneRays, TransportSettings,
-    direct_irradiance, resample_into_patches,
+    direct_irradiance, resample_into_patches_with_caps, translucent_patch_cap,
 };
 
 /// Precompute cost of the translucency transport per patch budget, into a CSV.
@@ -38,7 +38,7 @@ struct Cli {
           value_parser = clap::value_parser!(u32).range(1..=200_000))]
     budgets: Vec<u32>,
     /// Diffusion profile
-    #[arg(long, value_enum, default_value_t = Kernel::Dipole)]
+    #[arg(long, value_enum, default_value_t = Kernel::Burley)]
     kernel: Kernel,
     /// Form factors below this are dropped (before visibility)
     #[arg(long, default_value_t = 1e-5)]
@@ -89,7 +89,9 @@ iterations,solve_ms,threads";
     println!("{header}");
     for &budget in &cli.budgets {
         let start = Instant::now();
-        let patches = resample_into_patches(&views, budget as usize);
+        // Translucent objects' patches capped as the plugin caps them.
+        let caps: Vec<Option<f32>> = surfaces.iter().map(|s| translucent_patch_cap(s, &settings)).collect();
+        let patches = resample_into_patches_with_caps(&views, &caps, budget as usize);
         let rays = SceneRays::new(&views);
         let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
         let precompute = start.elapsed().as_secs_f32();

@@ -55,9 +55,9 @@
 //! ## Sub-plugins
 //! [`volumetric::VolumetricSpotsPlugin`]: spot lights seen in a homogeneous medium, by
 //! equal-angle single scattering (seed 004), with or without the mesostructure plugin.
-//! [`translucency`]: translucent objects lit globally by seed 001's radiosity with dipole
-//! subsurface transport — so far the CPU precompute (patches, sparse transport with ray-traced
-//! form factors) and its iteration; no plugin yet.
+//! [`translucency::TranslucencyPlugin`]: translucent objects lit globally by seed 001's
+//! radiosity with subsurface transport (patches precomputed for static scenes, the iteration on
+//! the GPU when a light changes, a per-pixel gather), with or without the mesostructure plugin.
 //!
 //! ## Bad input
 //! Missing or still-loading height maps, unsupported formats, meshes without UVs or normals,

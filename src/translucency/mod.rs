@@ -44,6 +44,7 @@ pub use gather::TranslucencyCamera;
 pub use plugin::{
     MAX_PATCH_BUDGET, RadiosityReceiver, Translucent, TranslucencyFrame, TranslucencyScene,
     TranslucencySettings, TranslucencyStatus, TranslucentMaterials, precompute_elapsed,
+    translucent_patch_cap,
 };
 
 /// Translucent objects lit globally (seed 001): [`Translucent`] on static meshes,
@@ -113,8 +114,10 @@ mod tests;
 
 pub use diffusion::{DiffusionKernel, DiffusionProfile};
 pub use medium::{TranslucentMedium, TranslucentPreset};
-pub use patches::{Patch, PatchObject, Patches, resample_into_patches};
+pub use patches::{
+    Patch, PatchObject, Patches, resample_into_patches, resample_into_patches_with_caps,
+};
 pub use transport::{
-    EnergyTransport, PatchLight, PatchSurface, SceneRays, SparseMatrix, TransportReport,
-    TransportSettings, TransportSolution, direct_irradiance,
+    DirectLight, EnergyTransport, PatchLight, PatchSurface, SceneRays, SparseMatrix,
+    TransportReport, TransportSettings, TransportSolution, direct_irradiance, direct_light,
 };

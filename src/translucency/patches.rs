@@ -41,8 +41,11 @@ pub struct Patch {
 pub struct Patches {
     /// The patches, grouped by object in order.
     pub patches: Vec<Patch>,
-    /// The patch size `h` the grid settled on (world units): patches are about `h²` in area.
+    /// The largest patch size the grid settled on (world units): patches are about `h²` in
+    /// area.
     pub patch_size: f32,
+    /// Each object's patch size.
+    pub object_patch_sizes: Vec<f32>,
     /// Triangles left out: non-finite vertices, indices out of range or zero area.
     pub skipped_triangles: usize,
     /// The surface samples (pieces of triangles, edges ≤ `patch_size / 2`) of each patch:
@@ -64,6 +67,12 @@ pub struct PatchSample {
 }
 
 impl Patches {
+    /// The patch size of patch `i`'s object.
+    pub fn size_of(&self, i: usize) -> f32 {
+        let s = self.object_patch_sizes[self.patches[i].object as usize];
+        if s.is_finite() { s } else { 1.0 }
+    }
+
     /// Patch `i`'s samples.
     pub fn samples_of(&self, i: usize) -> &[PatchSample] {
         &self.samples[self.sample_offsets[i] as usize..self.sample_offsets[i + 1] as usize]
@@ -120,9 +129,10 @@ fn triangles<'a>(objects: &'a [PatchObject<'a>], skipped: &'a mut usize) -> Vec<
 }
 
 /// Splits each triangle into `m²` similar pieces with edges ≤ `max_edge`.
-fn samples(triangles: &[(u32, [Vec3; 3])], max_edge: f32) -> Vec<Sample> {
+fn samples(triangles: &[(u32, [Vec3; 3])], sizes: &[f32]) -> Vec<Sample> {
     let mut out = Vec::new();
     for &(object, [a, b, c]) in triangles {
+        let max_edge = 0.5 * sizes[object as usize];
         let cross = (b - a).cross(c - a);
         let area = 0.5 * cross.length();
         let normal = cross.normalize();
@@ -161,11 +171,11 @@ struct Accumulated {
     area: f32,
 }
 
-fn group(samples: &[Sample], h: f32) -> (Vec<Key>, HashMap<Key, Accumulated>) {
+fn group(samples: &[Sample], sizes: &[f32]) -> (Vec<Key>, HashMap<Key, Accumulated>) {
     let mut groups: HashMap<Key, Accumulated> = HashMap::default();
     let mut order = Vec::new();
     for s in samples {
-        let key = sample_key(s, h);
+        let key = sample_key(s, sizes);
         let g = groups.entry(key).or_insert_with(|| {
             order.push(key);
             Accumulated::default()
@@ -182,12 +192,13 @@ fn group(samples: &[Sample], h: f32) -> (Vec<Key>, HashMap<Key, Accumulated>) {
 fn merge_slivers(
     order: &[Key],
     groups: &mut HashMap<Key, Accumulated>,
-    min_area: f32,
+    sizes: &[f32],
 ) -> (Vec<Key>, HashMap<Key, Key>) {
     let mut redirect = HashMap::default();
     for &key in order {
         let Some(&g) = groups.get(&key) else { continue };
-        if g.area >= min_area {
+        let size = sizes[key.0 as usize];
+        if g.area >= 0.2 * size * size {
             continue;
         }
         let (object, cell, axis) = key;
@@ -224,7 +235,8 @@ fn merge_slivers(
     (kept, redirect)
 }
 
-fn sample_key(s: &Sample, h: f32) -> Key {
+fn sample_key(s: &Sample, sizes: &[f32]) -> Key {
+    let h = sizes[s.object as usize];
     (
         s.object,
         (s.position / h).floor().as_ivec3(),
@@ -235,6 +247,19 @@ fn sample_key(s: &Sample, h: f32) -> Key {
 /// Resamples `objects` into at most `budget` patches of near-equal area (at least one per
 /// object that has any area).
 pub fn resample_into_patches(objects: &[PatchObject], budget: usize) -> Patches {
+    resample_into_patches_with_caps(objects, &vec![None; objects.len()], budget)
+}
+
+/// [`resample_into_patches`], with patches on object `o` no wider than `caps[o]` relative to
+/// the others: sizes are `k · min(h₀, cap)` with `h₀ = √(area / budget)` and `k` fitted to
+/// the budget, so an object whose cap is below `h₀` gets patches finer by `cap / h₀` (a
+/// translucent object's patches as wide as a fraction of its diffusion reach) and the rest
+/// share what is left.
+pub fn resample_into_patches_with_caps(
+    objects: &[PatchObject],
+    caps: &[Option<f32>],
+    budget: usize,
+) -> Patches {
     let mut skipped = 0;
     let triangles = triangles(objects, &mut skipped);
     let total_area: f64 = triangles
@@ -247,39 +272,48 @@ pub fn resample_into_patches(objects: &[PatchObject], budget: usize) -> Patches 
             ..default()
         };
     }
-    let mut h = (total_area / budget as f64).sqrt() as f32;
+    let h0 = (total_area / budget as f64).sqrt() as f32;
+    let base: Vec<f32> = (0..objects.len())
+        .map(|o| match caps.get(o).copied().flatten() {
+            Some(cap) if cap.is_finite() && cap > 0.0 => cap.min(h0),
+            _ => h0,
+        })
+        .collect();
+    let mut k = 1.0f32;
     type Grouping = (
-        f32,
+        Vec<f32>,
         Vec<Sample>,
         Vec<Key>,
         HashMap<Key, Accumulated>,
         HashMap<Key, Key>,
     );
     let mut best: Option<Grouping> = None;
-    for _ in 0..8 {
-        let samples = samples(&triangles, h * 0.5);
-        let (order, mut groups) = group(&samples, h);
-        let (order, redirect) = merge_slivers(&order, &mut groups, 0.2 * h * h);
+    for _ in 0..10 {
+        let sizes: Vec<f32> = base.iter().map(|b| b * k).collect();
+        let samples = samples(&triangles, &sizes);
+        let (order, mut groups) = group(&samples, &sizes);
+        let (order, redirect) = merge_slivers(&order, &mut groups, &sizes);
         let count = order.len();
         let fits = count <= budget;
         let done = fits && count * 4 >= budget * 3;
         if fits && best.as_ref().is_none_or(|b| count > b.2.len()) {
-            best = Some((h, samples, order, groups, redirect));
+            best = Some((sizes, samples, order, groups, redirect));
         }
         if done {
             break;
         }
-        // Patch count goes as 1/h²; aim a little under the budget.
-        h *= ((count as f32) / (0.9 * budget as f32))
+        // Patch count goes as 1/k²; aim a little under the budget.
+        k *= ((count as f32) / (0.9 * budget as f32))
             .sqrt()
             .clamp(0.5, 2.0);
     }
-    let (h, samples, order, groups, redirect) = best.unwrap_or_else(|| {
+    let (sizes, samples, order, groups, redirect) = best.unwrap_or_else(|| {
         // Never fitted (a budget smaller than the number of objects × axes): one patch per
         // object and axis.
-        let samples = samples(&triangles, f32::INFINITY);
-        let (order, groups) = group(&samples, f32::INFINITY);
-        (f32::INFINITY, samples, order, groups, HashMap::default())
+        let sizes = vec![f32::INFINITY; objects.len()];
+        let samples = samples(&triangles, &sizes);
+        let (order, groups) = group(&samples, &sizes);
+        (sizes, samples, order, groups, HashMap::default())
     });
     // Patches grouped by object (stable), then each sample into its patch.
     let mut order = order;
@@ -293,7 +327,7 @@ pub fn resample_into_patches(objects: &[PatchObject], budget: usize) -> Patches 
     };
     let mut members: Vec<Vec<PatchSample>> = vec![Vec::new(); order.len()];
     for s in &samples {
-        let i = index[&final_key(sample_key(s, h))];
+        let i = index[&final_key(sample_key(s, &sizes))];
         members[i].push(PatchSample {
             position: s.position,
             normal: s.normal,
@@ -326,7 +360,8 @@ pub fn resample_into_patches(objects: &[PatchObject], budget: usize) -> Patches 
     }
     Patches {
         patches,
-        patch_size: h,
+        patch_size: sizes.iter().copied().fold(0.0, f32::max),
+        object_patch_sizes: sizes,
         skipped_triangles: skipped,
         samples: all_samples,
         sample_offsets,

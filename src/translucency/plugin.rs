@@ -15,10 +15,10 @@ use bevy::{
 
 use super::{
     medium::TranslucentMedium,
-    patches::{Patches, resample_into_patches, world_triangles},
+    patches::{Patches, resample_into_patches_with_caps, world_triangles},
     transport::{
-        EnergyTransport, PatchLight, PatchSurface, SceneRays, TransportReport, TransportSettings,
-        direct_irradiance,
+        DirectLight, EnergyTransport, PatchLight, PatchSurface, SceneRays, TransportReport,
+        TransportSettings, direct_light,
     },
 };
 use crate::warn_once::WarnedOnce;
@@ -131,9 +131,9 @@ pub struct TranslucencyScene {
 pub struct TranslucencyFrame {
     /// The scene and its generation (changes when it is rebuilt).
     pub scene: Option<(u64, Arc<TranslucencyScene>)>,
-    /// This frame's direct irradiance per patch, and its generation (changes when a light
+    /// This frame's direct light per patch, and its generation (changes when a light
     /// does).
-    pub direct: Option<(u64, Arc<Vec<Vec3>>)>,
+    pub direct: Option<(u64, Arc<DirectLight>)>,
     /// The settings.
     pub settings: TranslucencySettings,
 }
@@ -340,7 +340,11 @@ pub(crate) fn run_precompute(
                 .map(|(p, i, _)| super::patches::PatchObject { positions: p, indices: i })
                 .collect();
             let surfaces: Vec<PatchSurface> = objects.iter().map(|o| o.2).collect();
-            let patches = resample_into_patches(&views, budget);
+            let caps: Vec<Option<f32>> = surfaces
+                .iter()
+                .map(|s| translucent_patch_cap(s, &transport_settings))
+                .collect();
+            let patches = resample_into_patches_with_caps(&views, &caps, budget);
             let rays = SceneRays::new(&views);
             let transport = EnergyTransport::build(&patches, &surfaces, &rays, &transport_settings);
             let albedo = patches
@@ -368,6 +372,20 @@ pub(crate) fn run_precompute(
         frame.scene = Some((state.generation, Arc::new(scene)));
     }
     frame.settings = *settings;
+}
+
+/// The widest patch a translucent object may have: a third of the radius within which its
+/// profile gives off 99 % of its light, so that each patch has neighbours to pass light to
+/// (with the room's uniform share, a 10 cm marble bunny got 68 patches of 21 mm and the
+/// Burley profile, 99 % within ~9 mm, reached none of them).
+pub fn translucent_patch_cap(surface: &PatchSurface, settings: &TransportSettings) -> Option<f32> {
+    match *surface {
+        PatchSurface::Translucent { medium, world_units_per_mm } => {
+            let profile = super::diffusion::DiffusionProfile::new(&medium, settings.kernel);
+            Some((profile.radius_holding(0.99) / 3.0) as f32 * world_units_per_mm)
+        }
+        PatchSurface::Opaque { .. } => None,
+    }
 }
 
 /// The lights as the transport injects them, when they change.
@@ -416,7 +434,7 @@ pub(crate) fn inject_direct_light(
     }
     state.direct_signature = signature;
     state.direct_generation += 1;
-    let direct = direct_irradiance(&scene.patches, &lights, &scene.rays);
+    let direct = direct_light(&scene.patches, Some(&scene.transport), &lights, &scene.rays);
     frame.direct = Some((state.direct_generation, Arc::new(direct)));
 }
 

@@ -153,7 +153,7 @@ impl Default for TransportSettings {
     /// costs and changes).
     fn default() -> Self {
         Self {
-            kernel: DiffusionKernel::Dipole,
+            kernel: DiffusionKernel::Burley,
             diffusion_energy_kept: 0.99,
             form_factor_cutoff: 1e-5,
             cluster_size: 4,
@@ -251,6 +251,10 @@ pub struct EnergyTransport {
     pub form_factors: SparseMatrix<f32>,
     /// Row `c`: cluster `c`'s members with their share of its area (`A_j / A_c`).
     pub cluster_means: SparseMatrix<f32>,
+    /// Per patch, `(1 − F_dr,ext) α/2` of its medium (zero on opaque patches): times
+    /// [`single_scattering_shape`](super::diffusion::single_scattering_shape) of a beam's
+    /// incidence, the single-scattered exitance per unit irradiance.
+    pub single_scattering: Vec<Vec3>,
     /// Patch areas (for energies).
     pub areas: Vec<f32>,
     /// What was kept and dropped.
@@ -312,10 +316,8 @@ impl EnergyTransport {
         let start = Instant::now();
         let p = &patches.patches;
         let n = p.len();
-        let offset = 0.05 * patches.patch_size.min(1e6);
-        let lifted: Vec<Vec3> = p
-            .iter()
-            .map(|q| q.surface_point + q.normal * offset)
+        let lifted: Vec<Vec3> = (0..n)
+            .map(|i| p[i].surface_point + p[i].normal * (0.05 * patches.size_of(i)))
             .collect();
         let cutoff = settings.form_factor_cutoff.max(0.0);
 
@@ -323,19 +325,15 @@ impl EnergyTransport {
         // patches wide. A row links to a whole cluster (one entry, one ray to the member
         // nearest its centroid, the cluster's area-mean exitance) once the cluster is further
         // than `far_field_ratio` × its radius; nearer, to each member.
-        let cluster_cell = settings.cluster_size.max(1) as f32 * patches.patch_size;
-        let clustering = settings.cluster_size > 1 && cluster_cell.is_finite();
-        let clusters = clusters(
-            p,
-            if clustering {
-                cluster_cell
-            } else {
-                f32::INFINITY
-            },
-            clustering,
-        );
+        let clustering = settings.cluster_size > 1;
+        // Each object's clusters as wide as `cluster_size` of its own patches.
+        let cells: Vec<f32> = patches
+            .object_patch_sizes
+            .iter()
+            .map(|s| if s.is_finite() { s * settings.cluster_size as f32 } else { f32::INFINITY })
+            .collect();
+        let clusters = clusters(p, &cells, clustering);
         let far_ratio2 = settings.far_field_ratio.max(1.0).powi(2);
-        let near = 2.5 * patches.patch_size;
         let rows = parallel_rows(n, |i| {
             let (pi, xi) = (&p[i], lifted[i]);
             let mut row = Vec::new();
@@ -344,6 +342,7 @@ impl EnergyTransport {
                 let pj = &p[j];
                 let d = pj.centre - pi.centre;
                 let r2 = d.length_squared();
+                let near = 2.5 * patches.size_of(i).max(patches.size_of(j));
                 if r2 < near * near {
                     // Neighbours: the kernel summed over both patches' samples, where the
                     // centres' single disc term is far off (corners, curved patches).
@@ -504,6 +503,28 @@ impl EnergyTransport {
         for (value, &column) in scattering.values.iter_mut().zip(&scattering.columns) {
             *value *= column_scale[column as usize];
         }
+        // Single scattering leaves where it enters: on the diagonal, for diffuse light
+        // (`single_scattering` keeps the factor for direct light's own incidence).
+        let single_scattering: Vec<Vec3> = p
+            .iter()
+            .map(|q| match profiles.get(q.object as usize).copied().flatten() {
+                Some((profile, ..)) => {
+                    let a = profile.single_scattering_albedo;
+                    Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32)
+                        * (0.5 * profile.entrance_transmittance) as f32
+                }
+                None => Vec3::ZERO,
+            })
+            .collect();
+        let diffuse_shape = super::diffusion::diffuse_single_scattering_shape() as f32;
+        for i in 0..n {
+            let range = scattering.row_offsets[i] as usize..scattering.row_offsets[i + 1] as usize;
+            for e in range {
+                if scattering.columns[e] as usize == i {
+                    scattering.values[e] += single_scattering[i] * diffuse_shape;
+                }
+            }
+        }
 
         let report = TransportReport {
             form_factor_entries: form_factors.entries(),
@@ -519,6 +540,7 @@ impl EnergyTransport {
             scattering,
             form_factors,
             cluster_means,
+            single_scattering,
             areas: p.iter().map(|q| q.area).collect(),
             report,
         }
@@ -544,8 +566,17 @@ impl EnergyTransport {
     /// Iterates `ΔE = F ΔB`, `ΔB = K ΔE` from `B = K E⁰` until the flux of `ΔB` is below
     /// `threshold` × the flux of the first `B`, or `max_iterations`.
     pub fn solve(&self, direct: &[Vec3], threshold: f32, max_iterations: u32) -> TransportSolution {
-        let mut irradiance = direct.to_vec();
-        let mut delta = self.scattering.mul_vec(direct);
+        self.solve_with(&DirectLight { irradiance: direct.to_vec(), exitance: Vec::new() }, threshold, max_iterations)
+    }
+
+    /// [`solve`](Self::solve) from `B = K E⁰ + S⁰`: `direct.exitance` is the exitance the
+    /// direct light leaves besides `K E⁰` (single scattering at each beam's own incidence).
+    pub fn solve_with(&self, direct: &DirectLight, threshold: f32, max_iterations: u32) -> TransportSolution {
+        let mut irradiance = direct.irradiance.clone();
+        let mut delta = self.scattering.mul_vec(&direct.irradiance);
+        for (d, s) in delta.iter_mut().zip(&direct.exitance) {
+            *d += *s;
+        }
         let mut exitance = delta.clone();
         let first = self.flux(&exitance);
         let mut iterations = 0;
@@ -572,6 +603,17 @@ impl EnergyTransport {
     }
 }
 
+/// The lights' direct contribution to the patches.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DirectLight {
+    /// Irradiance `E⁰` per patch.
+    pub irradiance: Vec<Vec3>,
+    /// Exitance `S⁰` per patch besides `K E⁰` (may be empty: none): on translucent patches,
+    /// the single scattering of each beam at its own incidence less the diffuse mean `K`
+    /// already holds.
+    pub exitance: Vec<Vec3>,
+}
+
 /// A far-field cluster.
 struct Cluster {
     members: Vec<usize>,
@@ -583,7 +625,7 @@ struct Cluster {
     representative: usize,
 }
 
-fn clusters(p: &[super::patches::Patch], cell: f32, clustering: bool) -> Vec<Cluster> {
+fn clusters(p: &[super::patches::Patch], cells: &[f32], clustering: bool) -> Vec<Cluster> {
     if !clustering {
         return vec![Cluster {
             members: (0..p.len()).collect(),
@@ -598,7 +640,7 @@ fn clusters(p: &[super::patches::Patch], cell: f32, clustering: bool) -> Vec<Clu
     for (j, q) in p.iter().enumerate() {
         let key = (
             q.object,
-            (q.centre / cell).floor().as_ivec3(),
+            (q.centre / cells[q.object as usize]).floor().as_ivec3(),
             super::patches::normal_axis(q.normal),
         );
         let c = *index.entry(key).or_insert_with(|| {
@@ -713,49 +755,65 @@ pub enum PatchLight {
 /// the CPU oracle of the light injection (the seed counts each patch's pixels in the light's
 /// view instead).
 pub fn direct_irradiance(patches: &Patches, lights: &[PatchLight], rays: &SceneRays) -> Vec<Vec3> {
-    let offset = 0.05 * patches.patch_size.min(1e6);
-    parallel_rows(patches.patches.len(), |i| {
+    direct_light(patches, None, lights, rays).irradiance
+}
+
+/// [`direct_irradiance`], and with `transport` the single-scattering exitance `S⁰` of each
+/// beam at its incidence (see [`DirectLight`]).
+pub fn direct_light(
+    patches: &Patches,
+    transport: Option<&EnergyTransport>,
+    lights: &[PatchLight],
+    rays: &SceneRays,
+) -> DirectLight {
+    let diffuse_shape = super::diffusion::diffuse_single_scattering_shape() as f32;
+    let per_patch = parallel_rows(patches.patches.len(), |i| {
         let p = &patches.patches[i];
-        let x = p.surface_point + p.normal * offset;
-        lights
-            .iter()
-            .map(|light| match *light {
-                PatchLight::Directional {
-                    direction,
-                    illuminance,
-                } => {
+        let x = p.surface_point + p.normal * (0.05 * patches.size_of(i));
+        let single = transport.and_then(|t| t.single_scattering.get(i)).copied().unwrap_or(Vec3::ZERO);
+        let (mut irradiance, mut exitance) = (Vec3::ZERO, Vec3::ZERO);
+        for light in lights {
+            let (e, to_light) = match *light {
+                PatchLight::Directional { direction, illuminance } => {
                     let to_light = -direction.normalize_or_zero();
                     let cos = p.normal.dot(to_light);
-                    if cos > 0.0 && rays.free(x, to_light, f32::INFINITY) {
+                    let e = if cos > 0.0 && rays.free(x, to_light, f32::INFINITY) {
                         illuminance * cos
                     } else {
                         Vec3::ZERO
-                    }
+                    };
+                    (e, to_light)
                 }
-                PatchLight::Point {
-                    position,
-                    intensity,
-                    range,
-                } => point_irradiance(p.normal, x, position, intensity, None, range, rays),
-                PatchLight::Spot {
-                    position,
-                    direction,
-                    intensity,
-                    inner_angle,
-                    outer_angle,
-                    range,
-                } => point_irradiance(
-                    p.normal,
-                    x,
-                    position,
-                    intensity,
-                    Some((direction, inner_angle, outer_angle)),
-                    range,
-                    rays,
+                PatchLight::Point { position, intensity, range } => (
+                    point_irradiance(p.normal, x, position, intensity, None, range, rays),
+                    (position - x).normalize_or_zero(),
                 ),
-            })
-            .fold(Vec3::ZERO, |a, b| a + b)
-    })
+                PatchLight::Spot { position, direction, intensity, inner_angle, outer_angle, range } => (
+                    point_irradiance(
+                        p.normal,
+                        x,
+                        position,
+                        intensity,
+                        Some((direction, inner_angle, outer_angle)),
+                        range,
+                        rays,
+                    ),
+                    (position - x).normalize_or_zero(),
+                ),
+            };
+            irradiance += e;
+            if single != Vec3::ZERO && e != Vec3::ZERO {
+                let shape = super::diffusion::single_scattering_shape(p.normal.dot(to_light) as f64) as f32;
+                exitance += single * e * (shape - diffuse_shape);
+            }
+        }
+        (irradiance, exitance)
+    });
+    let has_single = transport.is_some_and(|t| t.single_scattering.iter().any(|s| *s != Vec3::ZERO));
+    DirectLight {
+        exitance: if has_single { per_patch.iter().map(|d| d.1).collect() } else { Vec::new() },
+        irradiance: per_patch.into_iter().map(|d| d.0).collect(),
+    }
 }
 
 fn point_irradiance(

@@ -10,8 +10,8 @@ use bevy::{
     },
 };
 use bevy_mesostructure::translucency::{
-    EnergyTransport, PatchLight, PatchObject, PatchSurface, SceneRays, TransportSettings,
-    TranslucentPreset, direct_irradiance,
+    DiffusionKernel, EnergyTransport, PatchLight, PatchObject, PatchSurface, SceneRays, TransportSettings,
+    TranslucentPreset, direct_light,
     iteration::{GpuTransport, IterationLimits},
     patches::world_triangles,
     resample_into_patches,
@@ -66,7 +66,9 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
         PatchSurface::Opaque { albedo: Vec3::splat(0.8) },
         PatchSurface::Opaque { albedo: Vec3::new(0.8, 0.1, 0.1) },
     ];
-    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
+    // The dipole: its single-scattering term exercises the first bounce's extra exitance.
+    let settings = TransportSettings { kernel: DiffusionKernel::Dipole, ..default() };
+    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
     assert!(transport.report.clusters > 0, "the far field takes part");
     let position = Vec3::new(0.15, 0.25, 0.1);
     let lights = [PatchLight::Spot {
@@ -77,7 +79,10 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
         outer_angle: 0.6,
         range: 10.0,
     }];
-    let direct = direct_irradiance(&patches, &lights, &rays);
+    // With the single-scattering exitance of the marble's direct light (the first bounce's
+    // extra term).
+    let direct = direct_light(&patches, Some(&transport), &lights, &rays);
+    assert!(direct.exitance.iter().any(|s| *s != Vec3::ZERO));
     let n = patches.patches.len();
 
     // Converged (the loop stops on the GPU), and stopped by the cap.
@@ -85,7 +90,7 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
         IterationLimits { threshold: 1e-4, max_iterations: 60 },
         IterationLimits { threshold: 1e-9, max_iterations: 3 },
     ] {
-        let cpu = transport.solve(&direct, limits.threshold, limits.max_iterations);
+        let cpu = transport.solve_with(&direct, limits.threshold, limits.max_iterations);
         let gpu = GpuTransport::new(&device, &transport, limits);
         gpu.write_direct(&queue, &direct);
         let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
@@ -128,7 +133,7 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     };
     use bevy_mesostructure::translucency::{
         Translucent, TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin,
-        TranslucencySettings, TranslucencyStatus, gather::GATHER_RADIUS_IN_PATCHES,
+        TranslucencySettings, TranslucencyStatus, gather::gathered_radiance,
     };
     if !gpu_or_skip() {
         return;
@@ -184,8 +189,7 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     let frame = app.world().resource::<TranslucencyFrame>().clone();
     let (_, scene) = frame.scene.expect("a scene");
     let (_, direct) = frame.direct.expect("the light injected");
-    let solution = scene.transport.solve(&direct, frame.settings.iteration_threshold, frame.settings.max_iterations);
-    let r = GATHER_RADIUS_IN_PATCHES * scene.patches.patch_size;
+    let solution = scene.transport.solve_with(&direct, frame.settings.iteration_threshold, frame.settings.max_iterations);
     let exposure = Exposure::default().exposure();
     let (camera_component, camera_transform) = app
         .world_mut()
@@ -212,21 +216,8 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
             if n.dot(-d) < 0.3 {
                 continue;
             }
-            let (mut sum, mut weights) = (Vec3::ZERO, 0.0);
-            for (i, p) in scene.patches.patches.iter().enumerate() {
-                let d2 = p.surface_point.distance_squared(hit);
-                if d2 >= r * r {
-                    continue;
-                }
-                let t = ((n.dot(p.normal) - 0.3) / 0.6).clamp(0.0, 1.0);
-                let agree = t * t * (3.0 - 2.0 * t);
-                let w = (1.0 - d2 / (r * r)).powi(2) * agree;
-                if w > 0.0 {
-                    sum += w * (solution.exitance[i] - scene.albedo[i] * direct[i]).max(Vec3::ZERO) / std::f32::consts::PI;
-                    weights += w;
-                }
-            }
-            let expected = if weights > 0.0 { sum.x / weights * exposure } else { 0.0 };
+            let expected = gathered_radiance(&scene.patches, &scene.albedo, &direct.irradiance, &solution.exitance, hit, n)
+                .map_or(0.0, |l| l.x * exposure);
             let pixel = shot.get_color_at(x, y).unwrap().to_srgba().red * 255.0;
             let error = (pixel - srgb8(expected)).abs();
             compared += 1;
@@ -240,11 +231,11 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     let mean = sum_error / compared as f32;
     eprintln!("{compared} pixels: mean |GPU − CPU| {mean:.2}/255, worst {worst:.1}/255; {glowing_in_shade} lit pixels in the shade");
     assert!(compared > 500);
-    // Measured 0.26/255 mean and 3.9/255 worst (the mesh's facets against the sphere).
+    // Measured 0.22/255 mean and 2.7/255 worst (the mesh's facets against the sphere).
     assert!(mean <= 1.0 && worst <= 8.0, "mean {mean}, worst {worst}");
     // Light carried under the surface past the terminator, where Bevy's own shading is
-    // black: measured 91 pixels at ≥ 3/255.
-    assert!(glowing_in_shade >= 45, "{glowing_in_shade}");
+    // black: measured 68 pixels at ≥ 3/255.
+    assert!(glowing_in_shade >= 34, "{glowing_in_shade}");
 }
 
 #[test]
@@ -287,6 +278,15 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         TranslucencyCamera,
         Transform::from_xyz(0.0, 0.0, 0.6).looking_at(Vec3::ZERO, Vec3::Y),
     ));
+    // A second camera with MSAA on: a warning, no gather, no wgpu error.
+    let other = target(&mut app, 32, 32);
+    app.world_mut().spawn((
+        Camera3d::default(),
+        bevy::camera::RenderTarget::Image(other.into()),
+        Msaa::Sample4,
+        TranslucencyCamera,
+        Transform::from_xyz(0.0, 0.0, 0.6).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
     let ready = |app: &App| matches!(app.world().resource::<TranslucencyStatus>(), TranslucencyStatus::Ready { .. });
     let wait_ready = |app: &mut App| {
         for _ in 0..600 {
@@ -300,7 +300,12 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     };
     wait_ready(&mut app);
     let causes = warnings(&app);
-    for key in ["translucency-budget", &format!("translucency-medium-{bad}"), "translucency-units-"] {
+    for key in [
+        "translucency-budget",
+        &format!("translucency-medium-{bad}"),
+        "translucency-units-",
+        "translucency-msaa",
+    ] {
         assert!(causes.iter().any(|c| c.starts_with(key)), "no warning {key}: {causes:?}");
     }
     assert_eq!(app.world().resource::<TranslucencySettings>().patch_budget, 16);

@@ -1,6 +1,6 @@
 // Seed 001's last step, by per-pixel interpolation of the patches' outgoing radiance: each
 // pixel (world position from the depth prepass, normal from the normal prepass) gathers the
-// patches within a radius R about it through a hashed grid, weighted by distance,
+// patches within their reach R (1.5 of their object's patch size) about it through a hashed grid, weighted by distance,
 // (1 − d²/R²)², and by how far their normals agree with its own; translucent patches give
 // their whole exitance B/π (their mesh's material has no diffuse), opaque patches the light
 // they bounce, (B − ρE⁰)/π = ρ(E − E⁰)/π (their direct light is Bevy's). Added to the lit
@@ -55,7 +55,6 @@ fn gather(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     let n = normalize(textureLoad(normal_prepass, p, 0).xyz * 2.0 - 1.0);
 
     let centre_cell = vec3<i32>(floor(x / params.cell_size));
-    let r2 = params.radius * params.radius;
     var sum = vec3(0.0);
     var weights = 0.0;
     for (var dz = -1; dz <= 1; dz += 1) {
@@ -69,6 +68,8 @@ fn gather(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
                     let record = patches[i];
                     let d = record.centre.xyz - x;
                     let d2 = dot(d, d);
+                    // Each patch reaches 1.5 of its own object's patch sizes (centre.w).
+                    let r2 = record.centre.w * record.centre.w;
                     if d2 >= r2 {
                         continue;
                     }

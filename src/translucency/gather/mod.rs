@@ -66,6 +66,36 @@ impl PatchGrid {
     }
 }
 
+/// The radiance the gather gives a point `x` with normal `n` (before the view's exposure):
+/// the patches within `radius`, weighted by `(1 − d²/R²)²` and by `smoothstep(0.3, 0.9, n·n_i)`,
+/// each giving `(B_i − ρ_i E⁰_i) / π`; `None` where no patch is near. The CPU twin of
+/// `gather.wgsl` (brute force instead of the hashed grid), the oracle of its tests.
+pub fn gathered_radiance(
+    patches: &super::patches::Patches,
+    albedo: &[Vec3],
+    direct: &[Vec3],
+    exitance: &[Vec3],
+    x: Vec3,
+    n: Vec3,
+) -> Option<Vec3> {
+    let (mut sum, mut weights) = (Vec3::ZERO, 0.0);
+    for (i, p) in patches.patches.iter().enumerate() {
+        let d2 = p.surface_point.distance_squared(x);
+        // Each patch reaches 1.5 of its own object's patch sizes.
+        let r2 = (GATHER_RADIUS_IN_PATCHES * patches.size_of(i)).powi(2);
+        if d2 >= r2 {
+            continue;
+        }
+        let t = ((n.dot(p.normal) - 0.3) / 0.6).clamp(0.0, 1.0);
+        let w = (1.0 - d2 / r2).powi(2) * t * t * (3.0 - 2.0 * t);
+        if w > 0.0 {
+            sum += w * (exitance[i] - albedo[i] * direct[i]).max(Vec3::ZERO) / std::f32::consts::PI;
+            weights += w;
+        }
+    }
+    (weights > 0.0).then(|| sum / weights)
+}
+
 /// `GatherParams` in `gather.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, ShaderType)]
@@ -131,17 +161,20 @@ fn gather_buffers(
     transport: &GpuTransport,
 ) -> (Buffer, Buffer, Buffer) {
     let patches = &scene.patches;
-    let size = if patches.patch_size.is_finite() { patches.patch_size } else { 1.0 };
-    let radius = GATHER_RADIUS_IN_PATCHES * size;
+    // Cells as wide as the widest reach; each patch reaches 1.5 of its own patch sizes.
+    let radius = GATHER_RADIUS_IN_PATCHES
+        * (0..patches.patches.len()).map(|i| patches.size_of(i)).fold(0.0, f32::max).max(1e-9);
     let centres: Vec<Vec3> = patches.patches.iter().map(|p| p.surface_point).collect();
     let grid = PatchGrid::new(&centres, radius);
     let records: Vec<[f32; 12]> = patches
         .patches
         .iter()
         .zip(&scene.albedo)
-        .map(|(p, a)| {
+        .enumerate()
+        .map(|(i, (p, a))| {
+            let reach = GATHER_RADIUS_IN_PATCHES * patches.size_of(i);
             [
-                p.surface_point.x, p.surface_point.y, p.surface_point.z, 0.0,
+                p.surface_point.x, p.surface_point.y, p.surface_point.z, reach,
                 p.normal.x, p.normal.y, p.normal.z, 0.0,
                 a.x, a.y, a.z, 0.0,
             ]
@@ -286,15 +319,26 @@ impl SpecializedRenderPipeline for GatherPipeline {
 #[derive(Component)]
 pub struct ViewGatherPipeline(CachedRenderPipelineId);
 
-/// Specialises the gather for each translucency camera's target format (render `Prepare`).
+/// Specialises the gather for each translucency camera's target format (render `Prepare`);
+/// a camera with MSAA on gets one warning and no gather (its prepass images are multisampled).
 pub fn prepare_gather_pipelines(
     mut commands: Commands,
     pipeline_cache: Res<PipelineCache>,
     mut pipelines: ResMut<SpecializedRenderPipelines<GatherPipeline>>,
     pipeline: Res<GatherPipeline>,
-    views: Query<(Entity, &ViewTarget), With<TranslucencyCamera>>,
+    views: Query<(Entity, &ViewTarget, Option<&bevy::render::view::Msaa>), With<TranslucencyCamera>>,
+    mut warned: ResMut<crate::warn_once::WarnedOnce>,
 ) {
-    for (entity, target) in &views {
+    for (entity, target, msaa) in &views {
+        if msaa.is_some_and(|m| *m != bevy::render::view::Msaa::Off) {
+            warned.warn("translucency-msaa", || {
+                "translucency: a TranslucencyCamera has MSAA on; the translucency needs Msaa::Off \
+                 and is not shown by that camera"
+                    .to_string()
+            });
+            commands.entity(entity).remove::<ViewGatherPipeline>();
+            continue;
+        }
         let id = pipelines.specialize(&pipeline_cache, &pipeline, target.main_texture_format());
         commands.entity(entity).insert(ViewGatherPipeline(id));
     }

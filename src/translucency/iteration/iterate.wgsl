@@ -1,5 +1,5 @@
-// Seed 001's per-frame transport on the GPU: B = K E⁰ + K F B, iterated as
-//   ΔB₀ = K E⁰;  repeat { ΔB_c = cluster means of ΔB;  ΔE = F [ΔB, ΔB_c];  E += ΔE;
+// Seed 001's per-frame transport on the GPU: B = K E⁰ + S⁰ + K F B, iterated as
+//   ΔB₀ = K E⁰ + S⁰;  repeat { ΔB_c = cluster means of ΔB;  ΔE = F [ΔB, ΔB_c];  E += ΔE;
 //                         ΔB = K ΔE;  B += ΔB }  until flux(ΔB) ≤ threshold · flux(ΔB₀).
 // The same arithmetic as `EnergyTransport::solve` (src/translucency/transport.rs). The loop is
 // recorded max_iterations times; `decide` zeroes the indirect dispatch arguments once the
@@ -27,7 +27,8 @@ struct Layout {
     irradiance: u32,
     delta_exitance: u32,   // patches + clusters (the clusters' means after the patches)
     delta_irradiance: u32,
-    _pad0: u32,
+    // The direct light's exitance besides K E⁰ (single scattering at each beam's incidence).
+    direct_exitance: u32,
 }
 
 struct State {
@@ -84,12 +85,9 @@ fn seed(@builtin(global_invocation_id) id: vec3<u32>) {
 
 var<workgroup> flux: array<f32, 64>;
 
-// ΔB = K ΔE; B += ΔB; each workgroup's share of flux(ΔB) = Σ A_i (ΔB.r + ΔB.g + ΔB.b).
-@compute @workgroup_size(64)
-fn scatter(@builtin(global_invocation_id) id: vec3<u32>,
-           @builtin(local_invocation_index) local: u32,
-           @builtin(workgroup_id) group: vec3<u32>) {
-    let i = id.x;
+// ΔB = K ΔE (+ S⁰ on the first bounce); B += ΔB; each workgroup's share of
+// flux(ΔB) = Σ A_i (ΔB.r + ΔB.g + ΔB.b).
+fn scatter_rows(i: u32, local: u32, group: u32, first: bool) {
     var own = 0.0;
     if i < packing.patches {
         var sum = vec4(0.0);
@@ -101,6 +99,9 @@ fn scatter(@builtin(global_invocation_id) id: vec3<u32>,
             let k = vec4(bitcast<f32>(matrices[v]), bitcast<f32>(matrices[v + 1u]),
                          bitcast<f32>(matrices[v + 2u]), 0.0);
             sum += k * vectors[packing.delta_irradiance + j];
+        }
+        if first {
+            sum += vectors[packing.direct_exitance + i];
         }
         vectors[packing.delta_exitance + i] = sum;
         vectors[packing.exitance + i] += sum;
@@ -115,8 +116,22 @@ fn scatter(@builtin(global_invocation_id) id: vec3<u32>,
         workgroupBarrier();
     }
     if local == 0u {
-        partials[group.x] = flux[0];
+        partials[group] = flux[0];
     }
+}
+
+@compute @workgroup_size(64)
+fn scatter_first(@builtin(global_invocation_id) id: vec3<u32>,
+                 @builtin(local_invocation_index) local: u32,
+                 @builtin(workgroup_id) group: vec3<u32>) {
+    scatter_rows(id.x, local, group.x, true);
+}
+
+@compute @workgroup_size(64)
+fn scatter(@builtin(global_invocation_id) id: vec3<u32>,
+           @builtin(local_invocation_index) local: u32,
+           @builtin(workgroup_id) group: vec3<u32>) {
+    scatter_rows(id.x, local, group.x, false);
 }
 
 // Sums the partial fluxes and decides whether the loop goes on.

@@ -49,7 +49,7 @@ struct Layout {
     irradiance: u32,
     delta_exitance: u32,
     delta_irradiance: u32,
-    _pad0: u32,
+    direct_exitance: u32,
 }
 
 /// `State` in `iterate.wgsl` (indirect arguments first, as dispatches read them).
@@ -80,6 +80,7 @@ pub struct GpuTransport {
     bind_group: BindGroup,
     state_bind_group: BindGroup,
     seed: ComputePipeline,
+    scatter_first: ComputePipeline,
     scatter: ComputePipeline,
     decide: ComputePipeline,
     restrict: ComputePipeline,
@@ -129,7 +130,8 @@ impl GpuTransport {
         layout.irradiance = 2 * n;
         layout.delta_exitance = 3 * n;
         layout.delta_irradiance = 4 * n + clusters;
-        let vector_count = (5 * n + clusters).max(1) as u64;
+        layout.direct_exitance = 5 * n + clusters;
+        let vector_count = (6 * n + clusters).max(1) as u64;
 
         let matrices = device.create_buffer_with_data(&BufferInitDescriptor {
             label: Some("translucency_matrices"),
@@ -237,6 +239,7 @@ impl GpuTransport {
             bind_group,
             state_bind_group,
             seed: pipeline("seed", &control),
+            scatter_first: pipeline("scatter_first", &products),
             scatter: pipeline("scatter", &products),
             decide: pipeline("decide", &control),
             restrict: pipeline("cluster_means", &products),
@@ -249,14 +252,20 @@ impl GpuTransport {
         self.layout.patches
     }
 
-    /// Writes this frame's direct irradiance `E⁰` (one per patch).
-    pub fn write_direct(&self, queue: &RenderQueue, direct: &[Vec3]) {
+    /// Writes this frame's direct light: irradiance `E⁰` and the exitance `S⁰` besides
+    /// `K E⁰` (one per patch; an empty `exitance` is zero).
+    pub fn write_direct(&self, queue: &RenderQueue, direct: &super::transport::DirectLight) {
         let n = self.layout.patches as usize;
-        let data: Vec<[f32; 4]> = (0..n)
-            .map(|i| direct.get(i).map_or([0.0; 4], |e| [e.x, e.y, e.z, 0.0]))
-            .collect();
-        if !data.is_empty() {
-            queue.write_buffer(&self.vectors, self.layout.direct as u64 * 16, bytemuck::cast_slice(&data));
+        let pack = |v: &[Vec3]| -> Vec<[f32; 4]> {
+            (0..n).map(|i| v.get(i).map_or([0.0; 4], |e| [e.x, e.y, e.z, 0.0])).collect()
+        };
+        if n > 0 {
+            queue.write_buffer(&self.vectors, self.layout.direct as u64 * 16, bytemuck::cast_slice(&pack(&direct.irradiance)));
+            queue.write_buffer(
+                &self.vectors,
+                self.layout.direct_exitance as u64 * 16,
+                bytemuck::cast_slice(&pack(&direct.exitance)),
+            );
         }
     }
 
@@ -277,7 +286,7 @@ impl GpuTransport {
             let groups = n.div_ceil(WORKGROUP);
             pass.set_pipeline(&self.seed);
             pass.dispatch_workgroups(groups, 1, 1);
-            pass.set_pipeline(&self.scatter);
+            pass.set_pipeline(&self.scatter_first);
             pass.dispatch_workgroups(groups, 1, 1);
             pass.set_pipeline(&self.decide);
             pass.dispatch_workgroups(1, 1, 1);
