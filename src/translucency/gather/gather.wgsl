@@ -10,15 +10,13 @@
 #import bevy_render::view::View
 
 struct GatherParams {
-    cell_size: f32,
-    radius: f32,
-    table_mask: u32,
+    // Grids by reach (`PatchGrid::levels`): per grid four words at the start of `grid` (cell
+    // size, bucket mask, where its bucket offsets and its members start).
+    levels: u32,
     patches: u32,
-    // Offsets in `vectors` (vec4s) and `grid` (u32 words).
+    // Offsets in `vectors` (vec4s).
     direct: u32,
     exitance: u32,
-    table: u32,
-    members: u32,
 }
 
 struct GatherPatch {
@@ -36,9 +34,9 @@ struct GatherPatch {
 @group(0) @binding(6) var<storage, read> grid: array<u32>;
 
 // The grid cell's bucket: `PatchGrid::bucket` in gather/mod.rs.
-fn bucket(cell: vec3<i32>) -> u32 {
+fn bucket(cell: vec3<i32>, mask: u32) -> u32 {
     let c = bitcast<vec3<u32>>(cell);
-    return ((c.x * 73856093u) ^ (c.y * 19349663u) ^ (c.z * 83492791u)) & params.table_mask;
+    return ((c.x * 73856093u) ^ (c.y * 19349663u) ^ (c.z * 83492791u)) & mask;
 }
 
 @fragment
@@ -54,35 +52,41 @@ fn gather(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     let x = world.xyz / world.w;
     let n = normalize(textureLoad(normal_prepass, p, 0).xyz * 2.0 - 1.0);
 
-    let centre_cell = vec3<i32>(floor(x / params.cell_size));
     var sum = vec3(0.0);
     var weights = 0.0;
-    for (var dz = -1; dz <= 1; dz += 1) {
-        for (var dy = -1; dy <= 1; dy += 1) {
-            for (var dx = -1; dx <= 1; dx += 1) {
-                let b = bucket(centre_cell + vec3(dx, dy, dz));
-                let start = grid[params.table + b];
-                let end = grid[params.table + b + 1u];
-                for (var k = start; k < end; k += 1u) {
-                    let i = grid[params.members + k];
-                    let record = patches[i];
-                    let d = record.centre.xyz - x;
-                    let d2 = dot(d, d);
-                    // Each patch reaches 1.5 of its own object's patch sizes (centre.w).
-                    let r2 = record.centre.w * record.centre.w;
-                    if d2 >= r2 {
-                        continue;
+    for (var level = 0u; level < params.levels; level += 1u) {
+        let cell_size = bitcast<f32>(grid[4u * level]);
+        let mask = grid[4u * level + 1u];
+        let table = grid[4u * level + 2u];
+        let members = grid[4u * level + 3u];
+        let centre_cell = vec3<i32>(floor(x / cell_size));
+        for (var dz = -1; dz <= 1; dz += 1) {
+            for (var dy = -1; dy <= 1; dy += 1) {
+                for (var dx = -1; dx <= 1; dx += 1) {
+                    let b = bucket(centre_cell + vec3(dx, dy, dz), mask);
+                    let start = grid[table + b];
+                    let end = grid[table + b + 1u];
+                    for (var k = start; k < end; k += 1u) {
+                        let i = grid[members + k];
+                        let record = patches[i];
+                        let d = record.centre.xyz - x;
+                        let d2 = dot(d, d);
+                        // Each patch reaches 1.5 of its own object's patch sizes (centre.w).
+                        let r2 = record.centre.w * record.centre.w;
+                        if d2 >= r2 {
+                            continue;
+                        }
+                        let agree = smoothstep(0.3, 0.9, dot(n, record.normal.xyz));
+                        let falloff = 1.0 - d2 / r2;
+                        let w = falloff * falloff * agree;
+                        if w <= 0.0 {
+                            continue;
+                        }
+                        let b_i = vectors[params.exitance + i].rgb;
+                        let e0 = vectors[params.direct + i].rgb;
+                        sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) / 3.14159265358979;
+                        weights += w;
                     }
-                    let agree = smoothstep(0.3, 0.9, dot(n, record.normal.xyz));
-                    let falloff = 1.0 - d2 / r2;
-                    let w = falloff * falloff * agree;
-                    if w <= 0.0 {
-                        continue;
-                    }
-                    let b_i = vectors[params.exitance + i].rgb;
-                    let e0 = vectors[params.direct + i].rgb;
-                    sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) / 3.14159265358979;
-                    weights += w;
                 }
             }
         }

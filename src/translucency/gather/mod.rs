@@ -21,8 +21,8 @@ use super::{
     plugin::{TranslucencyFrame, TranslucencyScene},
 };
 
-/// The patches in a hashed grid of cells as wide as the gather radius: a pixel looks in the
-/// 27 cells about it.
+/// Some patches in a hashed grid of cells as wide as their widest reach: a pixel looks in
+/// the 27 cells about it.
 #[derive(Clone, Debug, Default)]
 pub struct PatchGrid {
     /// Cell width (world units).
@@ -34,13 +34,14 @@ pub struct PatchGrid {
 }
 
 impl PatchGrid {
-    /// Buckets a power of two ≥ 4 × the patches (few collisions among the 27 cells looked at).
-    pub fn new(centres: &[Vec3], cell_size: f32) -> Self {
-        let buckets = (centres.len() * 4).next_power_of_two().max(64) as u32;
+    /// The patches `indices` (centres `centres[i]`); buckets a power of two ≥ 4 × their
+    /// number (few collisions among the 27 cells looked at).
+    pub fn new(centres: &[Vec3], indices: &[u32], cell_size: f32) -> Self {
+        let buckets = (indices.len() * 4).next_power_of_two().max(64) as u32;
         let mask = buckets - 1;
-        let bucket_of: Vec<u32> = centres
+        let bucket_of: Vec<u32> = indices
             .iter()
-            .map(|c| Self::bucket((*c / cell_size).floor().as_ivec3(), mask))
+            .map(|&i| Self::bucket((centres[i as usize] / cell_size).floor().as_ivec3(), mask))
             .collect();
         let mut offsets = vec![0u32; buckets as usize + 1];
         for &b in &bucket_of {
@@ -50,9 +51,9 @@ impl PatchGrid {
             offsets[b + 1] += offsets[b];
         }
         let mut fill = offsets.clone();
-        let mut members = vec![0u32; centres.len()];
-        for (i, &b) in bucket_of.iter().enumerate() {
-            members[fill[b as usize] as usize] = i as u32;
+        let mut members = vec![0u32; indices.len()];
+        for (&i, &b) in indices.iter().zip(&bucket_of) {
+            members[fill[b as usize] as usize] = i;
             fill[b as usize] += 1;
         }
         Self { cell_size, offsets, members }
@@ -64,7 +65,30 @@ impl PatchGrid {
         (c.x.wrapping_mul(73_856_093) ^ c.y.wrapping_mul(19_349_663) ^ c.z.wrapping_mul(83_492_791))
             & mask
     }
+
+    /// The patches in grids by reach: one grid per power-of-two step of reach above the
+    /// smallest (at most [`MAX_GRID_LEVELS`], the last taking the rest), so that a pixel near
+    /// finely patched objects does not walk the buckets of cells sized for a wall's patches.
+    pub fn levels(centres: &[Vec3], reaches: &[f32]) -> Vec<PatchGrid> {
+        let smallest = reaches.iter().copied().fold(f32::INFINITY, f32::min).max(1e-9);
+        let level = |r: f32| ((r / smallest).log2().ceil().max(0.0) as usize).min(MAX_GRID_LEVELS - 1);
+        let mut by_level: Vec<Vec<u32>> = vec![Vec::new(); MAX_GRID_LEVELS];
+        for (i, &r) in reaches.iter().enumerate() {
+            by_level[level(r)].push(i as u32);
+        }
+        by_level
+            .into_iter()
+            .filter(|members| !members.is_empty())
+            .map(|members| {
+                let cell = members.iter().map(|&i| reaches[i as usize]).fold(0.0, f32::max);
+                PatchGrid::new(centres, &members, cell)
+            })
+            .collect()
+    }
 }
+
+/// The most grids the gather looks in.
+pub const MAX_GRID_LEVELS: usize = 8;
 
 /// The radiance the gather gives a point `x` with normal `n` (before the view's exposure):
 /// the patches within `radius`, weighted by `(1 − d²/R²)²` and by `smoothstep(0.3, 0.9, n·n_i)`,
@@ -100,14 +124,10 @@ pub fn gathered_radiance(
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, ShaderType)]
 struct GatherParams {
-    cell_size: f32,
-    radius: f32,
-    table_mask: u32,
+    levels: u32,
     patches: u32,
     direct: u32,
     exitance: u32,
-    table: u32,
-    members: u32,
 }
 
 /// The gather radius in patch sizes: about two rings of neighbours.
@@ -161,39 +181,43 @@ fn gather_buffers(
     transport: &GpuTransport,
 ) -> (Buffer, Buffer, Buffer) {
     let patches = &scene.patches;
-    // Cells as wide as the widest reach; each patch reaches 1.5 of its own patch sizes.
-    let radius = GATHER_RADIUS_IN_PATCHES
-        * (0..patches.patches.len()).map(|i| patches.size_of(i)).fold(0.0, f32::max).max(1e-9);
+    // Each patch reaches 1.5 of its own patch sizes.
+    let reaches: Vec<f32> = (0..patches.patches.len())
+        .map(|i| GATHER_RADIUS_IN_PATCHES * patches.size_of(i))
+        .collect();
     let centres: Vec<Vec3> = patches.patches.iter().map(|p| p.surface_point).collect();
-    let grid = PatchGrid::new(&centres, radius);
+    let grids = PatchGrid::levels(&centres, &reaches);
     let records: Vec<[f32; 12]> = patches
         .patches
         .iter()
         .zip(&scene.albedo)
-        .enumerate()
-        .map(|(i, (p, a))| {
-            let reach = GATHER_RADIUS_IN_PATCHES * patches.size_of(i);
+        .zip(&reaches)
+        .map(|((p, a), reach)| {
             [
-                p.surface_point.x, p.surface_point.y, p.surface_point.z, reach,
+                p.surface_point.x, p.surface_point.y, p.surface_point.z, *reach,
                 p.normal.x, p.normal.y, p.normal.z, 0.0,
                 a.x, a.y, a.z, 0.0,
             ]
         })
         .collect();
-    let mut words = grid.offsets.clone();
-    let members_at = words.len() as u32;
-    words.extend(&grid.members);
+    // Per grid: cell size, bucket mask, where its offsets and its members start; then the
+    // arrays themselves.
+    let mut words = vec![0u32; 4 * grids.len()];
+    for (l, grid) in grids.iter().enumerate() {
+        words[4 * l] = grid.cell_size.to_bits();
+        words[4 * l + 1] = (grid.offsets.len() - 2) as u32;
+        words[4 * l + 2] = words.len() as u32;
+        words.extend(&grid.offsets);
+        words[4 * l + 3] = words.len() as u32;
+        words.extend(&grid.members);
+    }
     words.push(0);
     let (direct, exitance) = transport.vector_offsets();
     let params = GatherParams {
-        cell_size: radius,
-        radius,
-        table_mask: (grid.offsets.len() - 2) as u32,
+        levels: grids.len() as u32,
         patches: patches.patches.len() as u32,
         direct,
         exitance,
-        table: 0,
-        members: members_at,
     };
     let patch_buffer = device.create_buffer_with_data(&BufferInitDescriptor {
         label: Some("translucency_gather_patches"),
@@ -321,7 +345,7 @@ pub struct ViewGatherPipeline(CachedRenderPipelineId);
 
 /// Specialises the gather for each translucency camera's target format (render `Prepare`);
 /// a camera with MSAA on gets one warning and no gather (its prepass images are multisampled).
-pub fn prepare_gather_pipelines(
+pub(crate) fn prepare_gather_pipelines(
     mut commands: Commands,
     pipeline_cache: Res<PipelineCache>,
     mut pipelines: ResMut<SpecializedRenderPipelines<GatherPipeline>>,
