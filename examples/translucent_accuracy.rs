@@ -19,7 +19,16 @@
 //! all channels; `flip` is NVIDIA FLIP's mean on both pictures scaled by the reference's
 //! brightest pixel.
 
-use std::{io::Write, path::PathBuf, process::Command, time::Instant};
+#[path = "common/headless.rs"]
+mod headless;
+
+use std::{
+    io::Write,
+    path::PathBuf,
+    process::Command,
+    sync::{Arc, Mutex},
+    time::Instant,
+};
 
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
@@ -30,7 +39,8 @@ use bevy_mesostructure::translucency::{
 
 const RADIUS: f32 = 0.01;
 const EYE: Vec3 = Vec3::new(0.0, 0.0, 0.04);
-const LIGHT: Vec3 = Vec3::new(-1.0, -0.2, -0.3);
+/// The default light: from the right, slightly above and in front.
+const FRONT_LIGHT: Vec3 = Vec3::new(-1.0, -0.2, -0.3);
 const FOV_Y: f32 = std::f32::consts::FRAC_PI_4;
 
 /// The translucency's picture of a ball against Mitsuba's, per patch budget, into a CSV.
@@ -47,6 +57,10 @@ struct Cli {
     /// Diffusion profile
     #[arg(long, value_enum, default_value_t = Kernel::Burley)]
     kernel: Kernel,
+    /// The direction the light travels, x,y,z (default -1,-0.2,-0.3: from the right, a
+    /// little above and in front; 0.4,-0.2,1 lights the ball from behind)
+    #[arg(long, value_parser = parse_direction, allow_negative_numbers = true)]
+    light: Option<Vec3>,
     /// Picture width = height
     #[arg(long, default_value_t = 96, value_parser = clap::value_parser!(u32).range(8..=1024))]
     size: u32,
@@ -59,6 +73,11 @@ struct Cli {
     /// CSV to append rows to (header written if the file is new)
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Also fit Bevy's own `diffuse_transmission` material to the reference (renders on the
+    /// GPU or the software driver): the best base colour per channel for each transmission
+    /// 0, 0.1, … 1 and thickness 0 or 2 cm
+    #[arg(long)]
+    bevy: bool,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum, Debug)]
@@ -74,6 +93,43 @@ enum Medium {
 enum Kernel {
     Dipole,
     Burley,
+}
+
+/// The camera ray through pixel `(x, y)` and where it meets the ball (point, normal), if it
+/// does.
+fn ball_hit(x: u32, y: u32, size: u32) -> Option<(Vec3, Vec3, Vec3)> {
+    let tan = (FOV_Y / 2.0).tan();
+    let forward = (-EYE).normalize();
+    let right = forward.cross(Vec3::Y).normalize();
+    let up = right.cross(forward);
+    let sx = (2.0 * (x as f32 + 0.5) / size as f32 - 1.0) * tan;
+    let sy = (1.0 - 2.0 * (y as f32 + 0.5) / size as f32) * tan;
+    let d = (forward + right * sx + up * sy).normalize();
+    let b = EYE.dot(d);
+    let disc = b * b - (EYE.length_squared() - RADIUS * RADIUS);
+    (disc > 0.0).then(|| {
+        let hit = EYE + d * (-b - disc.sqrt());
+        (d, hit, hit.normalize())
+    })
+}
+
+/// Whether pixel `(x, y)` is scored: on the ball, the silhouette's rim (mesh against sphere,
+/// pixels half on the ball) left out.
+fn scored(x: u32, y: u32, size: u32) -> bool {
+    ball_hit(x, y, size).is_some_and(|(d, _, n)| n.dot(-d) >= 0.3)
+}
+
+fn parse_direction(s: &str) -> Result<Vec3, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|c| c.trim().parse::<f32>().map_err(|_| format!("{s:?} is not three numbers x,y,z")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if Vec3::new(x, y, z).length() > 0.0 && Vec3::new(x, y, z).is_finite() => {
+            Ok(Vec3::new(x, y, z).normalize())
+        }
+        _ => Err(format!("{s:?} is not a direction x,y,z")),
+    }
 }
 
 fn fail(message: String) -> ! {
@@ -95,12 +151,18 @@ fn main() {
         index_of_refraction: 1.0,
         ..preset.medium()
     };
+    let light = cli.light.unwrap_or(FRONT_LIGHT.normalize());
+    let lighting = if light.z > 0.3 { "back" } else { "front" };
     let name = format!("{:?}", cli.medium).to_lowercase();
     let size = cli.size;
     let reference_path = cli.reference.clone().unwrap_or_else(|| {
         let dir = PathBuf::from("out/translucent_accuracy");
         std::fs::create_dir_all(&dir).unwrap_or_else(|e| fail(format!("cannot create {}: {e}", dir.display())));
-        let path = dir.join(format!("reference_{name}_{size}_{}.exr", cli.spp));
+        let path = dir.join(format!(
+            "reference_{name}_{size}_{}{}.exr",
+            cli.spp,
+            if cli.light.is_some() { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() }
+        ));
         if !path.exists() {
             let list = |v: Vec3| format!("{},{},{}", v.x, v.y, v.z);
             let mut command = Command::new("python3");
@@ -110,7 +172,7 @@ fn main() {
                 &format!("--sigma-s={}", list(medium.reduced_scattering)),
                 &format!("--radius={RADIUS}"),
                 &format!("--eye={}", list(EYE)),
-                &format!("--light={}", list(LIGHT)),
+                &format!("--light={}", list(light)),
                 &format!("--fov={}", FOV_Y.to_degrees()),
                 &format!("--size={size}"),
                 &format!("--spp={}", cli.spp),
@@ -147,7 +209,7 @@ fn main() {
         },
         ..default()
     };
-    let lights = [PatchLight::Directional { direction: LIGHT.normalize(), illuminance: Vec3::ONE }];
+    let lights = [PatchLight::Directional { direction: light, illuminance: Vec3::ONE }];
     let method = format!("patches_{:?}", cli.kernel).to_lowercase();
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
@@ -163,28 +225,16 @@ fn main() {
         let mut picture = vec![Vec3::ZERO; (size * size) as usize];
         let (mut difference, mut total) = (0.0f64, 0.0f64);
         let mut mask = vec![false; picture.len()];
-        let tan = (FOV_Y / 2.0).tan();
-        let forward = (-EYE).normalize();
-        let right = forward.cross(Vec3::Y).normalize();
-        let up = right.cross(forward);
         for y in 0..size {
             for x in 0..size {
-                let sx = (2.0 * (x as f32 + 0.5) / size as f32 - 1.0) * tan;
-                let sy = (1.0 - 2.0 * (y as f32 + 0.5) / size as f32) * tan;
-                let d = (forward + right * sx + up * sy).normalize();
-                let b = EYE.dot(d);
-                let disc = b * b - (EYE.length_squared() - RADIUS * RADIUS);
-                if disc <= 0.0 {
+                let Some((_, hit, n)) = ball_hit(x, y, size) else {
                     continue;
-                }
-                let hit = EYE + d * (-b - disc.sqrt());
-                let n = hit.normalize();
+                };
                 let i = (y * size + x) as usize;
                 let radiance = gathered_radiance(&patches, &albedo, &direct.irradiance, &solution.exitance, hit, n)
                     .unwrap_or(Vec3::ZERO);
                 picture[i] = radiance;
-                // The silhouette's rim (mesh against sphere, pixels half on the ball) left out.
-                if n.dot(-d) < 0.3 {
+                if !scored(x, y, size) {
                     continue;
                 }
                 mask[i] = true;
@@ -237,7 +287,7 @@ fn main() {
             solution.iterations
         );
         rows.push(format!(
-            "ball_{name}_r10mm,{method},{budget},{n},{size},{size},,{precompute:.3},{:.3},{rel_l1:.4},{flip:.4},cpu oracle of the GPU passes",
+            "ball_{name}_r10mm_{lighting},{method},{budget},{n},{size},{size},,{precompute:.3},{:.3},{rel_l1:.4},{flip:.4},cpu oracle of the GPU passes",
             bytes as f32 / 1e6
         ));
         // The picture for a look (linear EXR).
@@ -248,6 +298,16 @@ fn main() {
         }) {
             eprintln!("warning: cannot write {}: {e}", path.display());
         }
+    }
+    if cli.bevy {
+        let (best, transmission, thickness, colour) = bevy_best_fit(&reference, size, light);
+        eprintln!(
+            "{name} Bevy diffuse_transmission best fit: rel L1 {best:.4} at transmission {transmission}, thickness {thickness} m, base colour {colour:?}"
+        );
+        rows.push(format!(
+            "ball_{name}_r10mm_{lighting},bevy_diffuse_transmission,transmission {transmission} thickness {thickness} base {:.3} {:.3} {:.3},,{size},{size},,,,{best:.4},,Bevy 0.19.1 on the software driver, best of a grid",
+            colour[0], colour[1], colour[2]
+        ));
     }
     println!("{header}");
     for row in &rows {
@@ -268,4 +328,121 @@ fn main() {
             fail(format!("cannot write {}: {e}", out.display()));
         }
     }
+}
+
+/// Renders the ball with Bevy's `StandardMaterial` (white, no specular) for each diffuse
+/// transmission and thickness of the grid, fits the base colour per channel (the weighted
+/// median of reference / render: the L1-best scale, as Bevy's light is linear in it) and
+/// returns the best relative L1 with its transmission, thickness and colour.
+fn bevy_best_fit(reference: &image::Rgb32FImage, size: u32, light: Vec3) -> (f64, f32, f32, [f32; 3]) {
+    use bevy::{
+        camera::{Exposure, RenderTarget},
+        core_pipeline::tonemapping::Tonemapping,
+        render::{
+            render_resource::{TextureFormat, TextureUsages},
+            view::screenshot::{Screenshot, ScreenshotCaptured},
+        },
+    };
+    let mut app = App::new();
+    app.add_plugins(headless::headless_plugins().disable::<bevy::log::LogPlugin>());
+    app.finish();
+    app.cleanup();
+    app.insert_resource(bevy::light::GlobalAmbientLight { brightness: 0.0, ..default() });
+    // Irradiance × exposure: a white Lambertian facing the light reads 0.85.
+    let exposure = Exposure { ev100: 0.0 };
+    let illuminance = 0.85 * std::f32::consts::PI / exposure.exposure();
+    app.world_mut().spawn((
+        DirectionalLight { illuminance, ..default() },
+        Transform::default().looking_to(light, Vec3::Y),
+    ));
+    let mut image = Image::new_target_texture(size, size, TextureFormat::Rgba8UnormSrgb, None);
+    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+    let target = app.world_mut().resource_mut::<Assets<Image>>().add(image);
+    app.world_mut().spawn((
+        Camera3d::default(),
+        Projection::Perspective(PerspectiveProjection { fov: FOV_Y, near: 0.0005, ..default() }),
+        RenderTarget::Image(target.clone().into()),
+        Msaa::Off,
+        Tonemapping::None,
+        exposure,
+        Transform::from_translation(EYE).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    let mesh = app
+        .world_mut()
+        .resource_mut::<Assets<Mesh>>()
+        .add(Sphere::new(RADIUS).mesh().ico(5).expect("a valid subdivision"));
+    let material = app.world_mut().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::WHITE,
+        perceptual_roughness: 1.0,
+        reflectance: 0.0,
+        ..default()
+    });
+    app.world_mut().spawn((Mesh3d(mesh), MeshMaterial3d(material.clone())));
+    let decode = |s: f32| if s <= 0.04045 { s / 12.92 } else { ((s + 0.055) / 1.055).powf(2.4) };
+    let mut best = (f64::INFINITY, 0.0, 0.0, [0.0; 3]);
+    for thickness in [0.0, 0.02] {
+        for step in 0..=10 {
+            let transmission = step as f32 / 10.0;
+            if let Some(mut m) = app.world_mut().resource_mut::<Assets<StandardMaterial>>().get_mut(&material) {
+                m.diffuse_transmission = transmission;
+                m.thickness = thickness;
+            }
+            for _ in 0..3 {
+                app.update();
+            }
+            let slot: Arc<Mutex<Option<Image>>> = Arc::default();
+            let s = slot.clone();
+            app.world_mut()
+                .spawn(Screenshot::image(target.clone()))
+                .observe(move |ev: On<ScreenshotCaptured>| *s.lock().unwrap() = Some(ev.image.clone()));
+            let shot = (0..20).find_map(|_| {
+                app.update();
+                slot.lock().unwrap().take()
+            });
+            let Some(shot) = shot else {
+                fail("Bevy's picture never came back".into());
+            };
+            // Radiance per unit irradiance of the white ball, per pixel and channel.
+            let white: Vec<[f32; 3]> = (0..size * size)
+                .map(|i| {
+                    let c = shot.get_color_at(i % size, i / size).map(|c| c.to_srgba()).unwrap_or(Srgba::BLACK);
+                    [c.red, c.green, c.blue].map(|v| decode(v) / (illuminance * exposure.exposure()))
+                })
+                .collect();
+            let mut colour = [0.0f32; 3];
+            let mut error = 0.0f64;
+            let mut total = 0.0f64;
+            for c in 0..3 {
+                // Weighted median of reference / render, weights the render.
+                let mut pairs: Vec<(f32, f32)> = (0..size * size)
+                    .filter(|&i| scored(i % size, i / size, size))
+                    .filter_map(|i| {
+                        let f = white[i as usize][c];
+                        let m = reference.get_pixel(i % size, i / size).0[c];
+                        (f > 1e-4 && m > 0.0).then_some((m / f, f))
+                    })
+                    .collect();
+                pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let half = pairs.iter().map(|p| p.1).sum::<f32>() / 2.0;
+                let mut acc = 0.0;
+                colour[c] = pairs
+                    .iter()
+                    .find(|p| {
+                        acc += p.1;
+                        acc >= half
+                    })
+                    .map_or(0.0, |p| p.0.clamp(0.0, 1.0));
+                for i in (0..size * size).filter(|&i| scored(i % size, i / size, size)) {
+                    let m = reference.get_pixel(i % size, i / size).0[c];
+                    error += (colour[c] * white[i as usize][c] - m).abs() as f64;
+                    total += m as f64;
+                }
+            }
+            let relative = error / total;
+            if relative < best.0 {
+                best = (relative, transmission, thickness, colour);
+            }
+        }
+    }
+    best
 }
