@@ -67,3 +67,8 @@ cp "$out/volumetric/volumetric_spots_no-haze.png" docs/images/volumetric_spots_n
 # shades it without the transport.
 run translucent -- --out "$out/translucent" --size 384x288 --headless
 cp "$out"/translucent/translucent_*.png docs/images/
+
+# Translucency charts (the accuracy one from docs/translucent.csv; needs `pip install mitsuba
+# numpy` for the references): see docs/translucent.md for the full commands.
+run translucent_precompute -- --budgets 500,1000,2000,5000,10000,20000 \
+  --out docs/translucent-precompute.csv --chart docs/images/translucent_precompute.png

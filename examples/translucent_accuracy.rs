@@ -19,6 +19,10 @@
 //! all channels; `flip` is NVIDIA FLIP's mean on both pictures scaled by the reference's
 //! brightest pixel.
 
+// Only `save`, `line_with_points` and `legend_at` are used here.
+#[allow(dead_code)]
+#[path = "common/chart.rs"]
+mod chart;
 #[path = "common/headless.rs"]
 mod headless;
 
@@ -73,6 +77,10 @@ struct Cli {
     /// CSV to append rows to (header written if the file is new)
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Draw every row of `--out` into this PNG: relative L1 against patches per scene and
+    /// kernel, Bevy's best fit as a dashed level
+    #[arg(long, requires = "out")]
+    chart: Option<PathBuf>,
     /// Also fit Bevy's own `diffuse_transmission` material to the reference (renders on the
     /// GPU or the software driver): the best base colour per channel for each transmission
     /// 0, 0.1, … 1 and thickness 0 or 2 cm
@@ -327,7 +335,83 @@ fn main() {
         if let Err(e) = written {
             fail(format!("cannot write {}: {e}", out.display()));
         }
+        if let Some(path) = &cli.chart {
+            draw_chart(&out, path);
+        }
     }
+}
+
+/// Relative L1 against patch count (log) for every scene and method in the CSV `csv`.
+fn draw_chart(csv: &std::path::Path, path: &std::path::Path) {
+    use plotters::prelude::*;
+    let text = std::fs::read_to_string(csv).unwrap_or_else(|e| fail(format!("cannot read {}: {e}", csv.display())));
+    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    let mut levels: Vec<(String, f64)> = Vec::new();
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let (Some(scene), Some(method), Some(rel)) = (f.first(), f.get(1), f.get(9).and_then(|v| v.parse::<f64>().ok())) else {
+            continue;
+        };
+        let key = format!("{scene} {method}");
+        match f.get(3).and_then(|v| v.parse::<f64>().ok()) {
+            Some(patches) => match series.iter_mut().find(|s| s.0 == key) {
+                Some(s) => s.1.push((patches.log10(), rel)),
+                None => series.push((key, vec![(patches.log10(), rel)])),
+            },
+            None => levels.push((key, rel)),
+        }
+    }
+    for s in &mut series {
+        s.1.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    chart::save(1400, 600, path, |root| {
+        let panels = root.split_evenly((1, 2));
+        for (panel, (which, title)) in panels.iter().zip([("_front", "lit from the front"), ("_back", "lit from behind")]) {
+            let shown: Vec<&(String, Vec<(f64, f64)>)> = series.iter().filter(|s| s.0.contains(which)).collect();
+            let flat: Vec<&(String, f64)> = levels.iter().filter(|l| l.0.contains(which)).collect();
+            let top = shown
+                .iter()
+                .flat_map(|s| s.1.iter().map(|p| p.1))
+                .chain(flat.iter().map(|l| l.1))
+                .fold(0.1, f64::max);
+            let mut c = ChartBuilder::on(panel)
+                .caption(format!("1 cm ball against Mitsuba 3, {title}"), ("sans-serif", 18))
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(56)
+                .build_cartesian_2d(2.0f64..3.8f64, 0.0f64..top * if which == "_front" { 2.4 } else { 1.3 })
+                .expect("draw");
+            c.configure_mesh()
+                .x_desc("patches on the ball")
+                .y_desc("relative L1 (all channels)")
+                .x_label_formatter(&|x| format!("{:.0}", 10f64.powf(*x)))
+                .label_style(("sans-serif", 13))
+                .draw()
+                .expect("draw");
+            for (i, (label, points)) in shown.iter().map(|s| (&s.0, &s.1)).enumerate() {
+                let colour = Palette99::pick(i).to_rgba();
+                chart::line_with_points(&mut c, &label.replace("ball_", ""), points, colour);
+            }
+            for (i, (label, level)) in flat.iter().map(|l| (&l.0, l.1)).enumerate() {
+                let colour = Palette99::pick(shown.len() + i).to_rgba();
+                c.draw_series(DashedLineSeries::new([(2.0, level), (3.8, level)], 8, 6, colour.stroke_width(2)))
+                    .expect("draw")
+                    .label(format!("{} (best fit)", label.replace("ball_", "")))
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
+            }
+            // The goal.
+            c.draw_series(DashedLineSeries::new([(2.0, 0.08), (3.8, 0.08)], 3, 3, BLACK.stroke_width(1)))
+                .expect("draw")
+                .label("goal 0.08")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+            // Where the data is not: above the front-lit curves, below the back-lit ones.
+            chart::legend_at(
+                &mut c,
+                if which == "_front" { SeriesLabelPosition::UpperRight } else { SeriesLabelPosition::LowerRight },
+            );
+        }
+    });
+    println!("wrote {}", path.display());
 }
 
 /// Renders the ball with Bevy's `StandardMaterial` (white, no specular) for each diffuse

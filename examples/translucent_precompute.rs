@@ -20,6 +20,10 @@
 mod meshes;
 #[path = "common/translucent_scene.rs"]
 mod translucent_scene;
+// Only `save` and `line_with_points` are used here.
+#[allow(dead_code)]
+#[path = "common/chart.rs"]
+mod chart;
 
 use std::{io::Write, path::PathBuf, time::Instant};
 
@@ -46,6 +50,9 @@ struct Cli {
     /// CSV to write (stdout as well)
     #[arg(long)]
     out: Option<PathBuf>,
+    /// PNG chart of precompute time and memory against patches
+    #[arg(long)]
+    chart: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -86,6 +93,7 @@ fn main() {
 dropped_form_factor_mean,dropped_form_factor_max,diffusion_kept_r,diffusion_kept_g,diffusion_kept_b,\
 iterations,solve_ms,threads";
     let mut lines = vec![header.to_string()];
+    let mut measured: Vec<(f64, f64, f64)> = Vec::new();
     println!("{header}");
     for &budget in &cli.budgets {
         let start = Instant::now();
@@ -133,6 +141,36 @@ iterations,solve_ms,threads";
         );
         println!("{line}");
         lines.push(line);
+        measured.push((n as f64, precompute as f64, bytes as f64 / 1e6));
+    }
+    if let Some(path) = &cli.chart {
+        use plotters::prelude::*;
+        let top_x = measured.iter().map(|m| m.0).fold(1.0, f64::max) * 1.05;
+        chart::save(1200, 480, path, |root| {
+            let panels = root.split_evenly((1, 2));
+            for (panel, (title, pick)) in panels.iter().zip([
+                ("precompute, s (2 CPU cores)", 1usize),
+                ("memory of K and F, MB", 2usize),
+            ]) {
+                let value = |m: &(f64, f64, f64)| if pick == 1 { m.1 } else { m.2 };
+                let top_y = measured.iter().map(value).fold(0.1, f64::max) * 1.1;
+                let mut c = ChartBuilder::on(panel)
+                    .caption(title, ("sans-serif", 18))
+                    .margin(12)
+                    .x_label_area_size(40)
+                    .y_label_area_size(56)
+                    .build_cartesian_2d(0.0..top_x, 0.0..top_y)
+                    .expect("draw");
+                c.configure_mesh()
+                    .x_desc("patches (marble bunny, skin sphere, room)")
+                    .label_style(("sans-serif", 13))
+                    .draw()
+                    .expect("draw");
+                let points: Vec<(f64, f64)> = measured.iter().map(|m| (m.0, value(m))).collect();
+                chart::line_with_points(&mut c, title, &points, BLUE.to_rgba());
+            }
+        });
+        println!("wrote {}", path.display());
     }
     if let Some(out) = cli.out {
         let written = std::fs::File::create(&out)

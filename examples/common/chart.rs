@@ -56,8 +56,17 @@ pub fn line_with_points<'a, DB: DrawingBackend + 'a, Y: Ranged<ValueType = f64>>
 pub fn legend<'a, DB: DrawingBackend + 'a, Y: Ranged<ValueType = f64>>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, Y>>,
 ) {
+    legend_at(chart, SeriesLabelPosition::UpperRight);
+}
+
+/// The legend, boxed, at `position`.
+pub fn legend_at<'a, DB: DrawingBackend + 'a, Y: Ranged<ValueType = f64>>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, Y>>,
+    position: SeriesLabelPosition,
+) {
     chart
         .configure_series_labels()
+        .position(position)
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .label_font(("sans-serif", 14))
