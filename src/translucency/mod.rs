@@ -19,6 +19,7 @@
 //! [`TranslucencyCamera`] gather the patches' light per pixel (`gather/`).
 //! `docs/translucent.md` says what is measured and what is not built yet.
 
+pub mod cache;
 pub mod diffusion;
 pub mod gather;
 pub mod iteration;

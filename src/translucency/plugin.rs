@@ -54,7 +54,7 @@ impl Default for Translucent {
 pub struct RadiosityReceiver;
 
 /// The scene-wide settings of the translucency transport.
-#[derive(Resource, Reflect, Clone, Copy, Debug, PartialEq)]
+#[derive(Resource, Reflect, Clone, Debug, PartialEq)]
 #[reflect(Resource, Default)]
 pub struct TranslucencySettings {
     /// Patches over every participating mesh (16 – 200 000; more is capped with a warning).
@@ -66,6 +66,10 @@ pub struct TranslucencySettings {
     pub max_iterations: u32,
     /// How the transport is built.
     pub transport: TransportSettings,
+    /// A folder to keep precomputed transports in (created if missing), one file per scene
+    /// keyed by everything the transport depends on; `None` (the default) keeps nothing on
+    /// disk.
+    pub cache_dir: Option<std::path::PathBuf>,
 }
 
 impl Default for TranslucencySettings {
@@ -77,6 +81,7 @@ impl Default for TranslucencySettings {
             iteration_threshold: 1e-3,
             max_iterations: 32,
             transport: TransportSettings::default(),
+            cache_dir: None,
         }
     }
 }
@@ -145,7 +150,7 @@ pub(crate) struct Precompute {
     /// A changed signature waiting to stay the same for [`SETTLE_FRAMES`] before a rebuild,
     /// and for how many frames it has.
     settling: Option<(Vec<u64>, u32)>,
-    task: Option<Task<TranslucencyScene>>,
+    task: Option<Task<(TranslucencyScene, Vec<String>)>>,
     generation: u64,
     direct_signature: Vec<u64>,
     direct_generation: u64,
@@ -278,7 +283,7 @@ pub(crate) fn run_precompute(
             }
             if frames < SETTLE_FRAMES {
                 state.settling = Some((signature, frames));
-                frame.settings = *settings;
+                frame.settings = settings.clone();
                 return;
             }
         }
@@ -334,19 +339,47 @@ pub(crate) fn run_precompute(
         }
         let budget = settings.patch_budget as usize;
         let transport_settings = settings.transport;
+        let cache_dir = settings.cache_dir.clone();
         state.task = Some(AsyncComputeTaskPool::get().spawn(async move {
             let views: Vec<_> = objects
                 .iter()
                 .map(|(p, i, _)| super::patches::PatchObject { positions: p, indices: i })
                 .collect();
             let surfaces: Vec<PatchSurface> = objects.iter().map(|o| o.2).collect();
-            let caps: Vec<Option<f32>> = surfaces
-                .iter()
-                .map(|s| translucent_patch_cap(s, &transport_settings))
-                .collect();
-            let patches = resample_into_patches_with_caps(&views, &caps, budget);
             let rays = SceneRays::new(&views);
-            let transport = EnergyTransport::build(&patches, &surfaces, &rays, &transport_settings);
+            let mut notes = Vec::new();
+            // From the cache where it holds this very scene; else built (and kept).
+            let file = cache_dir.as_ref().map(|dir| {
+                let keyed: Vec<_> = objects.iter().map(|(p, i, s)| (p.as_slice(), i.as_slice(), *s)).collect();
+                let key = super::cache::scene_key(&keyed, budget, &transport_settings);
+                dir.join(format!("{key:016x}.translucency"))
+            });
+            let cached = file.as_ref().and_then(|path| match super::cache::load(path) {
+                Ok(loaded) => Some(loaded),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+                Err(e) => {
+                    notes.push(format!("translucency: the cached transport {} is unreadable ({e}); built again", path.display()));
+                    None
+                }
+            });
+            let (patches, transport) = cached.unwrap_or_else(|| {
+                let caps: Vec<Option<f32>> = surfaces
+                    .iter()
+                    .map(|s| translucent_patch_cap(s, &transport_settings))
+                    .collect();
+                let patches = resample_into_patches_with_caps(&views, &caps, budget);
+                let transport = EnergyTransport::build(&patches, &surfaces, &rays, &transport_settings);
+                if let Some(path) = &file {
+                    let kept = path
+                        .parent()
+                        .map_or(Ok(()), std::fs::create_dir_all)
+                        .and_then(|_| super::cache::save(path, &patches, &transport));
+                    if let Err(e) = kept {
+                        notes.push(format!("translucency: cannot keep the transport in {} ({e})", path.display()));
+                    }
+                }
+                (patches, transport)
+            });
             let albedo = patches
                 .patches
                 .iter()
@@ -355,13 +388,16 @@ pub(crate) fn run_precompute(
                     PatchSurface::Translucent { .. } => Vec3::ZERO,
                 })
                 .collect();
-            TranslucencyScene { patches, transport, rays, albedo, entities }
+            (TranslucencyScene { patches, transport, rays, albedo, entities }, notes)
         }));
         *status = TranslucencyStatus::Precomputing { since: Instant::now() };
     }
     if let Some(task) = state.task.as_mut()
-        && let Some(scene) = block_on(poll_once(task))
+        && let Some((scene, notes)) = block_on(poll_once(task))
     {
+        for note in notes {
+            warned.warn(note.clone(), || note);
+        }
         state.task = None;
         state.generation += 1;
         state.direct_signature.clear();
@@ -371,7 +407,7 @@ pub(crate) fn run_precompute(
         };
         frame.scene = Some((state.generation, Arc::new(scene)));
     }
-    frame.settings = *settings;
+    frame.settings = settings.clone();
 }
 
 /// The widest patch a translucent object may have: a third of the radius within which its

@@ -613,3 +613,56 @@ fn invalid_media_scatter_nothing_and_say_why() {
     let solution = transport.solve(&vec![Vec3::ONE; patches.patches.len()], 1e-4, 10);
     assert!(solution.exitance.iter().all(|b| *b == Vec3::ZERO));
 }
+
+#[test]
+fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
+    let ball = mesh_object(Sphere::new(0.05).mesh().ico(2).unwrap(), Transform::from_xyz(0.0, 0.05, 0.0));
+    let floor = mesh_object(Plane3d::new(Vec3::Y, Vec2::splat(0.2)).mesh().build(), Transform::IDENTITY);
+    let objects = [ball, floor];
+    let views: Vec<PatchObject> = objects.iter().map(|o| PatchObject { positions: &o.0, indices: &o.1 }).collect();
+    let surfaces = [
+        PatchSurface::Translucent { medium: TranslucentPreset::Skin1.medium(), world_units_per_mm: 0.001 },
+        PatchSurface::Opaque { albedo: Vec3::splat(0.8) },
+    ];
+    let patches = resample_into_patches(&views, 200);
+    let rays = SceneRays::new(&views);
+    let settings = TransportSettings::default();
+    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
+    let dir = std::env::temp_dir().join(format!("bevy_mesostructure_cache_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("scene.translucency");
+    super::cache::save(&path, &patches, &transport).unwrap();
+    let (p, t) = super::cache::load(&path).unwrap();
+    assert_eq!(p.patches, patches.patches);
+    assert_eq!(p.samples, patches.samples);
+    assert_eq!(p.sample_offsets, patches.sample_offsets);
+    assert_eq!(p.object_patch_sizes, patches.object_patch_sizes);
+    assert_eq!(t.scattering, transport.scattering);
+    assert_eq!(t.form_factors, transport.form_factors);
+    assert_eq!(t.cluster_means, transport.cluster_means);
+    assert_eq!(t.single_scattering, transport.single_scattering);
+    assert_eq!(t.areas, transport.areas);
+    assert_eq!(t.report, transport.report);
+    // Cut short, or not a cache at all: an error, never a panic or a wrong transport.
+    let bytes = std::fs::read(&path).unwrap();
+    for cut in [0, 7, 100, bytes.len() / 2, bytes.len() - 1] {
+        std::fs::write(&path, &bytes[..cut]).unwrap();
+        assert!(super::cache::load(&path).is_err(), "cut at {cut}");
+    }
+    let mut flipped = bytes.clone();
+    flipped[8] ^= 0xff;
+    std::fs::write(&path, &flipped).unwrap();
+    assert!(super::cache::load(&path).is_err());
+    std::fs::remove_dir_all(&dir).unwrap();
+    // The key follows what the transport depends on.
+    let key = |surfaces: &[PatchSurface], budget| {
+        let keyed: Vec<_> = objects.iter().zip(surfaces).map(|(o, s)| (o.0.as_slice(), o.1.as_slice(), *s)).collect();
+        super::cache::scene_key(&keyed, budget, &settings)
+    };
+    let base = key(&surfaces, 200);
+    assert_eq!(base, key(&surfaces, 200));
+    assert_ne!(base, key(&surfaces, 201));
+    let mut other = surfaces;
+    other[1] = PatchSurface::Opaque { albedo: Vec3::splat(0.7) };
+    assert_ne!(base, key(&other, 200));
+}

@@ -326,3 +326,52 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     wait_ready(&mut app);
     assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
 }
+
+#[test]
+fn a_kept_transport_is_read_back_instead_of_built_again() {
+    use bevy_mesostructure::translucency::{
+        Translucent, TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin,
+        TranslucencySettings, TranslucencyStatus,
+    };
+    if !gpu_or_skip() {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("bevy_mesostructure_kept_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let build = |dir: &std::path::Path| {
+        let mut app = bare_app_with(|app| {
+            app.add_plugins(TranslucencyPlugin);
+        });
+        app.insert_resource(TranslucencySettings { patch_budget: 300, cache_dir: Some(dir.to_path_buf()), ..default() });
+        sun(&mut app, Vec3::new(-1.0, -1.0, -1.0), 2000.0);
+        let ball = mesh(&mut app, Sphere::new(0.05).mesh().ico(3).unwrap());
+        let material = app.world_mut().resource_mut::<Assets<StandardMaterial>>().add(Color::WHITE);
+        app.world_mut().spawn((ball, MeshMaterial3d(material), Translucent::default(), Transform::IDENTITY));
+        let image = target(&mut app, 16, 16);
+        app.world_mut().spawn((
+            Camera3d::default(),
+            bevy::camera::RenderTarget::Image(image.into()),
+            Msaa::Off,
+            TranslucencyCamera,
+            Transform::from_xyz(0.0, 0.0, 0.4).looking_at(Vec3::ZERO, Vec3::Y),
+        ));
+        for _ in 0..600 {
+            run(&mut app, 1);
+            if matches!(app.world().resource::<TranslucencyStatus>(), TranslucencyStatus::Ready { .. }) {
+                let (_, scene) = app.world().resource::<TranslucencyFrame>().scene.clone().unwrap();
+                return (scene.transport.report.clone(), scene.patches.patches.len());
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        panic!("never ready");
+    };
+    let (first, patches) = build(&dir);
+    let files: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+    assert_eq!(files.len(), 1, "one kept transport");
+    // A second app with the same scene reads it: the same report, its build time included
+    // (a rebuild would measure its own).
+    let (second, patches_again) = build(&dir);
+    assert_eq!(second, first);
+    assert_eq!(patches_again, patches);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
