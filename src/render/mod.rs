@@ -126,6 +126,45 @@ pub(crate) const STORAGE_IMAGE: TextureUsages = TextureUsages::STORAGE_BINDING
 #[derive(Component, Clone, Copy)]
 pub struct ViewMesostructureUniformOffset(pub u32);
 
+/// A fullscreen pass whose fragment `entry` of `shader` is added to a view target of `format`
+/// (alpha kept): the bleeding composite and the translucency gather.
+pub(crate) fn additive_fullscreen_pipeline(
+    label: &'static str,
+    layout: BindGroupLayoutDescriptor,
+    fullscreen: &bevy::core_pipeline::FullscreenShader,
+    shader: Handle<Shader>,
+    entry: &'static str,
+    format: TextureFormat,
+) -> RenderPipelineDescriptor {
+    RenderPipelineDescriptor {
+        label: Some(label.into()),
+        layout: vec![layout],
+        vertex: fullscreen.to_vertex_state(),
+        fragment: Some(FragmentState {
+            shader,
+            entry_point: Some(entry.into()),
+            targets: vec![Some(ColorTargetState {
+                format,
+                blend: Some(BlendState {
+                    color: BlendComponent {
+                        src_factor: BlendFactor::One,
+                        dst_factor: BlendFactor::One,
+                        operation: BlendOperation::Add,
+                    },
+                    alpha: BlendComponent {
+                        src_factor: BlendFactor::Zero,
+                        dst_factor: BlendFactor::One,
+                        operation: BlendOperation::Add,
+                    },
+                }),
+                write_mask: ColorWrites::ALL,
+            })],
+            ..default()
+        }),
+        ..default()
+    }
+}
+
 /// Whether any mesostructure mesh was queued into the height phase of `view` this frame; the
 /// passes do nothing (and cost nothing) for views without one.
 pub fn view_has_mesostructure(

@@ -149,6 +149,17 @@ fn mesh_object(mesh: Mesh, transform: Transform) -> (Vec<Vec3>, Vec<u32>) {
     world_triangles(&mesh, &GlobalTransform::from(transform)).expect("a triangle list")
 }
 
+/// The objects as the patch resampler takes them.
+fn views_of(objects: &[(Vec<Vec3>, Vec<u32>)]) -> Vec<PatchObject<'_>> {
+    objects
+        .iter()
+        .map(|o| PatchObject {
+            positions: &o.0,
+            indices: &o.1,
+        })
+        .collect()
+}
+
 fn inside_out(mut object: (Vec<Vec3>, Vec<u32>)) -> (Vec<Vec3>, Vec<u32>) {
     for t in object.1.chunks_mut(3) {
         t.swap(1, 2);
@@ -275,13 +286,7 @@ fn closed_box(budget: usize) -> (Vec<(Vec<Vec3>, Vec<u32>)>, super::patches::Pat
         Transform::from_xyz(0.3, -0.4, 0.2),
     );
     let objects = vec![room, ball];
-    let views: Vec<PatchObject> = objects
-        .iter()
-        .map(|o| PatchObject {
-            positions: &o.0,
-            indices: &o.1,
-        })
-        .collect();
+    let views = views_of(&objects);
     let patches = resample_into_patches(&views, budget);
     (objects, patches)
 }
@@ -289,13 +294,7 @@ fn closed_box(budget: usize) -> (Vec<(Vec<Vec3>, Vec<u32>)>, super::patches::Pat
 #[test]
 fn form_factors_are_reciprocal_and_sum_to_one_in_a_closed_box() {
     let (objects, patches) = closed_box(1200);
-    let views: Vec<PatchObject> = objects
-        .iter()
-        .map(|o| PatchObject {
-            positions: &o.0,
-            indices: &o.1,
-        })
-        .collect();
+    let views = views_of(&objects);
     let rays = SceneRays::new(&views);
     let surfaces = [PatchSurface::Opaque {
         albedo: Vec3::splat(0.5),
@@ -345,13 +344,7 @@ fn form_factors_are_reciprocal_and_sum_to_one_in_a_closed_box() {
 #[test]
 fn a_closed_box_absorbs_exactly_the_light_put_in() {
     let (objects, patches) = closed_box(1200);
-    let views: Vec<PatchObject> = objects
-        .iter()
-        .map(|o| PatchObject {
-            positions: &o.0,
-            indices: &o.1,
-        })
-        .collect();
+    let views = views_of(&objects);
     let rays = SceneRays::new(&views);
     let albedo = 0.6;
     let surfaces = [PatchSurface::Opaque {
@@ -492,13 +485,7 @@ fn the_sparse_iteration_converges_to_the_dense_solution() {
         Transform::from_xyz(-0.1, 0.1, 0.0),
     );
     let objects = [ball, floor, wall];
-    let views: Vec<PatchObject> = objects
-        .iter()
-        .map(|o| PatchObject {
-            positions: &o.0,
-            indices: &o.1,
-        })
-        .collect();
+    let views = views_of(&objects);
     let patches = resample_into_patches(&views, 300);
     let rays = SceneRays::new(&views);
     let surfaces = [
@@ -619,7 +606,7 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
     let ball = mesh_object(Sphere::new(0.05).mesh().ico(2).unwrap(), Transform::from_xyz(0.0, 0.05, 0.0));
     let floor = mesh_object(Plane3d::new(Vec3::Y, Vec2::splat(0.2)).mesh().build(), Transform::IDENTITY);
     let objects = [ball, floor];
-    let views: Vec<PatchObject> = objects.iter().map(|o| PatchObject { positions: &o.0, indices: &o.1 }).collect();
+    let views = views_of(&objects);
     let surfaces = [
         PatchSurface::Translucent { medium: TranslucentPreset::Skin1.medium(), world_units_per_mm: 0.001 },
         PatchSurface::Opaque { albedo: Vec3::splat(0.8) },

@@ -159,34 +159,15 @@ impl SpecializedRenderPipeline for BleedingPipeline {
     type Key = TextureFormat;
 
     fn specialize(&self, format: TextureFormat) -> RenderPipelineDescriptor {
-        RenderPipelineDescriptor {
-            label: Some("mesostructure_bleeding_composite_pipeline".into()),
-            layout: vec![self.composite_layout.clone()],
-            vertex: self.fullscreen.to_vertex_state(),
-            fragment: Some(FragmentState {
-                shader: self.composite_shader.clone(),
-                entry_point: Some("composite".into()),
-                targets: vec![Some(ColorTargetState {
-                    format,
-                    // Added to the lit colour; alpha kept.
-                    blend: Some(BlendState {
-                        color: BlendComponent {
-                            src_factor: BlendFactor::One,
-                            dst_factor: BlendFactor::One,
-                            operation: BlendOperation::Add,
-                        },
-                        alpha: BlendComponent {
-                            src_factor: BlendFactor::Zero,
-                            dst_factor: BlendFactor::One,
-                            operation: BlendOperation::Add,
-                        },
-                    }),
-                    write_mask: ColorWrites::ALL,
-                })],
-                ..default()
-            }),
-            ..default()
-        }
+        // Added to the lit colour; alpha kept.
+        super::additive_fullscreen_pipeline(
+            "mesostructure_bleeding_composite_pipeline",
+            self.composite_layout.clone(),
+            &self.fullscreen,
+            self.composite_shader.clone(),
+            "composite",
+            format,
+        )
     }
 }
 

@@ -308,34 +308,15 @@ impl SpecializedRenderPipeline for GatherPipeline {
     type Key = TextureFormat;
 
     fn specialize(&self, format: TextureFormat) -> RenderPipelineDescriptor {
-        RenderPipelineDescriptor {
-            label: Some("translucency_gather_pipeline".into()),
-            layout: vec![self.layout.clone()],
-            vertex: self.fullscreen.to_vertex_state(),
-            fragment: Some(FragmentState {
-                shader: self.shader.clone(),
-                entry_point: Some("gather".into()),
-                targets: vec![Some(ColorTargetState {
-                    format,
-                    // Added to the lit colour; alpha kept.
-                    blend: Some(BlendState {
-                        color: BlendComponent {
-                            src_factor: BlendFactor::One,
-                            dst_factor: BlendFactor::One,
-                            operation: BlendOperation::Add,
-                        },
-                        alpha: BlendComponent {
-                            src_factor: BlendFactor::Zero,
-                            dst_factor: BlendFactor::One,
-                            operation: BlendOperation::Add,
-                        },
-                    }),
-                    write_mask: ColorWrites::ALL,
-                })],
-                ..default()
-            }),
-            ..default()
-        }
+        // Added to the lit colour; alpha kept.
+        crate::render::additive_fullscreen_pipeline(
+            "translucency_gather_pipeline",
+            self.layout.clone(),
+            &self.fullscreen,
+            self.shader.clone(),
+            "gather",
+            format,
+        )
     }
 }
 

@@ -171,6 +171,18 @@ fn decide(@builtin(local_invocation_index) local: u32) {
     }
 }
 
+// Row `row` of a scalar CSR matrix (F or the cluster means) times ΔB (patches, then clusters).
+fn scalar_row(offsets: u32, columns: u32, values: u32, row: u32) -> vec4<f32> {
+    var sum = vec4(0.0);
+    let start = matrices[offsets + row];
+    let end = matrices[offsets + row + 1u];
+    for (var e = start; e < end; e += 1u) {
+        let j = matrices[columns + e];
+        sum += bitcast<f32>(matrices[values + e]) * vectors[packing.delta_exitance + j];
+    }
+    return sum;
+}
+
 // ΔB of each far-field cluster: its members' area mean.
 @compute @workgroup_size(64)
 fn cluster_means(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -178,14 +190,8 @@ fn cluster_means(@builtin(global_invocation_id) id: vec3<u32>) {
     if c >= packing.clusters {
         return;
     }
-    var sum = vec4(0.0);
-    let start = matrices[packing.c_offsets + c];
-    let end = matrices[packing.c_offsets + c + 1u];
-    for (var e = start; e < end; e += 1u) {
-        let j = matrices[packing.c_columns + e];
-        sum += bitcast<f32>(matrices[packing.c_values + e]) * vectors[packing.delta_exitance + j];
-    }
-    vectors[packing.delta_exitance + packing.patches + c] = sum;
+    vectors[packing.delta_exitance + packing.patches + c] =
+        scalar_row(packing.c_offsets, packing.c_columns, packing.c_values, c);
 }
 
 // ΔE = F [ΔB, ΔB_clusters]; E += ΔE.
@@ -195,13 +201,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= packing.patches {
         return;
     }
-    var sum = vec4(0.0);
-    let start = matrices[packing.f_offsets + i];
-    let end = matrices[packing.f_offsets + i + 1u];
-    for (var e = start; e < end; e += 1u) {
-        let j = matrices[packing.f_columns + e];
-        sum += bitcast<f32>(matrices[packing.f_values + e]) * vectors[packing.delta_exitance + j];
-    }
+    let sum = scalar_row(packing.f_offsets, packing.f_columns, packing.f_values, i);
     vectors[packing.delta_irradiance + i] = sum;
     vectors[packing.irradiance + i] += sum;
 }
