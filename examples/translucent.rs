@@ -22,7 +22,7 @@ mod meshes;
 
 use bevy::{camera::Exposure, camera::Hdr, prelude::*};
 use bevy_mesostructure::translucency::{
-    RadiosityReceiver, Translucent, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings,
+    RadiosityReceiver, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings, Translucent,
     TranslucentPreset,
 };
 
@@ -105,16 +105,26 @@ fn setup(world: &mut World) {
         Transform::from_xyz(0.0, 0.12, 0.42).looking_at(Vec3::new(0.0, 0.05, 0.0), Vec3::Y),
     ));
     let mut mesh = |m: Mesh| world.resource_mut::<Assets<Mesh>>().add(m);
-    let bunny = mesh(meshes::obj_mesh(&meshes::asset_path("meshes/bunny.obj"), 1.0));
-    let sphere = mesh(Sphere::new(0.03).mesh().ico(5).expect("a valid subdivision"));
+    let bunny = mesh(meshes::obj_mesh(
+        &meshes::asset_path("meshes/bunny.obj"),
+        1.0,
+    ));
+    let sphere = mesh(
+        Sphere::new(0.03)
+            .mesh()
+            .ico(5)
+            .expect("a valid subdivision"),
+    );
     let half = 0.3;
     let wall = mesh(Plane3d::new(Vec3::Y, Vec2::splat(half)).mesh().build());
     let mut material = |base_color: Color, roughness: f32| {
-        world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-            base_color,
-            perceptual_roughness: roughness,
-            ..default()
-        })
+        world
+            .resource_mut::<Assets<StandardMaterial>>()
+            .add(StandardMaterial {
+                base_color,
+                perceptual_roughness: roughness,
+                ..default()
+            })
     };
     let white = material(Color::srgb(0.75, 0.75, 0.75), 0.9);
     let red = material(Color::srgb(0.75, 0.1, 0.1), 0.9);
@@ -146,13 +156,28 @@ fn setup(world: &mut World) {
         (white.clone(), Transform::IDENTITY),
         (
             white.clone(),
-            Transform::from_xyz(0.0, 2.0 * half, 0.0).with_rotation(Quat::from_rotation_x(2.0 * quarter)),
+            Transform::from_xyz(0.0, 2.0 * half, 0.0)
+                .with_rotation(Quat::from_rotation_x(2.0 * quarter)),
         ),
-        (red, Transform::from_xyz(-half, half, 0.0).with_rotation(Quat::from_rotation_z(-quarter))),
-        (green, Transform::from_xyz(half, half, 0.0).with_rotation(Quat::from_rotation_z(quarter))),
-        (white.clone(), Transform::from_xyz(0.0, half, -half).with_rotation(Quat::from_rotation_x(quarter))),
+        (
+            red,
+            Transform::from_xyz(-half, half, 0.0).with_rotation(Quat::from_rotation_z(-quarter)),
+        ),
+        (
+            green,
+            Transform::from_xyz(half, half, 0.0).with_rotation(Quat::from_rotation_z(quarter)),
+        ),
+        (
+            white.clone(),
+            Transform::from_xyz(0.0, half, -half).with_rotation(Quat::from_rotation_x(quarter)),
+        ),
     ] {
-        world.spawn((Mesh3d(wall.clone()), MeshMaterial3d(material), transform, RadiosityReceiver));
+        world.spawn((
+            Mesh3d(wall.clone()),
+            MeshMaterial3d(material),
+            transform,
+            RadiosityReceiver,
+        ));
     }
     world.spawn((
         SpotLight {
@@ -168,11 +193,18 @@ fn setup(world: &mut World) {
 }
 
 /// The spot circles the objects at a fixed height, from in front (`0`) to behind (`1`).
-fn move_spot(clock: Res<common::Clock>, place: Res<SpotPlace>, mut spots: Query<&mut Transform, With<SpotLight>>) {
-    let s = place.fixed.unwrap_or_else(|| 0.5 - 0.5 * (clock.t * 0.5).cos());
+fn move_spot(
+    clock: Res<common::Clock>,
+    place: Res<SpotPlace>,
+    mut spots: Query<&mut Transform, With<SpotLight>>,
+) {
+    let s = place
+        .fixed
+        .unwrap_or_else(|| 0.5 - 0.5 * (clock.t * 0.5).cos());
     let angle = s * std::f32::consts::PI;
     let position = Vec3::new(0.25 * angle.sin(), 0.2, 0.25 * angle.cos());
     for mut transform in &mut spots {
-        *transform = Transform::from_translation(position).looking_at(Vec3::new(0.0, 0.04, 0.0), Vec3::Y);
+        *transform =
+            Transform::from_translation(position).looking_at(Vec3::new(0.0, 0.04, 0.0), Vec3::Y);
     }
 }

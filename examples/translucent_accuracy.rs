@@ -37,7 +37,7 @@ use std::{
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     DiffusionKernel, EnergyTransport, PatchLight, PatchObject, PatchSurface, SceneRays,
-    TransportSettings, TranslucentPreset, direct_light, gather::gathered_radiance,
+    TranslucentPreset, TransportSettings, direct_light, gather::gathered_radiance,
     patches::world_triangles, resample_into_patches,
 };
 
@@ -130,7 +130,11 @@ fn scored(x: u32, y: u32, size: u32) -> bool {
 fn parse_direction(s: &str) -> Result<Vec3, String> {
     let v: Vec<f32> = s
         .split(',')
-        .map(|c| c.trim().parse::<f32>().map_err(|_| format!("{s:?} is not three numbers x,y,z")))
+        .map(|c| {
+            c.trim()
+                .parse::<f32>()
+                .map_err(|_| format!("{s:?} is not three numbers x,y,z"))
+        })
         .collect::<Result<_, _>>()?;
     match v[..] {
         [x, y, z] if Vec3::new(x, y, z).length() > 0.0 && Vec3::new(x, y, z).is_finite() => {
@@ -199,17 +203,31 @@ fn main() {
         .unwrap_or_else(|e| fail(format!("cannot read {}: {e}", reference_path.display())))
         .to_rgb32f();
     if reference.width() != size || reference.height() != size {
-        fail(format!("{} is {}×{}, not {size}×{size}", reference_path.display(), reference.width(), reference.height()));
+        fail(format!(
+            "{} is {}×{}, not {size}×{size}",
+            reference_path.display(),
+            reference.width(),
+            reference.height()
+        ));
     }
 
     // The ball as the plugin takes it: Bevy's ico sphere, 20 480 triangles.
     let (positions, indices) = world_triangles(
-        &Sphere::new(RADIUS).mesh().ico(5).expect("a valid subdivision"),
+        &Sphere::new(RADIUS)
+            .mesh()
+            .ico(5)
+            .expect("a valid subdivision"),
         &GlobalTransform::IDENTITY,
     )
     .expect("a triangle list");
-    let views = [PatchObject { positions: &positions, indices: &indices }];
-    let surfaces = [PatchSurface::Translucent { medium, world_units_per_mm: 0.001 }];
+    let views = [PatchObject {
+        positions: &positions,
+        indices: &indices,
+    }];
+    let surfaces = [PatchSurface::Translucent {
+        medium,
+        world_units_per_mm: 0.001,
+    }];
     let settings = TransportSettings {
         kernel: match cli.kernel {
             Kernel::Dipole => DiffusionKernel::Dipole,
@@ -217,7 +235,10 @@ fn main() {
         },
         ..default()
     };
-    let lights = [PatchLight::Directional { direction: light, illuminance: Vec3::ONE }];
+    let lights = [PatchLight::Directional {
+        direction: light,
+        illuminance: Vec3::ONE,
+    }];
     let method = format!("patches_{:?}", cli.kernel).to_lowercase();
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
@@ -239,8 +260,15 @@ fn main() {
                     continue;
                 };
                 let i = (y * size + x) as usize;
-                let radiance = gathered_radiance(&patches, &albedo, &direct.irradiance, &solution.exitance, hit, n)
-                    .unwrap_or(Vec3::ZERO);
+                let radiance = gathered_radiance(
+                    &patches,
+                    &albedo,
+                    &direct.irradiance,
+                    &solution.exitance,
+                    hit,
+                    n,
+                )
+                .unwrap_or(Vec3::ZERO);
                 picture[i] = radiance;
                 if !scored(x, y, size) {
                     continue;
@@ -255,13 +283,21 @@ fn main() {
         }
         let rel_l1 = difference / total;
         // FLIP on both scaled by the reference's brightest pixel (sRGB-encoded, 8 bits).
-        let peak = reference.pixels().flat_map(|p| p.0).fold(0.0f32, f32::max).max(1e-9);
+        let peak = reference
+            .pixels()
+            .flat_map(|p| p.0)
+            .fold(0.0f32, f32::max)
+            .max(1e-9);
         let encode = |value: &dyn Fn(u32, u32) -> [f32; 3]| -> Vec<u8> {
             (0..size * size)
                 .flat_map(|i| value(i % size, i / size))
                 .map(|v| {
                     let c = (v / peak).clamp(0.0, 1.0);
-                    let s = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+                    let s = if c <= 0.003_130_8 {
+                        12.92 * c
+                    } else {
+                        1.055 * c.powf(1.0 / 2.4) - 0.055
+                    };
                     (s * 255.0).round() as u8
                 })
                 .collect()
@@ -275,7 +311,9 @@ fn main() {
         );
         let flip = nv_flip::FlipPool::from_image(&flip_image).mean();
         let n = patches.patches.len();
-        let bytes = 8 * (2 * (n + 1)) + 8 * transport.form_factors.entries() + 16 * transport.scattering.entries();
+        let bytes = 8 * (2 * (n + 1))
+            + 8 * transport.form_factors.entries()
+            + 16 * transport.scattering.entries();
         // Mean ratio per channel (a scale error shows here first).
         let mut sums = [[0.0f64; 2]; 3];
         for (i, &m) in mask.iter().enumerate() {
@@ -299,11 +337,14 @@ fn main() {
             bytes as f32 / 1e6
         ));
         // The picture for a look (linear EXR).
-        let exr = image::Rgb32FImage::from_fn(size, size, |x, y| image::Rgb(picture[(y * size + x) as usize].to_array()));
-        let path = PathBuf::from("out/translucent_accuracy").join(format!("plugin_{name}_{method}_{budget}.exr"));
-        if let Err(e) = std::fs::create_dir_all("out/translucent_accuracy").and_then(|_| {
-            exr.save(&path).map_err(std::io::Error::other)
-        }) {
+        let exr = image::Rgb32FImage::from_fn(size, size, |x, y| {
+            image::Rgb(picture[(y * size + x) as usize].to_array())
+        });
+        let path = PathBuf::from("out/translucent_accuracy")
+            .join(format!("plugin_{name}_{method}_{budget}.exr"));
+        if let Err(e) = std::fs::create_dir_all("out/translucent_accuracy")
+            .and_then(|_| exr.save(&path).map_err(std::io::Error::other))
+        {
             eprintln!("warning: cannot write {}: {e}", path.display());
         }
     }
@@ -323,15 +364,19 @@ fn main() {
     }
     if let Some(out) = cli.out {
         let new = !out.exists();
-        let written = std::fs::OpenOptions::new().create(true).append(true).open(&out).and_then(|mut f| {
-            if new {
-                writeln!(f, "{header}")?;
-            }
-            for row in &rows {
-                writeln!(f, "{row}")?;
-            }
-            Ok(())
-        });
+        let written = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&out)
+            .and_then(|mut f| {
+                if new {
+                    writeln!(f, "{header}")?;
+                }
+                for row in &rows {
+                    writeln!(f, "{row}")?;
+                }
+                Ok(())
+            });
         if let Err(e) = written {
             fail(format!("cannot write {}: {e}", out.display()));
         }
@@ -344,12 +389,17 @@ fn main() {
 /// Relative L1 against patch count (log) for every scene and method in the CSV `csv`.
 fn draw_chart(csv: &std::path::Path, path: &std::path::Path) {
     use plotters::prelude::*;
-    let text = std::fs::read_to_string(csv).unwrap_or_else(|e| fail(format!("cannot read {}: {e}", csv.display())));
+    let text = std::fs::read_to_string(csv)
+        .unwrap_or_else(|e| fail(format!("cannot read {}: {e}", csv.display())));
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     let mut levels: Vec<(String, f64)> = Vec::new();
     for line in text.lines().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
-        let (Some(scene), Some(method), Some(rel)) = (f.first(), f.get(1), f.get(9).and_then(|v| v.parse::<f64>().ok())) else {
+        let (Some(scene), Some(method), Some(rel)) = (
+            f.first(),
+            f.get(1),
+            f.get(9).and_then(|v| v.parse::<f64>().ok()),
+        ) else {
             continue;
         };
         let key = format!("{scene} {method}");
@@ -366,8 +416,12 @@ fn draw_chart(csv: &std::path::Path, path: &std::path::Path) {
     }
     chart::save(1400, 600, path, |root| {
         let panels = root.split_evenly((1, 2));
-        for (panel, (which, title)) in panels.iter().zip([("_front", "lit from the front"), ("_back", "lit from behind")]) {
-            let shown: Vec<&(String, Vec<(f64, f64)>)> = series.iter().filter(|s| s.0.contains(which)).collect();
+        for (panel, (which, title)) in panels.iter().zip([
+            ("_front", "lit from the front"),
+            ("_back", "lit from behind"),
+        ]) {
+            let shown: Vec<&(String, Vec<(f64, f64)>)> =
+                series.iter().filter(|s| s.0.contains(which)).collect();
             let flat: Vec<&(String, f64)> = levels.iter().filter(|l| l.0.contains(which)).collect();
             let top = shown
                 .iter()
@@ -375,11 +429,17 @@ fn draw_chart(csv: &std::path::Path, path: &std::path::Path) {
                 .chain(flat.iter().map(|l| l.1))
                 .fold(0.1, f64::max);
             let mut c = ChartBuilder::on(panel)
-                .caption(format!("1 cm ball against Mitsuba 3, {title}"), ("sans-serif", 18))
+                .caption(
+                    format!("1 cm ball against Mitsuba 3, {title}"),
+                    ("sans-serif", 18),
+                )
                 .margin(12)
                 .x_label_area_size(40)
                 .y_label_area_size(56)
-                .build_cartesian_2d(2.0f64..3.8f64, 0.0f64..top * if which == "_front" { 2.4 } else { 1.3 })
+                .build_cartesian_2d(
+                    2.0f64..3.8f64,
+                    0.0f64..top * if which == "_front" { 2.4 } else { 1.3 },
+                )
                 .expect("draw");
             c.configure_mesh()
                 .x_desc("patches on the ball")
@@ -394,20 +454,34 @@ fn draw_chart(csv: &std::path::Path, path: &std::path::Path) {
             }
             for (i, (label, level)) in flat.iter().map(|l| (&l.0, l.1)).enumerate() {
                 let colour = Palette99::pick(shown.len() + i).to_rgba();
-                c.draw_series(DashedLineSeries::new([(2.0, level), (3.8, level)], 8, 6, colour.stroke_width(2)))
-                    .expect("draw")
-                    .label(format!("{} (best fit)", label.replace("ball_", "")))
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
+                c.draw_series(DashedLineSeries::new(
+                    [(2.0, level), (3.8, level)],
+                    8,
+                    6,
+                    colour.stroke_width(2),
+                ))
+                .expect("draw")
+                .label(format!("{} (best fit)", label.replace("ball_", "")))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
             }
             // The goal.
-            c.draw_series(DashedLineSeries::new([(2.0, 0.08), (3.8, 0.08)], 3, 3, BLACK.stroke_width(1)))
-                .expect("draw")
-                .label("goal 0.08")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+            c.draw_series(DashedLineSeries::new(
+                [(2.0, 0.08), (3.8, 0.08)],
+                3,
+                3,
+                BLACK.stroke_width(1),
+            ))
+            .expect("draw")
+            .label("goal 0.08")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
             // Where the data is not: above the front-lit curves, below the back-lit ones.
             chart::legend_at(
                 &mut c,
-                if which == "_front" { SeriesLabelPosition::UpperRight } else { SeriesLabelPosition::LowerRight },
+                if which == "_front" {
+                    SeriesLabelPosition::UpperRight
+                } else {
+                    SeriesLabelPosition::LowerRight
+                },
             );
         }
     });
@@ -418,7 +492,11 @@ fn draw_chart(csv: &std::path::Path, path: &std::path::Path) {
 /// transmission and thickness of the grid, fits the base colour per channel (the weighted
 /// median of reference / render: the L1-best scale, as Bevy's light is linear in it) and
 /// returns the best relative L1 with its transmission, thickness and colour.
-fn bevy_best_fit(reference: &image::Rgb32FImage, size: u32, light: Vec3) -> (f64, f32, f32, [f32; 3]) {
+fn bevy_best_fit(
+    reference: &image::Rgb32FImage,
+    size: u32,
+    light: Vec3,
+) -> (f64, f32, f32, [f32; 3]) {
     use bevy::{
         camera::{Exposure, RenderTarget},
         core_pipeline::tonemapping::Tonemapping,
@@ -431,12 +509,18 @@ fn bevy_best_fit(reference: &image::Rgb32FImage, size: u32, light: Vec3) -> (f64
     app.add_plugins(headless::headless_plugins().disable::<bevy::log::LogPlugin>());
     app.finish();
     app.cleanup();
-    app.insert_resource(bevy::light::GlobalAmbientLight { brightness: 0.0, ..default() });
+    app.insert_resource(bevy::light::GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
     // Irradiance × exposure: a white Lambertian facing the light reads 0.85.
     let exposure = Exposure { ev100: 0.0 };
     let illuminance = 0.85 * std::f32::consts::PI / exposure.exposure();
     app.world_mut().spawn((
-        DirectionalLight { illuminance, ..default() },
+        DirectionalLight {
+            illuminance,
+            ..default()
+        },
         Transform::default().looking_to(light, Vec3::Y),
     ));
     let mut image = Image::new_target_texture(size, size, TextureFormat::Rgba8UnormSrgb, None);
@@ -444,30 +528,50 @@ fn bevy_best_fit(reference: &image::Rgb32FImage, size: u32, light: Vec3) -> (f64
     let target = app.world_mut().resource_mut::<Assets<Image>>().add(image);
     app.world_mut().spawn((
         Camera3d::default(),
-        Projection::Perspective(PerspectiveProjection { fov: FOV_Y, near: 0.0005, ..default() }),
+        Projection::Perspective(PerspectiveProjection {
+            fov: FOV_Y,
+            near: 0.0005,
+            ..default()
+        }),
         RenderTarget::Image(target.clone().into()),
         Msaa::Off,
         Tonemapping::None,
         exposure,
         Transform::from_translation(EYE).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    let mesh = app
+    let mesh = app.world_mut().resource_mut::<Assets<Mesh>>().add(
+        Sphere::new(RADIUS)
+            .mesh()
+            .ico(5)
+            .expect("a valid subdivision"),
+    );
+    let material = app
         .world_mut()
-        .resource_mut::<Assets<Mesh>>()
-        .add(Sphere::new(RADIUS).mesh().ico(5).expect("a valid subdivision"));
-    let material = app.world_mut().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-        base_color: Color::WHITE,
-        perceptual_roughness: 1.0,
-        reflectance: 0.0,
-        ..default()
-    });
-    app.world_mut().spawn((Mesh3d(mesh), MeshMaterial3d(material.clone())));
-    let decode = |s: f32| if s <= 0.04045 { s / 12.92 } else { ((s + 0.055) / 1.055).powf(2.4) };
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::WHITE,
+            perceptual_roughness: 1.0,
+            reflectance: 0.0,
+            ..default()
+        });
+    app.world_mut()
+        .spawn((Mesh3d(mesh), MeshMaterial3d(material.clone())));
+    let decode = |s: f32| {
+        if s <= 0.04045 {
+            s / 12.92
+        } else {
+            ((s + 0.055) / 1.055).powf(2.4)
+        }
+    };
     let mut best = (f64::INFINITY, 0.0, 0.0, [0.0; 3]);
     for thickness in [0.0, 0.02] {
         for step in 0..=10 {
             let transmission = step as f32 / 10.0;
-            if let Some(mut m) = app.world_mut().resource_mut::<Assets<StandardMaterial>>().get_mut(&material) {
+            if let Some(mut m) = app
+                .world_mut()
+                .resource_mut::<Assets<StandardMaterial>>()
+                .get_mut(&material)
+            {
                 m.diffuse_transmission = transmission;
                 m.thickness = thickness;
             }
@@ -478,7 +582,9 @@ fn bevy_best_fit(reference: &image::Rgb32FImage, size: u32, light: Vec3) -> (f64
             let s = slot.clone();
             app.world_mut()
                 .spawn(Screenshot::image(target.clone()))
-                .observe(move |ev: On<ScreenshotCaptured>| *s.lock().unwrap() = Some(ev.image.clone()));
+                .observe(move |ev: On<ScreenshotCaptured>| {
+                    *s.lock().unwrap() = Some(ev.image.clone())
+                });
             let shot = (0..20).find_map(|_| {
                 app.update();
                 slot.lock().unwrap().take()
@@ -489,8 +595,12 @@ fn bevy_best_fit(reference: &image::Rgb32FImage, size: u32, light: Vec3) -> (f64
             // Radiance per unit irradiance of the white ball, per pixel and channel.
             let white: Vec<[f32; 3]> = (0..size * size)
                 .map(|i| {
-                    let c = shot.get_color_at(i % size, i / size).map(|c| c.to_srgba()).unwrap_or(Srgba::BLACK);
-                    [c.red, c.green, c.blue].map(|v| decode(v) / (illuminance * exposure.exposure()))
+                    let c = shot
+                        .get_color_at(i % size, i / size)
+                        .map(|c| c.to_srgba())
+                        .unwrap_or(Srgba::BLACK);
+                    [c.red, c.green, c.blue]
+                        .map(|v| decode(v) / (illuminance * exposure.exposure()))
                 })
                 .collect();
             let mut colour = [0.0f32; 3];

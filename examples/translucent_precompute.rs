@@ -98,7 +98,10 @@ iterations,solve_ms,threads";
     for &budget in &cli.budgets {
         let start = Instant::now();
         // Translucent objects' patches capped as the plugin caps them.
-        let caps: Vec<Option<f32>> = surfaces.iter().map(|s| translucent_patch_cap(s, &settings)).collect();
+        let caps: Vec<Option<f32>> = surfaces
+            .iter()
+            .map(|s| translucent_patch_cap(s, &settings))
+            .collect();
         let patches = resample_into_patches_with_caps(&views, &caps, budget as usize);
         let rays = SceneRays::new(&views);
         let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);

@@ -33,7 +33,9 @@ impl Hash {
         self
     }
     fn f32s(self, values: impl IntoIterator<Item = f32>) -> Self {
-        values.into_iter().fold(self, |h, v| h.bytes(&v.to_le_bytes()))
+        values
+            .into_iter()
+            .fold(self, |h, v| h.bytes(&v.to_le_bytes()))
     }
 }
 
@@ -59,7 +61,10 @@ pub fn scene_key(
         h = indices.iter().fold(h, |h, i| h.bytes(&i.to_le_bytes()));
         h = match surface {
             PatchSurface::Opaque { albedo } => h.bytes(b"opaque").f32s(albedo.to_array()),
-            PatchSurface::Translucent { medium, world_units_per_mm } => h
+            PatchSurface::Translucent {
+                medium,
+                world_units_per_mm,
+            } => h
                 .bytes(b"translucent")
                 .f32s(medium.absorption.to_array())
                 .f32s(medium.reduced_scattering.to_array())
@@ -97,7 +102,10 @@ impl<R: Read> Reader<R> {
         let n = u64::from_le_bytes(b);
         // A corrupt length must not allocate the machine away.
         if n > (1 << 34) {
-            return Err(io::Error::new(io::ErrorKind::InvalidData, "implausible array length"));
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidData,
+                "implausible array length",
+            ));
         }
         Ok(n as usize)
     }
@@ -105,7 +113,10 @@ impl<R: Read> Reader<R> {
         let n = self.len()?;
         let mut bytes = vec![0u8; n * 4];
         self.0.read_exact(&mut bytes)?;
-        Ok(bytes.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect())
+        Ok(bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+            .collect())
     }
     fn f32s(&mut self) -> io::Result<Vec<f32>> {
         Ok(self.u32s()?.into_iter().map(f32::from_bits).collect())
@@ -145,41 +156,83 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
         let mut w = Writer(io::BufWriter::new(std::fs::File::create(&temporary)?));
         w.0.write_all(MAGIC)?;
         let p = &patches.patches;
-        w.f32s(p.iter().flat_map(|q| {
-            [q.centre.to_array(), q.surface_point.to_array(), q.normal.to_array()]
-                .concat()
-                .into_iter()
-                .chain([q.area])
-        }).collect::<Vec<_>>().into_iter())?;
+        w.f32s(
+            p.iter()
+                .flat_map(|q| {
+                    [
+                        q.centre.to_array(),
+                        q.surface_point.to_array(),
+                        q.normal.to_array(),
+                    ]
+                    .concat()
+                    .into_iter()
+                    .chain([q.area])
+                })
+                .collect::<Vec<_>>()
+                .into_iter(),
+        )?;
         w.u32s(&p.iter().map(|q| q.object).collect::<Vec<_>>())?;
         w.f32s([patches.patch_size].into_iter())?;
         w.f32s(patches.object_patch_sizes.iter().copied())?;
         w.u32s(&[patches.skipped_triangles as u32])?;
-        w.f32s(patches.samples.iter().flat_map(|s| {
-            [s.position.to_array(), s.normal.to_array(), [s.area, 0.0, 0.0]].concat()
-        }).collect::<Vec<_>>().into_iter())?;
+        w.f32s(
+            patches
+                .samples
+                .iter()
+                .flat_map(|s| {
+                    [
+                        s.position.to_array(),
+                        s.normal.to_array(),
+                        [s.area, 0.0, 0.0],
+                    ]
+                    .concat()
+                })
+                .collect::<Vec<_>>()
+                .into_iter(),
+        )?;
         w.u32s(&patches.sample_offsets)?;
         let k = &transport.scattering;
         w.u32s(&k.row_offsets)?;
         w.u32s(&k.columns)?;
-        w.f32s(k.values.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
+        w.f32s(
+            k.values
+                .iter()
+                .flat_map(|v| v.to_array())
+                .collect::<Vec<_>>()
+                .into_iter(),
+        )?;
         for m in [&transport.form_factors, &transport.cluster_means] {
             w.u32s(&m.row_offsets)?;
             w.u32s(&m.columns)?;
             w.f32s(m.values.iter().copied())?;
         }
-        w.f32s(transport.single_scattering.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
+        w.f32s(
+            transport
+                .single_scattering
+                .iter()
+                .flat_map(|v| v.to_array())
+                .collect::<Vec<_>>()
+                .into_iter(),
+        )?;
         w.f32s(transport.areas.iter().copied())?;
         let r = &transport.report;
-        w.u32s(&[r.form_factor_entries as u32, r.clusters as u32, r.scattering_entries as u32, r.rays as u32])?;
-        w.f32s([
-            r.dropped_form_factor_mean,
-            r.dropped_form_factor_max,
-            r.diffusion_kept_mean.x,
-            r.diffusion_kept_mean.y,
-            r.diffusion_kept_mean.z,
-            r.seconds,
-        ].into_iter())?;
+        w.u32s(&[
+            r.form_factor_entries as u32,
+            r.clusters as u32,
+            r.scattering_entries as u32,
+            r.rays as u32,
+        ])?;
+        w.f32s(
+            [
+                r.dropped_form_factor_mean,
+                r.dropped_form_factor_max,
+                r.diffusion_kept_mean.x,
+                r.diffusion_kept_mean.y,
+                r.diffusion_kept_mean.z,
+                r.seconds,
+            ]
+            .into_iter(),
+        )?;
         w.0.flush()?;
     }
     std::fs::rename(&temporary, path)
@@ -223,7 +276,11 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
         .collect();
     let sample_offsets = r.u32s()?;
     let n = patches_list.len();
-    let max_object = patches_list.iter().map(|p| p.object as usize + 1).max().unwrap_or(0);
+    let max_object = patches_list
+        .iter()
+        .map(|p| p.object as usize + 1)
+        .max()
+        .unwrap_or(0);
     if sample_offsets.len() != n + 1
         || sample_offsets.last().copied().unwrap_or(0) as usize != samples.len()
         || sample_offsets.windows(2).any(|w| w[0] > w[1])
@@ -237,10 +294,17 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
     let f = read_matrix(&mut r)?;
     let c = read_matrix(&mut r)?;
     let clusters = c.0.len().saturating_sub(1);
-    if !consistent(&k, Some(n), n, 3) || !consistent(&f, Some(n), n + clusters, 1) || !consistent(&c, None, n, 1) {
+    if !consistent(&k, Some(n), n, 3)
+        || !consistent(&f, Some(n), n + clusters, 1)
+        || !consistent(&c, None, n, 1)
+    {
         return Err(invalid("sparse matrices"));
     }
-    let scattering = SparseMatrix { row_offsets: k.0, columns: k.1, values: vec3s(&k.2) };
+    let scattering = SparseMatrix {
+        row_offsets: k.0,
+        columns: k.1,
+        values: vec3s(&k.2),
+    };
     let (f_offsets, f_columns, f_values) = f;
     let (co, cc, cv) = c;
     let single_scattering = vec3s(&r.f32s()?);
@@ -260,8 +324,16 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
     };
     let transport = EnergyTransport {
         scattering,
-        form_factors: SparseMatrix { row_offsets: f_offsets, columns: f_columns, values: f_values },
-        cluster_means: SparseMatrix { row_offsets: co, columns: cc, values: cv },
+        form_factors: SparseMatrix {
+            row_offsets: f_offsets,
+            columns: f_columns,
+            values: f_values,
+        },
+        cluster_means: SparseMatrix {
+            row_offsets: co,
+            columns: cc,
+            values: cv,
+        },
         single_scattering,
         areas,
         report: TransportReport {

@@ -170,7 +170,11 @@ pub fn surface_albedo(alpha: f64) -> f64 {
     let (mut lo, mut hi) = (0.0, 1.0);
     for _ in 0..60 {
         let mid = 0.5 * (lo + hi);
-        if single_scattering_albedo_of(mid) < alpha { lo = mid } else { hi = mid }
+        if single_scattering_albedo_of(mid) < alpha {
+            lo = mid
+        } else {
+            hi = mid
+        }
     }
     0.5 * (lo + hi)
 }
@@ -237,7 +241,10 @@ impl DiffusionProfile {
             // Burley's `A` holds single scattering already.
             single_scattering_albedo: std::array::from_fn(|c| match kernel {
                 DiffusionKernel::Dipole => {
-                    let (a, s) = (medium.absorption[c] as f64, medium.reduced_scattering[c] as f64);
+                    let (a, s) = (
+                        medium.absorption[c] as f64,
+                        medium.reduced_scattering[c] as f64,
+                    );
                     s / (a + s)
                 }
                 DiffusionKernel::Burley => 0.0,

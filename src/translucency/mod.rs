@@ -43,9 +43,9 @@ use bevy::{
 
 pub use gather::TranslucencyCamera;
 pub use plugin::{
-    MAX_PATCH_BUDGET, RadiosityReceiver, Translucent, TranslucencyFrame, TranslucencyScene,
-    TranslucencySettings, TranslucencyStatus, TranslucentMaterials, precompute_elapsed,
-    translucent_patch_cap,
+    MAX_PATCH_BUDGET, RadiosityReceiver, TranslucencyFrame, TranslucencyScene,
+    TranslucencySettings, TranslucencyStatus, Translucent, TranslucentMaterials,
+    precompute_elapsed, translucent_patch_cap,
 };
 
 /// Translucent objects lit globally (seed 001): [`Translucent`] on static meshes,

@@ -191,7 +191,10 @@ fn hash_f32s(values: impl IntoIterator<Item = f32>) -> u64 {
 /// Gives each new translucent mesh its material without diffuse.
 pub(crate) fn prepare_translucent_materials(
     mut commands: Commands,
-    new: Query<(Entity, &MeshMaterial3d<StandardMaterial>), (With<Translucent>, Without<TranslucentMaterials>)>,
+    new: Query<
+        (Entity, &MeshMaterial3d<StandardMaterial>),
+        (With<Translucent>, Without<TranslucentMaterials>),
+    >,
     mut materials: ResMut<Assets<StandardMaterial>>,
 ) {
     for (entity, material) in &new {
@@ -236,24 +239,32 @@ pub(crate) fn run_precompute(
     let mut list: Vec<Participant> = participants.iter().collect();
     list.sort_by_key(|p| p.0);
     // The signature: entities, meshes, transforms, media and albedos.
-    let mut signature = vec![settings.patch_budget as u64, hash_f32s([
-        settings.transport.diffusion_energy_kept,
-        settings.transport.form_factor_cutoff,
-        settings.transport.far_field_ratio,
-        settings.transport.cluster_size as f32,
-        settings.transport.kernel as u32 as f32,
-    ])];
+    let mut signature = vec![
+        settings.patch_budget as u64,
+        hash_f32s([
+            settings.transport.diffusion_energy_kept,
+            settings.transport.form_factor_cutoff,
+            settings.transport.far_field_ratio,
+            settings.transport.cluster_size as f32,
+            settings.transport.kernel as u32 as f32,
+        ]),
+    ];
     for (entity, mesh, material, transform, translucent, _) in &list {
         signature.push(entity.to_bits());
         signature.push(hash_of(mesh.0.id()));
         signature.push(hash_f32s(transform.to_matrix().to_cols_array()));
         if translucent.is_none() {
-            let albedo = materials.get(&material.0).map(|m| m.base_color.to_linear().to_f32_array());
+            let albedo = materials
+                .get(&material.0)
+                .map(|m| m.base_color.to_linear().to_f32_array());
             signature.push(hash_f32s(albedo.unwrap_or([-1.0; 4])));
         }
         if let Some(t) = translucent {
             signature.push(hash_f32s(
-                t.medium.absorption.to_array().into_iter()
+                t.medium
+                    .absorption
+                    .to_array()
+                    .into_iter()
                     .chain(t.medium.reduced_scattering.to_array())
                     .chain([t.medium.index_of_refraction, t.world_units_per_mm]),
             ));
@@ -302,7 +313,8 @@ pub(crate) fn run_precompute(
         for (entity, mesh, material, transform, translucent, swapped) in &list {
             // Translucent meshes may show their copy without diffuse: read the original.
             let material = swapped.map_or(&material.0, |m| &m.original);
-            let (Some(mesh), Some(material)) = (meshes.get(&mesh.0), materials.get(material)) else {
+            let (Some(mesh), Some(material)) = (meshes.get(&mesh.0), materials.get(material))
+            else {
                 *status = TranslucencyStatus::Loading;
                 state.signature.clear();
                 return;
@@ -327,11 +339,16 @@ pub(crate) fn run_precompute(
                         });
                         continue;
                     }
-                    PatchSurface::Translucent { medium: t.medium, world_units_per_mm: t.world_units_per_mm }
+                    PatchSurface::Translucent {
+                        medium: t.medium,
+                        world_units_per_mm: t.world_units_per_mm,
+                    }
                 }
                 None => {
                     let c = material.base_color.to_linear();
-                    PatchSurface::Opaque { albedo: Vec3::new(c.red, c.green, c.blue) }
+                    PatchSurface::Opaque {
+                        albedo: Vec3::new(c.red, c.green, c.blue),
+                    }
                 }
             };
             objects.push((positions, indices, surface));
@@ -390,7 +407,9 @@ pub(crate) fn run_precompute(
                 .collect();
             (TranslucencyScene { patches, transport, rays, albedo, entities }, notes)
         }));
-        *status = TranslucencyStatus::Precomputing { since: Instant::now() };
+        *status = TranslucencyStatus::Precomputing {
+            since: Instant::now(),
+        };
     }
     if let Some(task) = state.task.as_mut()
         && let Some((scene, notes)) = block_on(poll_once(task))
@@ -416,7 +435,10 @@ pub(crate) fn run_precompute(
 /// Burley profile, 99 % within ~9 mm, reached none of them).
 pub fn translucent_patch_cap(surface: &PatchSurface, settings: &TransportSettings) -> Option<f32> {
     match *surface {
-        PatchSurface::Translucent { medium, world_units_per_mm } => {
+        PatchSurface::Translucent {
+            medium,
+            world_units_per_mm,
+        } => {
             let profile = super::diffusion::DiffusionProfile::new(&medium, settings.kernel);
             Some((profile.radius_holding(0.99) / 3.0) as f32 * world_units_per_mm)
         }
@@ -476,13 +498,28 @@ pub(crate) fn inject_direct_light(
 
 fn light_numbers(light: &PatchLight) -> Vec<f32> {
     match *light {
-        PatchLight::Directional { direction, illuminance } => {
-            [direction.to_array(), illuminance.to_array()].concat()
-        }
-        PatchLight::Point { position, intensity, range } => {
-            [position.to_array().as_slice(), &intensity.to_array(), &[range]].concat()
-        }
-        PatchLight::Spot { position, direction, intensity, inner_angle, outer_angle, range } => [
+        PatchLight::Directional {
+            direction,
+            illuminance,
+        } => [direction.to_array(), illuminance.to_array()].concat(),
+        PatchLight::Point {
+            position,
+            intensity,
+            range,
+        } => [
+            position.to_array().as_slice(),
+            &intensity.to_array(),
+            &[range],
+        ]
+        .concat(),
+        PatchLight::Spot {
+            position,
+            direction,
+            intensity,
+            inner_angle,
+            outer_angle,
+            range,
+        } => [
             position.to_array().as_slice(),
             &direction.to_array(),
             &intensity.to_array(),
@@ -495,7 +532,12 @@ fn light_numbers(light: &PatchLight) -> Vec<f32> {
 /// Shows each translucent mesh without its diffuse while its transport is ready, and with
 /// its own material otherwise (loading, precomputing, or taking no part).
 pub(crate) fn swap_translucent_materials(
-    mut meshes: Query<(Entity, &mut MeshMaterial3d<StandardMaterial>, &TranslucentMaterials, Has<Translucent>)>,
+    mut meshes: Query<(
+        Entity,
+        &mut MeshMaterial3d<StandardMaterial>,
+        &TranslucentMaterials,
+        Has<Translucent>,
+    )>,
     frame: Res<TranslucencyFrame>,
     status: Res<TranslucencyStatus>,
 ) {
@@ -503,7 +545,11 @@ pub(crate) fn swap_translucent_materials(
     let scene = frame.scene.as_ref().filter(|_| ready).map(|(_, s)| s);
     for (entity, mut material, materials, translucent) in &mut meshes {
         let takes_part = translucent && scene.is_some_and(|s| s.entities.contains(&entity));
-        let wanted = if takes_part { &materials.without_diffuse } else { &materials.original };
+        let wanted = if takes_part {
+            &materials.without_diffuse
+        } else {
+            &materials.original
+        };
         if material.0 != *wanted {
             material.0 = wanted.clone();
         }

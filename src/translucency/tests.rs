@@ -93,9 +93,15 @@ fn the_burley_profile_integrates_to_its_fitted_albedo() {
     for c in 0..3 {
         let numeric = integrate_log(|r| 2.0 * PI * r * burley.reflectance(r)[c], 1e-9, 1e4, 400);
         let total = burley.total_reflectance()[c];
-        assert!((numeric - total).abs() < 1e-6 * total, "{c}: {numeric} vs {total}");
+        assert!(
+            (numeric - total).abs() < 1e-6 * total,
+            "{c}: {numeric} vs {total}"
+        );
         // A is the inverse of Chiang et al.'s fit at the medium's albedo.
-        let (a, s) = (medium.absorption[c] as f64, medium.reduced_scattering[c] as f64);
+        let (a, s) = (
+            medium.absorption[c] as f64,
+            medium.reduced_scattering[c] as f64,
+        );
         assert!((super::diffusion::single_scattering_albedo_of(total) - s / (a + s)).abs() < 1e-9);
     }
     // Its ends: no scattering reflects nothing, no absorption everything.
@@ -532,8 +538,10 @@ fn the_sparse_iteration_converges_to_the_dense_solution() {
         );
     }
     // Every translucent column gives off the slab's total reflectance of what enters.
-    let profile =
-        DiffusionProfile::new(&TranslucentPreset::Marble.medium(), TransportSettings::default().kernel);
+    let profile = DiffusionProfile::new(
+        &TranslucentPreset::Marble.medium(),
+        TransportSettings::default().kernel,
+    );
     let total = profile.total_reflectance();
     let mut given_off = vec![Vec3::ZERO; patches.patches.len()];
     for i in 0..patches.patches.len() {
@@ -603,13 +611,24 @@ fn invalid_media_scatter_nothing_and_say_why() {
 
 #[test]
 fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
-    let ball = mesh_object(Sphere::new(0.05).mesh().ico(2).unwrap(), Transform::from_xyz(0.0, 0.05, 0.0));
-    let floor = mesh_object(Plane3d::new(Vec3::Y, Vec2::splat(0.2)).mesh().build(), Transform::IDENTITY);
+    let ball = mesh_object(
+        Sphere::new(0.05).mesh().ico(2).unwrap(),
+        Transform::from_xyz(0.0, 0.05, 0.0),
+    );
+    let floor = mesh_object(
+        Plane3d::new(Vec3::Y, Vec2::splat(0.2)).mesh().build(),
+        Transform::IDENTITY,
+    );
     let objects = [ball, floor];
     let views = views_of(&objects);
     let surfaces = [
-        PatchSurface::Translucent { medium: TranslucentPreset::Skin1.medium(), world_units_per_mm: 0.001 },
-        PatchSurface::Opaque { albedo: Vec3::splat(0.8) },
+        PatchSurface::Translucent {
+            medium: TranslucentPreset::Skin1.medium(),
+            world_units_per_mm: 0.001,
+        },
+        PatchSurface::Opaque {
+            albedo: Vec3::splat(0.8),
+        },
     ];
     let patches = resample_into_patches(&views, 200);
     let rays = SceneRays::new(&views);
@@ -643,13 +662,19 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
     std::fs::remove_dir_all(&dir).unwrap();
     // The key follows what the transport depends on.
     let key = |surfaces: &[PatchSurface], budget| {
-        let keyed: Vec<_> = objects.iter().zip(surfaces).map(|(o, s)| (o.0.as_slice(), o.1.as_slice(), *s)).collect();
+        let keyed: Vec<_> = objects
+            .iter()
+            .zip(surfaces)
+            .map(|(o, s)| (o.0.as_slice(), o.1.as_slice(), *s))
+            .collect();
         super::cache::scene_key(&keyed, budget, &settings)
     };
     let base = key(&surfaces, 200);
     assert_eq!(base, key(&surfaces, 200));
     assert_ne!(base, key(&surfaces, 201));
     let mut other = surfaces;
-    other[1] = PatchSurface::Opaque { albedo: Vec3::splat(0.7) };
+    other[1] = PatchSurface::Opaque {
+        albedo: Vec3::splat(0.7),
+    };
     assert_ne!(base, key(&other, 200));
 }

@@ -330,7 +330,13 @@ impl EnergyTransport {
         let cells: Vec<f32> = patches
             .object_patch_sizes
             .iter()
-            .map(|s| if s.is_finite() { s * settings.cluster_size as f32 } else { f32::INFINITY })
+            .map(|s| {
+                if s.is_finite() {
+                    s * settings.cluster_size as f32
+                } else {
+                    f32::INFINITY
+                }
+            })
             .collect();
         let clusters = clusters(p, &cells, clustering);
         let far_ratio2 = settings.far_field_ratio.max(1.0).powi(2);
@@ -507,14 +513,16 @@ impl EnergyTransport {
         // (`single_scattering` keeps the factor for direct light's own incidence).
         let single_scattering: Vec<Vec3> = p
             .iter()
-            .map(|q| match profiles.get(q.object as usize).copied().flatten() {
-                Some((profile, ..)) => {
-                    let a = profile.single_scattering_albedo;
-                    Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32)
-                        * (0.5 * profile.entrance_transmittance) as f32
-                }
-                None => Vec3::ZERO,
-            })
+            .map(
+                |q| match profiles.get(q.object as usize).copied().flatten() {
+                    Some((profile, ..)) => {
+                        let a = profile.single_scattering_albedo;
+                        Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32)
+                            * (0.5 * profile.entrance_transmittance) as f32
+                    }
+                    None => Vec3::ZERO,
+                },
+            )
             .collect();
         let diffuse_shape = super::diffusion::diffuse_single_scattering_shape() as f32;
         for i in 0..n {
@@ -566,12 +574,24 @@ impl EnergyTransport {
     /// Iterates `ΔE = F ΔB`, `ΔB = K ΔE` from `B = K E⁰` until the flux of `ΔB` is below
     /// `threshold` × the flux of the first `B`, or `max_iterations`.
     pub fn solve(&self, direct: &[Vec3], threshold: f32, max_iterations: u32) -> TransportSolution {
-        self.solve_with(&DirectLight { irradiance: direct.to_vec(), exitance: Vec::new() }, threshold, max_iterations)
+        self.solve_with(
+            &DirectLight {
+                irradiance: direct.to_vec(),
+                exitance: Vec::new(),
+            },
+            threshold,
+            max_iterations,
+        )
     }
 
     /// [`solve`](Self::solve) from `B = K E⁰ + S⁰`: `direct.exitance` is the exitance the
     /// direct light leaves besides `K E⁰` (single scattering at each beam's own incidence).
-    pub fn solve_with(&self, direct: &DirectLight, threshold: f32, max_iterations: u32) -> TransportSolution {
+    pub fn solve_with(
+        &self,
+        direct: &DirectLight,
+        threshold: f32,
+        max_iterations: u32,
+    ) -> TransportSolution {
         let mut irradiance = direct.irradiance.clone();
         let mut delta = self.scattering.mul_vec(&direct.irradiance);
         for (d, s) in delta.iter_mut().zip(&direct.exitance) {
@@ -770,11 +790,17 @@ pub fn direct_light(
     let per_patch = parallel_rows(patches.patches.len(), |i| {
         let p = &patches.patches[i];
         let x = p.surface_point + p.normal * (0.05 * patches.size_of(i));
-        let single = transport.and_then(|t| t.single_scattering.get(i)).copied().unwrap_or(Vec3::ZERO);
+        let single = transport
+            .and_then(|t| t.single_scattering.get(i))
+            .copied()
+            .unwrap_or(Vec3::ZERO);
         let (mut irradiance, mut exitance) = (Vec3::ZERO, Vec3::ZERO);
         for light in lights {
             let (e, to_light) = match *light {
-                PatchLight::Directional { direction, illuminance } => {
+                PatchLight::Directional {
+                    direction,
+                    illuminance,
+                } => {
                     let to_light = -direction.normalize_or_zero();
                     let cos = p.normal.dot(to_light);
                     let e = if cos > 0.0 && rays.free(x, to_light, f32::INFINITY) {
@@ -784,11 +810,22 @@ pub fn direct_light(
                     };
                     (e, to_light)
                 }
-                PatchLight::Point { position, intensity, range } => (
+                PatchLight::Point {
+                    position,
+                    intensity,
+                    range,
+                } => (
                     point_irradiance(p.normal, x, position, intensity, None, range, rays),
                     (position - x).normalize_or_zero(),
                 ),
-                PatchLight::Spot { position, direction, intensity, inner_angle, outer_angle, range } => (
+                PatchLight::Spot {
+                    position,
+                    direction,
+                    intensity,
+                    inner_angle,
+                    outer_angle,
+                    range,
+                } => (
                     point_irradiance(
                         p.normal,
                         x,
@@ -803,15 +840,21 @@ pub fn direct_light(
             };
             irradiance += e;
             if single != Vec3::ZERO && e != Vec3::ZERO {
-                let shape = super::diffusion::single_scattering_shape(p.normal.dot(to_light) as f64) as f32;
+                let shape =
+                    super::diffusion::single_scattering_shape(p.normal.dot(to_light) as f64) as f32;
                 exitance += single * e * (shape - diffuse_shape);
             }
         }
         (irradiance, exitance)
     });
-    let has_single = transport.is_some_and(|t| t.single_scattering.iter().any(|s| *s != Vec3::ZERO));
+    let has_single =
+        transport.is_some_and(|t| t.single_scattering.iter().any(|s| *s != Vec3::ZERO));
     DirectLight {
-        exitance: if has_single { per_patch.iter().map(|d| d.1).collect() } else { Vec::new() },
+        exitance: if has_single {
+            per_patch.iter().map(|d| d.1).collect()
+        } else {
+            Vec::new()
+        },
         irradiance: per_patch.into_iter().map(|d| d.0).collect(),
     }
 }

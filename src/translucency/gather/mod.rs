@@ -56,7 +56,11 @@ impl PatchGrid {
             members[fill[b as usize] as usize] = i;
             fill[b as usize] += 1;
         }
-        Self { cell_size, offsets, members }
+        Self {
+            cell_size,
+            offsets,
+            members,
+        }
     }
 
     /// A cell's bucket: `bucket` in `gather.wgsl`.
@@ -70,8 +74,13 @@ impl PatchGrid {
     /// smallest (at most [`MAX_GRID_LEVELS`], the last taking the rest), so that a pixel near
     /// finely patched objects does not walk the buckets of cells sized for a wall's patches.
     pub fn levels(centres: &[Vec3], reaches: &[f32]) -> Vec<PatchGrid> {
-        let smallest = reaches.iter().copied().fold(f32::INFINITY, f32::min).max(1e-9);
-        let level = |r: f32| ((r / smallest).log2().ceil().max(0.0) as usize).min(MAX_GRID_LEVELS - 1);
+        let smallest = reaches
+            .iter()
+            .copied()
+            .fold(f32::INFINITY, f32::min)
+            .max(1e-9);
+        let level =
+            |r: f32| ((r / smallest).log2().ceil().max(0.0) as usize).min(MAX_GRID_LEVELS - 1);
         let mut by_level: Vec<Vec<u32>> = vec![Vec::new(); MAX_GRID_LEVELS];
         for (i, &r) in reaches.iter().enumerate() {
             by_level[level(r)].push(i as u32);
@@ -80,7 +89,10 @@ impl PatchGrid {
             .into_iter()
             .filter(|members| !members.is_empty())
             .map(|members| {
-                let cell = members.iter().map(|&i| reaches[i as usize]).fold(0.0, f32::max);
+                let cell = members
+                    .iter()
+                    .map(|&i| reaches[i as usize])
+                    .fold(0.0, f32::max);
                 PatchGrid::new(centres, &members, cell)
             })
             .collect()
@@ -194,9 +206,18 @@ fn gather_buffers(
         .zip(&reaches)
         .map(|((p, a), reach)| {
             [
-                p.surface_point.x, p.surface_point.y, p.surface_point.z, *reach,
-                p.normal.x, p.normal.y, p.normal.z, 0.0,
-                a.x, a.y, a.z, 0.0,
+                p.surface_point.x,
+                p.surface_point.y,
+                p.surface_point.z,
+                *reach,
+                p.normal.x,
+                p.normal.y,
+                p.normal.z,
+                0.0,
+                a.x,
+                a.y,
+                a.z,
+                0.0,
             ]
         })
         .collect();
@@ -260,7 +281,15 @@ pub fn translucency_iteration_pass(
 
 /// A camera that shows the translucency: put on a `Camera3d` (with `Msaa::Off`). Brings the
 /// depth and normal prepasses the gather reads.
-#[derive(Component, Reflect, Clone, Copy, Debug, Default, bevy::render::extract_component::ExtractComponent)]
+#[derive(
+    Component,
+    Reflect,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    bevy::render::extract_component::ExtractComponent,
+)]
 #[reflect(Component, Default)]
 #[require(
     bevy::core_pipeline::prepass::DepthPrepass,
@@ -331,7 +360,10 @@ pub(crate) fn prepare_gather_pipelines(
     pipeline_cache: Res<PipelineCache>,
     mut pipelines: ResMut<SpecializedRenderPipelines<GatherPipeline>>,
     pipeline: Res<GatherPipeline>,
-    views: Query<(Entity, &ViewTarget, Option<&bevy::render::view::Msaa>), With<TranslucencyCamera>>,
+    views: Query<
+        (Entity, &ViewTarget, Option<&bevy::render::view::Msaa>),
+        With<TranslucencyCamera>,
+    >,
     mut warned: ResMut<crate::warn_once::WarnedOnce>,
 ) {
     for (entity, target, msaa) in &views {
@@ -352,7 +384,12 @@ pub(crate) fn prepare_gather_pipelines(
 /// Core3d system between the opaque and transparent passes: adds the patches' light to the
 /// view, timed as `translucency/gather`.
 pub fn translucency_gather_pass(
-    view: ViewQuery<(&ViewTarget, &ViewPrepassTextures, &ViewUniformOffset, &ViewGatherPipeline)>,
+    view: ViewQuery<(
+        &ViewTarget,
+        &ViewPrepassTextures,
+        &ViewUniformOffset,
+        &ViewGatherPipeline,
+    )>,
     gpu: Res<TranslucencyGpu>,
     pipeline: Res<GatherPipeline>,
     pipeline_cache: Res<PipelineCache>,
@@ -392,7 +429,8 @@ pub fn translucency_gather_pass(
     );
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
-    ctx.command_encoder().push_debug_group("translucency/gather");
+    ctx.command_encoder()
+        .push_debug_group("translucency/gather");
     {
         let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
             label: Some("translucency_gather_pass"),

@@ -96,10 +96,18 @@ fn push(words: &mut Vec<u32>, values: impl IntoIterator<Item = u32>) -> u32 {
 
 impl GpuTransport {
     /// Uploads `transport` and builds the pipelines.
-    pub fn new(device: &RenderDevice, transport: &EnergyTransport, limits: IterationLimits) -> Self {
+    pub fn new(
+        device: &RenderDevice,
+        transport: &EnergyTransport,
+        limits: IterationLimits,
+    ) -> Self {
         let n = transport.areas.len() as u32;
         let clusters = transport.cluster_means.rows() as u32;
-        let (f, k, c) = (&transport.form_factors, &transport.scattering, &transport.cluster_means);
+        let (f, k, c) = (
+            &transport.form_factors,
+            &transport.scattering,
+            &transport.cluster_means,
+        );
         let mut words = Vec::new();
         let mut layout = Layout {
             patches: n,
@@ -112,7 +120,10 @@ impl GpuTransport {
             k_offsets: push(&mut words, k.row_offsets.iter().copied()),
             k_columns: push(&mut words, k.columns.iter().copied()),
             // Three words per RGB value.
-            k_values: push(&mut words, k.values.iter().flat_map(|v| v.to_array().map(f32::to_bits))),
+            k_values: push(
+                &mut words,
+                k.values.iter().flat_map(|v| v.to_array().map(f32::to_bits)),
+            ),
             ..Zeroable::zeroed()
         };
         // An empty cluster matrix still has one offset (0) for the shader to find.
@@ -190,21 +201,36 @@ impl GpuTransport {
                 storage(3, false),
             ],
         );
-        let state_layout =
-            device.create_bind_group_layout(Some("translucency_state_layout"), &[storage(0, false)]);
+        let state_layout = device
+            .create_bind_group_layout(Some("translucency_state_layout"), &[storage(0, false)]);
         let state_bind_group = device.create_bind_group(
             Some("translucency_state"),
             &state_layout,
-            &[BindGroupEntry { binding: 0, resource: state.as_entire_binding() }],
+            &[BindGroupEntry {
+                binding: 0,
+                resource: state.as_entire_binding(),
+            }],
         );
         let bind_group = device.create_bind_group(
             Some("translucency_iteration"),
             &bind_group_layout,
             &[
-                BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
-                BindGroupEntry { binding: 1, resource: matrices.as_entire_binding() },
-                BindGroupEntry { binding: 2, resource: vectors.as_entire_binding() },
-                BindGroupEntry { binding: 3, resource: partials.as_entire_binding() },
+                BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                },
+                BindGroupEntry {
+                    binding: 1,
+                    resource: matrices.as_entire_binding(),
+                },
+                BindGroupEntry {
+                    binding: 2,
+                    resource: vectors.as_entire_binding(),
+                },
+                BindGroupEntry {
+                    binding: 3,
+                    resource: partials.as_entire_binding(),
+                },
             ],
         );
         let module = device.create_and_validate_shader_module(ShaderModuleDescriptor {
@@ -257,10 +283,16 @@ impl GpuTransport {
     pub fn write_direct(&self, queue: &RenderQueue, direct: &super::transport::DirectLight) {
         let n = self.layout.patches as usize;
         let pack = |v: &[Vec3]| -> Vec<[f32; 4]> {
-            (0..n).map(|i| v.get(i).map_or([0.0; 4], |e| [e.x, e.y, e.z, 0.0])).collect()
+            (0..n)
+                .map(|i| v.get(i).map_or([0.0; 4], |e| [e.x, e.y, e.z, 0.0]))
+                .collect()
         };
         if n > 0 {
-            queue.write_buffer(&self.vectors, self.layout.direct as u64 * 16, bytemuck::cast_slice(&pack(&direct.irradiance)));
+            queue.write_buffer(
+                &self.vectors,
+                self.layout.direct as u64 * 16,
+                bytemuck::cast_slice(&pack(&direct.irradiance)),
+            );
             queue.write_buffer(
                 &self.vectors,
                 self.layout.direct_exitance as u64 * 16,
@@ -312,7 +344,10 @@ impl GpuTransport {
     /// (`vec4<f32>` per patch, `w` unused): what the picture reads.
     pub fn exitance(&self) -> (&Buffer, std::ops::Range<u64>) {
         let start = self.layout.exitance as u64 * 16;
-        (&self.vectors, start..start + self.layout.patches as u64 * 16)
+        (
+            &self.vectors,
+            start..start + self.layout.patches as u64 * 16,
+        )
     }
 
     /// Where the direct irradiance `E⁰` and the exitance `B` start in the vectors buffer
