@@ -5,13 +5,15 @@ use bevy::{
     prelude::*,
     render::{
         RenderApp,
-        render_resource::{BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType},
+        render_resource::{
+            BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType,
+        },
         renderer::{RenderDevice, RenderQueue},
     },
 };
 use bevy_mesostructure::translucency::{
-    DiffusionKernel, EnergyTransport, PatchLight, PatchObject, PatchSurface, SceneRays, TransportSettings,
-    TranslucentPreset, direct_light,
+    DiffusionKernel, EnergyTransport, PatchLight, PatchObject, PatchSurface, SceneRays,
+    TranslucentPreset, TransportSettings, direct_light,
     iteration::{GpuTransport, IterationLimits},
     patches::world_triangles,
     resample_into_patches,
@@ -24,7 +26,13 @@ fn object(mesh: Mesh, transform: Transform) -> (Vec<Vec3>, Vec<u32>) {
 }
 
 /// Reads `size` bytes of `buffer` at `offset` back to the CPU.
-fn read_back(device: &RenderDevice, queue: &RenderQueue, buffer: &bevy::render::render_resource::Buffer, offset: u64, size: u64) -> Vec<u8> {
+fn read_back(
+    device: &RenderDevice,
+    queue: &RenderQueue,
+    buffer: &bevy::render::render_resource::Buffer,
+    offset: u64,
+    size: u64,
+) -> Vec<u8> {
     let staging = device.create_buffer(&BufferDescriptor {
         label: Some("readback"),
         size,
@@ -36,7 +44,9 @@ fn read_back(device: &RenderDevice, queue: &RenderQueue, buffer: &bevy::render::
     queue.submit([encoder.finish()]);
     let slice = staging.slice(..);
     device.map_buffer(&slice, MapMode::Read, |r| r.expect("the readback maps"));
-    device.poll(PollType::wait_indefinitely()).expect("the GPU finishes");
+    device
+        .poll(PollType::wait_indefinitely())
+        .expect("the GPU finishes");
     let bytes = slice.get_mapped_range().to_vec();
     staging.unmap();
     bytes
@@ -54,20 +64,45 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
 
     // A marble ball (5 cm, metres) on a white floor beside a red wall, lit by a spot.
     let objects = [
-        object(Sphere::new(0.05).mesh().ico(3).unwrap(), Transform::from_xyz(0.0, 0.05, 0.0)),
-        object(Plane3d::new(Vec3::Y, Vec2::splat(0.2)).mesh().build(), Transform::IDENTITY),
-        object(Plane3d::new(Vec3::X, Vec2::splat(0.2)).mesh().build(), Transform::from_xyz(-0.1, 0.1, 0.0)),
+        object(
+            Sphere::new(0.05).mesh().ico(3).unwrap(),
+            Transform::from_xyz(0.0, 0.05, 0.0),
+        ),
+        object(
+            Plane3d::new(Vec3::Y, Vec2::splat(0.2)).mesh().build(),
+            Transform::IDENTITY,
+        ),
+        object(
+            Plane3d::new(Vec3::X, Vec2::splat(0.2)).mesh().build(),
+            Transform::from_xyz(-0.1, 0.1, 0.0),
+        ),
     ];
-    let views: Vec<PatchObject> = objects.iter().map(|o| PatchObject { positions: &o.0, indices: &o.1 }).collect();
+    let views: Vec<PatchObject> = objects
+        .iter()
+        .map(|o| PatchObject {
+            positions: &o.0,
+            indices: &o.1,
+        })
+        .collect();
     let patches = resample_into_patches(&views, 600);
     let rays = SceneRays::new(&views);
     let surfaces = [
-        PatchSurface::Translucent { medium: TranslucentPreset::Marble.medium(), world_units_per_mm: 0.001 },
-        PatchSurface::Opaque { albedo: Vec3::splat(0.8) },
-        PatchSurface::Opaque { albedo: Vec3::new(0.8, 0.1, 0.1) },
+        PatchSurface::Translucent {
+            medium: TranslucentPreset::Marble.medium(),
+            world_units_per_mm: 0.001,
+        },
+        PatchSurface::Opaque {
+            albedo: Vec3::splat(0.8),
+        },
+        PatchSurface::Opaque {
+            albedo: Vec3::new(0.8, 0.1, 0.1),
+        },
     ];
     // The dipole: its single-scattering term exercises the first bounce's extra exitance.
-    let settings = TransportSettings { kernel: DiffusionKernel::Dipole, ..default() };
+    let settings = TransportSettings {
+        kernel: DiffusionKernel::Dipole,
+        ..default()
+    };
     let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
     assert!(transport.report.clusters > 0, "the far field takes part");
     let position = Vec3::new(0.15, 0.25, 0.1);
@@ -87,8 +122,14 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
 
     // Converged (the loop stops on the GPU), and stopped by the cap.
     for limits in [
-        IterationLimits { threshold: 1e-4, max_iterations: 60 },
-        IterationLimits { threshold: 1e-9, max_iterations: 3 },
+        IterationLimits {
+            threshold: 1e-4,
+            max_iterations: 60,
+        },
+        IterationLimits {
+            threshold: 1e-9,
+            max_iterations: 3,
+        },
     ] {
         let cpu = transport.solve_with(&direct, limits.threshold, limits.max_iterations);
         let gpu = GpuTransport::new(&device, &transport, limits);
@@ -101,26 +142,46 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
         let iterations = u32::from_le_bytes(state[24..28].try_into().unwrap());
         assert_eq!(iterations, cpu.iterations, "{limits:?}");
         let (buffer, range) = gpu.exitance();
-        let bytes = read_back(&device, &queue, buffer, range.start, range.end - range.start);
+        let bytes = read_back(
+            &device,
+            &queue,
+            buffer,
+            range.start,
+            range.end - range.start,
+        );
         let exitance: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
         assert_eq!(exitance.len(), n);
-        let peak = cpu.exitance.iter().map(|b| b.max_element()).fold(0.0, f32::max);
+        let peak = cpu
+            .exitance
+            .iter()
+            .map(|b| b.max_element())
+            .fold(0.0, f32::max);
         let worst = exitance
             .iter()
             .zip(&cpu.exitance)
             .map(|(g, c)| (Vec3::new(g[0], g[1], g[2]) - *c).abs().max_element())
             .fold(0.0, f32::max);
-        eprintln!("{limits:?}: {iterations} iterations, worst |GPU − CPU| {:.2e} of peak {peak:.3e}", worst / peak);
+        eprintln!(
+            "{limits:?}: {iterations} iterations, worst |GPU − CPU| {:.2e} of peak {peak:.3e}",
+            worst / peak
+        );
         // The same arithmetic in the same order (measured bit-identical on the software
         // driver); another device may fuse or reorder: within 1e-5 of the peak.
-        assert!(peak > 0.0 && worst <= 1e-5 * peak, "{limits:?}: worst {worst} of {peak}");
+        assert!(
+            peak > 0.0 && worst <= 1e-5 * peak,
+            "{limits:?}: worst {worst} of {peak}"
+        );
     }
 }
 
 /// sRGB-encoded 8-bit value of a linear one.
 fn srgb8(linear: f32) -> f32 {
     let c = linear.clamp(0.0, 1.0);
-    let s = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+    let s = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
     s * 255.0
 }
 
@@ -132,8 +193,8 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
         light::GlobalAmbientLight,
     };
     use bevy_mesostructure::translucency::{
-        Translucent, TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin,
-        TranslucencySettings, TranslucencyStatus, gather::gathered_radiance,
+        TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin, TranslucencySettings,
+        TranslucencyStatus, Translucent, gather::gathered_radiance,
     };
     if !gpu_or_skip() {
         return;
@@ -141,21 +202,35 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     let mut app = bare_app_with(|app| {
         app.add_plugins(TranslucencyPlugin);
     });
-    app.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
-    app.insert_resource(TranslucencySettings { patch_budget: 600, ..default() });
+    app.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    app.insert_resource(TranslucencySettings {
+        patch_budget: 600,
+        ..default()
+    });
     // Sunlight from the right: the left of the ball is lit only through the marble.
     let light_travel = Vec3::new(-1.0, -0.2, -0.3).normalize();
     sun(&mut app, light_travel, 2_000.0);
     let radius = 0.05;
     let ball = mesh(&mut app, Sphere::new(radius).mesh().uv(64, 32));
     // No specular (F0 = 0): the picture is the patches' light alone.
-    let material = app.world_mut().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-        base_color: Color::WHITE,
-        reflectance: 0.0,
-        perceptual_roughness: 1.0,
-        ..default()
-    });
-    app.world_mut().spawn((ball, MeshMaterial3d(material), Translucent::default(), Transform::IDENTITY));
+    let material = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::WHITE,
+            reflectance: 0.0,
+            perceptual_roughness: 1.0,
+            ..default()
+        });
+    app.world_mut().spawn((
+        ball,
+        MeshMaterial3d(material),
+        Translucent::default(),
+        Transform::IDENTITY,
+    ));
     let size = 64;
     let image = target(&mut app, size, size);
     let eye = Transform::from_xyz(0.0, 0.0, 0.25).looking_at(Vec3::ZERO, Vec3::Y);
@@ -172,13 +247,19 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
         .id();
     for _ in 0..600 {
         run(&mut app, 1);
-        if matches!(app.world().resource::<TranslucencyStatus>(), TranslucencyStatus::Ready { .. }) {
+        if matches!(
+            app.world().resource::<TranslucencyStatus>(),
+            TranslucencyStatus::Ready { .. }
+        ) {
             break;
         }
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
     assert!(
-        matches!(app.world().resource::<TranslucencyStatus>(), TranslucencyStatus::Ready { .. }),
+        matches!(
+            app.world().resource::<TranslucencyStatus>(),
+            TranslucencyStatus::Ready { .. }
+        ),
         "the precompute never finished"
     );
     run(&mut app, 3);
@@ -189,7 +270,11 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     let frame = app.world().resource::<TranslucencyFrame>().clone();
     let (_, scene) = frame.scene.expect("a scene");
     let (_, direct) = frame.direct.expect("the light injected");
-    let solution = scene.transport.solve_with(&direct, frame.settings.iteration_threshold, frame.settings.max_iterations);
+    let solution = scene.transport.solve_with(
+        &direct,
+        frame.settings.iteration_threshold,
+        frame.settings.max_iterations,
+    );
     let exposure = Exposure::default().exposure();
     let (camera_component, camera_transform) = app
         .world_mut()
@@ -200,7 +285,9 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     let (mut compared, mut sum_error, mut worst, mut glowing_in_shade) = (0, 0.0f32, 0.0f32, 0);
     for y in 0..size {
         for x in 0..size {
-            let Ok(ray) = camera_component.viewport_to_world(&camera_transform, Vec2::new(x as f32 + 0.5, y as f32 + 0.5)) else {
+            let Ok(ray) = camera_component
+                .viewport_to_world(&camera_transform, Vec2::new(x as f32 + 0.5, y as f32 + 0.5))
+            else {
                 continue;
             };
             // The ray against the ball.
@@ -216,8 +303,15 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
             if n.dot(-d) < 0.3 {
                 continue;
             }
-            let expected = gathered_radiance(&scene.patches, &scene.albedo, &direct.irradiance, &solution.exitance, hit, n)
-                .map_or(0.0, |l| l.x * exposure);
+            let expected = gathered_radiance(
+                &scene.patches,
+                &scene.albedo,
+                &direct.irradiance,
+                &solution.exitance,
+                hit,
+                n,
+            )
+            .map_or(0.0, |l| l.x * exposure);
             let pixel = shot.get_color_at(x, y).unwrap().to_srgba().red * 255.0;
             let error = (pixel - srgb8(expected)).abs();
             compared += 1;
@@ -229,7 +323,9 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
         }
     }
     let mean = sum_error / compared as f32;
-    eprintln!("{compared} pixels: mean |GPU − CPU| {mean:.2}/255, worst {worst:.1}/255; {glowing_in_shade} lit pixels in the shade");
+    eprintln!(
+        "{compared} pixels: mean |GPU − CPU| {mean:.2}/255, worst {worst:.1}/255; {glowing_in_shade} lit pixels in the shade"
+    );
     assert!(compared > 500);
     // Measured 0.22/255 mean and 2.7/255 worst (the mesh's facets against the sphere).
     assert!(mean <= 1.0 && worst <= 8.0, "mean {mean}, worst {worst}");
@@ -241,8 +337,8 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
 #[test]
 fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     use bevy_mesostructure::translucency::{
-        Translucent, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings,
-        TranslucencyStatus, TranslucentMaterials, TranslucentMedium,
+        TranslucencyCamera, TranslucencyPlugin, TranslucencySettings, TranslucencyStatus,
+        Translucent, TranslucentMaterials, TranslucentMedium,
     };
     if !gpu_or_skip() {
         return;
@@ -251,24 +347,49 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         app.add_plugins(TranslucencyPlugin);
     });
     // A budget below the least (16); a NaN medium, a zero scale and a good one.
-    app.insert_resource(TranslucencySettings { patch_budget: 0, ..default() });
+    app.insert_resource(TranslucencySettings {
+        patch_budget: 0,
+        ..default()
+    });
     sun(&mut app, Vec3::new(-1.0, -1.0, -1.0), 2000.0);
     let ball = mesh(&mut app, Sphere::new(0.05).mesh().ico(2).unwrap());
-    let material = app.world_mut().resource_mut::<Assets<StandardMaterial>>().add(Color::WHITE);
-    let nan = TranslucentMedium { absorption: Vec3::new(f32::NAN, 0.1, 0.1), ..default() };
+    let material = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(Color::WHITE);
+    let nan = TranslucentMedium {
+        absorption: Vec3::new(f32::NAN, 0.1, 0.1),
+        ..default()
+    };
     let bad = app
         .world_mut()
-        .spawn((ball.clone(), MeshMaterial3d(material.clone()), Translucent { medium: nan, ..default() }, Transform::from_xyz(-0.2, 0.0, 0.0)))
+        .spawn((
+            ball.clone(),
+            MeshMaterial3d(material.clone()),
+            Translucent {
+                medium: nan,
+                ..default()
+            },
+            Transform::from_xyz(-0.2, 0.0, 0.0),
+        ))
         .id();
     app.world_mut().spawn((
         ball.clone(),
         MeshMaterial3d(material.clone()),
-        Translucent { world_units_per_mm: 0.0, ..default() },
+        Translucent {
+            world_units_per_mm: 0.0,
+            ..default()
+        },
         Transform::from_xyz(0.2, 0.0, 0.0),
     ));
     let good = app
         .world_mut()
-        .spawn((ball, MeshMaterial3d(material.clone()), Translucent::default(), Transform::IDENTITY))
+        .spawn((
+            ball,
+            MeshMaterial3d(material.clone()),
+            Translucent::default(),
+            Transform::IDENTITY,
+        ))
         .id();
     let image = target(&mut app, 32, 32);
     app.world_mut().spawn((
@@ -287,7 +408,12 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         TranslucencyCamera,
         Transform::from_xyz(0.0, 0.0, 0.6).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    let ready = |app: &App| matches!(app.world().resource::<TranslucencyStatus>(), TranslucencyStatus::Ready { .. });
+    let ready = |app: &App| {
+        matches!(
+            app.world().resource::<TranslucencyStatus>(),
+            TranslucencyStatus::Ready { .. }
+        )
+    };
     let wait_ready = |app: &mut App| {
         for _ in 0..600 {
             run(app, 1);
@@ -306,18 +432,38 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         "translucency-units-",
         "translucency-msaa",
     ] {
-        assert!(causes.iter().any(|c| c.starts_with(key)), "no warning {key}: {causes:?}");
+        assert!(
+            causes.iter().any(|c| c.starts_with(key)),
+            "no warning {key}: {causes:?}"
+        );
     }
-    assert_eq!(app.world().resource::<TranslucencySettings>().patch_budget, 16);
+    assert_eq!(
+        app.world().resource::<TranslucencySettings>().patch_budget,
+        16
+    );
     // The good ball shows its copy without diffuse; the bad one keeps its own material.
-    let shown = |app: &mut App, e: Entity| app.world().get::<MeshMaterial3d<StandardMaterial>>(e).unwrap().0.clone();
-    let good_materials = app.world().get::<TranslucentMaterials>(good).unwrap().clone();
+    let shown = |app: &mut App, e: Entity| {
+        app.world()
+            .get::<MeshMaterial3d<StandardMaterial>>(e)
+            .unwrap()
+            .0
+            .clone()
+    };
+    let good_materials = app
+        .world()
+        .get::<TranslucentMaterials>(good)
+        .unwrap()
+        .clone();
     assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
     assert_eq!(shown(&mut app, bad), material);
 
     // Moving a participant: one warning, Bevy's shading while it moves, rebuilt once still.
     for step in 0..5 {
-        app.world_mut().get_mut::<Transform>(good).unwrap().translation.y = 0.01 * (step + 1) as f32;
+        app.world_mut()
+            .get_mut::<Transform>(good)
+            .unwrap()
+            .translation
+            .y = 0.01 * (step + 1) as f32;
         run(&mut app, 1);
         assert!(!ready(&app));
         assert_eq!(shown(&mut app, good), good_materials.original);
@@ -330,8 +476,8 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
 #[test]
 fn a_kept_transport_is_read_back_instead_of_built_again() {
     use bevy_mesostructure::translucency::{
-        Translucent, TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin,
-        TranslucencySettings, TranslucencyStatus,
+        TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin, TranslucencySettings,
+        TranslucencyStatus, Translucent,
     };
     if !gpu_or_skip() {
         return;
@@ -342,11 +488,23 @@ fn a_kept_transport_is_read_back_instead_of_built_again() {
         let mut app = bare_app_with(|app| {
             app.add_plugins(TranslucencyPlugin);
         });
-        app.insert_resource(TranslucencySettings { patch_budget: 300, cache_dir: Some(dir.to_path_buf()), ..default() });
+        app.insert_resource(TranslucencySettings {
+            patch_budget: 300,
+            cache_dir: Some(dir.to_path_buf()),
+            ..default()
+        });
         sun(&mut app, Vec3::new(-1.0, -1.0, -1.0), 2000.0);
         let ball = mesh(&mut app, Sphere::new(0.05).mesh().ico(3).unwrap());
-        let material = app.world_mut().resource_mut::<Assets<StandardMaterial>>().add(Color::WHITE);
-        app.world_mut().spawn((ball, MeshMaterial3d(material), Translucent::default(), Transform::IDENTITY));
+        let material = app
+            .world_mut()
+            .resource_mut::<Assets<StandardMaterial>>()
+            .add(Color::WHITE);
+        app.world_mut().spawn((
+            ball,
+            MeshMaterial3d(material),
+            Translucent::default(),
+            Transform::IDENTITY,
+        ));
         let image = target(&mut app, 16, 16);
         app.world_mut().spawn((
             Camera3d::default(),
@@ -357,8 +515,16 @@ fn a_kept_transport_is_read_back_instead_of_built_again() {
         ));
         for _ in 0..600 {
             run(&mut app, 1);
-            if matches!(app.world().resource::<TranslucencyStatus>(), TranslucencyStatus::Ready { .. }) {
-                let (_, scene) = app.world().resource::<TranslucencyFrame>().scene.clone().unwrap();
+            if matches!(
+                app.world().resource::<TranslucencyStatus>(),
+                TranslucencyStatus::Ready { .. }
+            ) {
+                let (_, scene) = app
+                    .world()
+                    .resource::<TranslucencyFrame>()
+                    .scene
+                    .clone()
+                    .unwrap();
                 return (scene.transport.report.clone(), scene.patches.patches.len());
             }
             std::thread::sleep(std::time::Duration::from_millis(5));
