@@ -339,12 +339,13 @@ fn form_factors_are_reciprocal_and_sum_to_one_in_a_closed_box() {
         "row sums: mean {mean:.4}, area-weighted {area_weighted:.4}, worst |1 − Σ| {worst:.3}; {:?}",
         transport.report
     );
-    // Measured: area-weighted 0.9915, worst row 0.063 off.
+    // Measured with the default two-level far field: area-weighted 0.9876, worst row 0.096
+    // off (patch to patch: 0.9915 and 0.063).
     assert!(
-        (area_weighted - 1.0).abs() < 0.015,
+        (area_weighted - 1.0).abs() < 0.02,
         "area-weighted row sum {area_weighted}"
     );
-    assert!(worst < 0.1, "worst row sum error {worst}");
+    assert!(worst < 0.15, "worst row sum error {worst}");
 }
 
 #[test]
@@ -398,7 +399,7 @@ fn a_closed_box_absorbs_exactly_the_light_put_in() {
             transport.report.form_factor_entries
         );
         // Everything put in is absorbed, up to the form factors' row sums (see the test
-        // above): measured 0.9895 patch to patch, 0.980 with clusters (the far field's
+        // above): measured 0.9895 patch to patch, 0.973 with the two-level far field (its
         // area-mean exitance and single ray are not reciprocal).
         assert!(
             (absorbed / injected - 1.0).abs() < margin,
@@ -406,7 +407,7 @@ fn a_closed_box_absorbs_exactly_the_light_put_in() {
         );
         exitances.push((solution.exitance, transport.areas.clone()));
     }
-    // The far field's effect on the picture: relative L1 of the exitance (measured 0.012).
+    // The far field's effect on the picture: relative L1 of the exitance (measured 0.017).
     let (exact, clustered) = (&exitances[0], &exitances[1]);
     let difference: f32 = exact
         .0

@@ -339,6 +339,15 @@ impl EnergyTransport {
             })
             .collect();
         let clusters = clusters(p, &cells, clustering);
+        // A second level, each cluster of clusters `cluster_size` times wider, linked as one
+        // beyond `far_field_ratio` of its own radius (a hierarchy of two levels: far rooms
+        // cost one entry per coarse cluster).
+        let coarse: Vec<(Cluster, Vec<usize>)> = if clustering {
+            coarser_clusters(p, &clusters, settings.cluster_size as f32)
+        } else {
+            vec![(clusters[0].clone(), vec![0])]
+        };
+        let fine_count = clusters.len();
         let far_ratio2 = settings.far_field_ratio.max(1.0).powi(2);
         let rows = parallel_rows(n, |i| {
             let (pi, xi) = (&p[i], lifted[i]);
@@ -367,13 +376,15 @@ impl EnergyTransport {
                     disc_kernel(ci, cj, r2, pi.area, pj.area)
                 }
             };
-            for (c, cluster) in clusters.iter().enumerate() {
-                let far = clustering
+            let far_from = |cluster: &Cluster| {
+                clustering
                     && cluster.members.len() > 1
                     && pi.centre.distance_squared(cluster.centroid)
-                        > far_ratio2 * cluster.radius * cluster.radius;
-                if far {
-                    let f: f32 = cluster.members.iter().map(|&j| kernel(j) * p[j].area).sum();
+                        > far_ratio2 * cluster.radius * cluster.radius
+            };
+            for (c2, (big, fines)) in coarse.iter().enumerate() {
+                if fines.len() > 1 && far_from(big) {
+                    let f: f32 = big.members.iter().map(|&j| kernel(j) * p[j].area).sum();
                     if !(f > 0.0) {
                         continue;
                     }
@@ -382,12 +393,16 @@ impl EnergyTransport {
                         continue;
                     }
                     rays_cast += 1;
-                    if rays.visible(xi, lifted[cluster.representative]) {
-                        row.push(((n + c) as u32, f));
+                    if rays.visible(xi, lifted[big.representative]) {
+                        row.push(((n + fine_count + c2) as u32, f));
                     }
-                } else {
-                    for &j in cluster.members.iter().filter(|&&j| j != i) {
-                        let f = kernel(j) * p[j].area;
+                    continue;
+                }
+                for &c in fines {
+                    let cluster = &clusters[c];
+                    if far_from(cluster) {
+                        let f: f32 =
+                            cluster.members.iter().map(|&j| kernel(j) * p[j].area).sum();
                         if !(f > 0.0) {
                             continue;
                         }
@@ -396,8 +411,23 @@ impl EnergyTransport {
                             continue;
                         }
                         rays_cast += 1;
-                        if rays.visible(xi, lifted[j]) {
-                            row.push((j as u32, f));
+                        if rays.visible(xi, lifted[cluster.representative]) {
+                            row.push(((n + c) as u32, f));
+                        }
+                    } else {
+                        for &j in cluster.members.iter().filter(|&&j| j != i) {
+                            let f = kernel(j) * p[j].area;
+                            if !(f > 0.0) {
+                                continue;
+                            }
+                            if f < cutoff {
+                                dropped += f;
+                                continue;
+                            }
+                            rays_cast += 1;
+                            if rays.visible(xi, lifted[j]) {
+                                row.push((j as u32, f));
+                            }
                         }
                     }
                 }
@@ -408,16 +438,11 @@ impl EnergyTransport {
         let dropped: Vec<f32> = rows.iter().map(|r| r.1).collect();
         let form_factors = SparseMatrix::from_rows(rows.into_iter().map(|r| r.0).collect());
         let cluster_means = if clustering {
+            let mean = |c: &Cluster| -> Vec<(u32, f32)> {
+                c.members.iter().map(|&j| (j as u32, p[j].area / c.area)).collect()
+            };
             SparseMatrix::from_rows(
-                clusters
-                    .iter()
-                    .map(|c| {
-                        c.members
-                            .iter()
-                            .map(|&j| (j as u32, p[j].area / c.area))
-                            .collect()
-                    })
-                    .collect(),
+                clusters.iter().map(mean).chain(coarse.iter().map(|(c, _)| mean(c))).collect(),
             )
         } else {
             SparseMatrix::from_rows(Vec::new())
@@ -635,6 +660,7 @@ pub struct DirectLight {
 }
 
 /// A far-field cluster.
+#[derive(Clone)]
 struct Cluster {
     members: Vec<usize>,
     area: f32,
@@ -671,36 +697,62 @@ fn clusters(p: &[super::patches::Patch], cells: &[f32], clustering: bool) -> Vec
     }
     members
         .into_iter()
-        .map(|members| {
-            let area: f32 = members.iter().map(|&j| p[j].area).sum();
-            let centroid = members
-                .iter()
-                .map(|&j| p[j].centre * p[j].area)
-                .sum::<Vec3>()
-                / area;
-            let radius = members
-                .iter()
-                .map(|&j| {
-                    p[j].centre.distance(centroid) + (p[j].area / std::f32::consts::PI).sqrt()
-                })
-                .fold(0.0, f32::max);
-            let representative = *members
-                .iter()
-                .min_by(|&&a, &&b| {
-                    p[a].centre
-                        .distance_squared(centroid)
-                        .total_cmp(&p[b].centre.distance_squared(centroid))
-                })
-                .expect("clusters are never empty");
-            Cluster {
-                members,
-                area,
-                centroid,
-                radius,
-                representative,
-            }
+        .map(|members| cluster_of(p, members))
+        .collect()
+}
+
+/// Groups `fine` clusters into clusters `factor` times wider (by object, normal axis of their
+/// first member and the cell of their centroid); each with the fine clusters it holds.
+fn coarser_clusters(
+    p: &[super::patches::Patch],
+    fine: &[Cluster],
+    factor: f32,
+) -> Vec<(Cluster, Vec<usize>)> {
+    let mut index: bevy::platform::collections::HashMap<(u32, IVec3, u8), usize> = default();
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for (c, cluster) in fine.iter().enumerate() {
+        let first = &p[cluster.members[0]];
+        // The fine cell's width: twice the radius bounds it from below; the coarse cell is
+        // `factor` fine radii across.
+        let cell = (factor * cluster.radius).max(1e-9);
+        let key = (
+            first.object,
+            (cluster.centroid / cell).floor().as_ivec3(),
+            super::patches::normal_axis(first.normal),
+        );
+        let g = *index.entry(key).or_insert_with(|| {
+            groups.push(Vec::new());
+            groups.len() - 1
+        });
+        groups[g].push(c);
+    }
+    groups
+        .into_iter()
+        .map(|fines| {
+            let members: Vec<usize> = fines.iter().flat_map(|&c| fine[c].members.iter().copied()).collect();
+            (cluster_of(p, members), fines)
         })
         .collect()
+}
+
+/// A cluster of the patches `members`: area, centroid, reach and the member nearest the
+/// centroid.
+fn cluster_of(p: &[super::patches::Patch], members: Vec<usize>) -> Cluster {
+    let area: f32 = members.iter().map(|&j| p[j].area).sum();
+    let centroid = members.iter().map(|&j| p[j].centre * p[j].area).sum::<Vec3>() / area;
+    let radius = members
+        .iter()
+        .map(|&j| p[j].centre.distance(centroid) + (p[j].area / std::f32::consts::PI).sqrt())
+        .fold(0.0, f32::max);
+    let representative = *members
+        .iter()
+        .min_by(|&&a, &&b| {
+            p[a].centre
+                .distance_squared(centroid)
+                .total_cmp(&p[b].centre.distance_squared(centroid))
+        })
+        .expect("clusters are never empty");
+    Cluster { members, area, centroid, radius, representative }
 }
 
 /// The symmetric form-factor kernel `G_ij = cos θ_i cos θ_j / (π r² + (A_i + A_j)/2)`
