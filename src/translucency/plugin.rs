@@ -451,6 +451,7 @@ pub(crate) fn inject_direct_light(
     directional: Query<(&DirectionalLight, &GlobalTransform)>,
     points: Query<(&PointLight, &GlobalTransform)>,
     spots: Query<(&SpotLight, &GlobalTransform)>,
+    ambient: Option<Res<bevy::light::GlobalAmbientLight>>,
     mut state: ResMut<Precompute>,
     mut frame: ResMut<TranslucencyFrame>,
 ) {
@@ -486,13 +487,27 @@ pub(crate) fn inject_direct_light(
             range: light.range,
         });
     }
-    let signature: Vec<u64> = lights.iter().map(|l| hash_f32s(light_numbers(l))).collect();
+    // Bevy's ambient light: uniform radiance `brightness × colour`, irradiance π times it.
+    // Bevy lights opaque surfaces with it itself; the translucent ones show no diffuse of their
+    // own, so it enters them here (unoccluded, as Bevy's is without SSAO).
+    let ambient = ambient.map_or(Vec3::ZERO, |a| {
+        colour(a.color, a.brightness * std::f32::consts::PI)
+    });
+    let mut signature: Vec<u64> = lights.iter().map(|l| hash_f32s(light_numbers(l))).collect();
+    signature.push(hash_f32s(ambient.to_array()));
     if signature == state.direct_signature && frame.direct.is_some() {
         return;
     }
     state.direct_signature = signature;
     state.direct_generation += 1;
-    let direct = direct_light(&scene.patches, Some(&scene.transport), &lights, &scene.rays);
+    let mut direct = direct_light(&scene.patches, Some(&scene.transport), &lights, &scene.rays);
+    if ambient != Vec3::ZERO {
+        for (e, albedo) in direct.irradiance.iter_mut().zip(&scene.albedo) {
+            if *albedo == Vec3::ZERO {
+                *e += ambient;
+            }
+        }
+    }
     frame.direct = Some((state.direct_generation, Arc::new(direct)));
 }
 

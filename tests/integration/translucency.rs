@@ -541,3 +541,90 @@ fn a_kept_transport_is_read_back_instead_of_built_again() {
     assert_eq!(patches_again, patches);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn ambient_light_reaches_translucent_objects() {
+    use bevy::light::GlobalAmbientLight;
+    use bevy_mesostructure::translucency::{
+        TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin, TranslucencySettings,
+        TranslucencyStatus, Translucent,
+    };
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = bare_app_with(|app| {
+        app.add_plugins(TranslucencyPlugin);
+    });
+    // No light but Bevy's ambient: the ball's material shows no diffuse of its own, so without
+    // the ambient entering its patches it would be black.
+    let brightness = 400.0;
+    app.insert_resource(GlobalAmbientLight {
+        brightness,
+        ..default()
+    });
+    app.insert_resource(TranslucencySettings {
+        patch_budget: 300,
+        ..default()
+    });
+    let ball = mesh(&mut app, Sphere::new(0.05).mesh().uv(48, 24));
+    let material = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::WHITE,
+            reflectance: 0.0,
+            perceptual_roughness: 1.0,
+            ..default()
+        });
+    app.world_mut().spawn((
+        ball,
+        MeshMaterial3d(material),
+        Translucent::default(),
+        Transform::IDENTITY,
+    ));
+    let size = 32;
+    let image = target(&mut app, size, size);
+    app.world_mut().spawn((
+        Camera3d::default(),
+        bevy::camera::RenderTarget::Image(image.clone().into()),
+        Msaa::Off,
+        bevy::core_pipeline::tonemapping::Tonemapping::None,
+        TranslucencyCamera,
+        Transform::from_xyz(0.0, 0.0, 0.25).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    for _ in 0..600 {
+        run(&mut app, 1);
+        if matches!(
+            app.world().resource::<TranslucencyStatus>(),
+            TranslucencyStatus::Ready { .. }
+        ) {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    run(&mut app, 3);
+    let (_, direct) = app
+        .world()
+        .resource::<TranslucencyFrame>()
+        .direct
+        .clone()
+        .expect("injected");
+    let expected = std::f32::consts::PI * brightness;
+    assert!(
+        direct
+            .irradiance
+            .iter()
+            .all(|e| (e.x - expected).abs() < 1e-3 * expected)
+    );
+    let shot = screenshot(&mut app, &image);
+    let centre = shot
+        .get_color_at(size / 2, size / 2)
+        .unwrap()
+        .to_srgba()
+        .red
+        * 255.0;
+    eprintln!("ambient-lit centre: {centre:.1}/255");
+    // Exitance ≈ A · π L (marble's red A ≈ 0.9) → radiance ≈ 0.9 × 400 × exposure (≈ 1e-3):
+    // about 0.36 linear, 160/255 in sRGB; measured 156.
+    assert!((130.0..=185.0).contains(&centre), "{centre}");
+}
