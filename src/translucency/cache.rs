@@ -18,21 +18,21 @@ use super::{
 
 const MAGIC: &[u8; 8] = b"BMSTRN01";
 
-/// FNV-1a, 64 bits.
+/// FNV-1a, 64 bits: the cache's key and the plugin's change signatures.
 #[derive(Clone, Copy)]
-struct Hash(u64);
+pub(crate) struct Hash(pub(crate) u64);
 
 impl Hash {
-    fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self(0xcbf2_9ce4_8422_2325)
     }
-    fn bytes(mut self, bytes: &[u8]) -> Self {
+    pub(crate) fn bytes(mut self, bytes: &[u8]) -> Self {
         for &b in bytes {
             self.0 = (self.0 ^ b as u64).wrapping_mul(0x0100_0000_01b3);
         }
         self
     }
-    fn f32s(self, values: impl IntoIterator<Item = f32>) -> Self {
+    pub(crate) fn f32s(self, values: impl IntoIterator<Item = f32>) -> Self {
         values
             .into_iter()
             .fold(self, |h, v| h.bytes(&v.to_le_bytes()))

@@ -183,9 +183,7 @@ fn hash_of(value: impl std::hash::Hash) -> u64 {
 }
 
 fn hash_f32s(values: impl IntoIterator<Item = f32>) -> u64 {
-    values.into_iter().fold(0xcbf2_9ce4_8422_2325, |h, v| {
-        (h ^ v.to_bits() as u64).wrapping_mul(0x0100_0000_01b3)
-    })
+    super::cache::Hash::new().f32s(values).0
 }
 
 /// Gives each new translucent mesh its material without diffuse.

@@ -401,8 +401,7 @@ impl EnergyTransport {
                 for &c in fines {
                     let cluster = &clusters[c];
                     if far_from(cluster) {
-                        let f: f32 =
-                            cluster.members.iter().map(|&j| kernel(j) * p[j].area).sum();
+                        let f: f32 = cluster.members.iter().map(|&j| kernel(j) * p[j].area).sum();
                         if !(f > 0.0) {
                             continue;
                         }
@@ -439,10 +438,17 @@ impl EnergyTransport {
         let form_factors = SparseMatrix::from_rows(rows.into_iter().map(|r| r.0).collect());
         let cluster_means = if clustering {
             let mean = |c: &Cluster| -> Vec<(u32, f32)> {
-                c.members.iter().map(|&j| (j as u32, p[j].area / c.area)).collect()
+                c.members
+                    .iter()
+                    .map(|&j| (j as u32, p[j].area / c.area))
+                    .collect()
             };
             SparseMatrix::from_rows(
-                clusters.iter().map(mean).chain(coarse.iter().map(|(c, _)| mean(c))).collect(),
+                clusters
+                    .iter()
+                    .map(mean)
+                    .chain(coarse.iter().map(|(c, _)| mean(c)))
+                    .collect(),
             )
         } else {
             SparseMatrix::from_rows(Vec::new())
@@ -681,24 +687,31 @@ fn clusters(p: &[super::patches::Patch], cells: &[f32], clustering: bool) -> Vec
             representative: 0,
         }];
     }
-    let mut index: bevy::platform::collections::HashMap<(u32, IVec3, u8), usize> = default();
-    let mut members: Vec<Vec<usize>> = Vec::new();
-    for (j, q) in p.iter().enumerate() {
-        let key = (
+    group_by_cell(p.iter().map(|q| {
+        (
             q.object,
             (q.centre / cells[q.object as usize]).floor().as_ivec3(),
             super::patches::normal_axis(q.normal),
-        );
-        let c = *index.entry(key).or_insert_with(|| {
-            members.push(Vec::new());
-            members.len() - 1
+        )
+    }))
+    .into_iter()
+    .map(|members| cluster_of(p, members))
+    .collect()
+}
+
+/// The indices of `keys` grouped by equal key (object, grid cell, normal axis), groups in the
+/// order their keys first appear.
+fn group_by_cell(keys: impl Iterator<Item = (u32, IVec3, u8)>) -> Vec<Vec<usize>> {
+    let mut index: bevy::platform::collections::HashMap<(u32, IVec3, u8), usize> = default();
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for (i, key) in keys.enumerate() {
+        let g = *index.entry(key).or_insert_with(|| {
+            groups.push(Vec::new());
+            groups.len() - 1
         });
-        members[c].push(j);
+        groups[g].push(i);
     }
-    members
-        .into_iter()
-        .map(|members| cluster_of(p, members))
-        .collect()
+    groups
 }
 
 /// Groups `fine` clusters into clusters `factor` times wider (by object, normal axis of their
@@ -708,38 +721,36 @@ fn coarser_clusters(
     fine: &[Cluster],
     factor: f32,
 ) -> Vec<(Cluster, Vec<usize>)> {
-    let mut index: bevy::platform::collections::HashMap<(u32, IVec3, u8), usize> = default();
-    let mut groups: Vec<Vec<usize>> = Vec::new();
-    for (c, cluster) in fine.iter().enumerate() {
+    group_by_cell(fine.iter().map(|cluster| {
         let first = &p[cluster.members[0]];
-        // The fine cell's width: twice the radius bounds it from below; the coarse cell is
-        // `factor` fine radii across.
+        // A cell `factor` of this cluster's own radii across.
         let cell = (factor * cluster.radius).max(1e-9);
-        let key = (
+        (
             first.object,
             (cluster.centroid / cell).floor().as_ivec3(),
             super::patches::normal_axis(first.normal),
-        );
-        let g = *index.entry(key).or_insert_with(|| {
-            groups.push(Vec::new());
-            groups.len() - 1
-        });
-        groups[g].push(c);
-    }
-    groups
-        .into_iter()
-        .map(|fines| {
-            let members: Vec<usize> = fines.iter().flat_map(|&c| fine[c].members.iter().copied()).collect();
-            (cluster_of(p, members), fines)
-        })
-        .collect()
+        )
+    }))
+    .into_iter()
+    .map(|fines| {
+        let members: Vec<usize> = fines
+            .iter()
+            .flat_map(|&c| fine[c].members.iter().copied())
+            .collect();
+        (cluster_of(p, members), fines)
+    })
+    .collect()
 }
 
 /// A cluster of the patches `members`: area, centroid, reach and the member nearest the
 /// centroid.
 fn cluster_of(p: &[super::patches::Patch], members: Vec<usize>) -> Cluster {
     let area: f32 = members.iter().map(|&j| p[j].area).sum();
-    let centroid = members.iter().map(|&j| p[j].centre * p[j].area).sum::<Vec3>() / area;
+    let centroid = members
+        .iter()
+        .map(|&j| p[j].centre * p[j].area)
+        .sum::<Vec3>()
+        / area;
     let radius = members
         .iter()
         .map(|&j| p[j].centre.distance(centroid) + (p[j].area / std::f32::consts::PI).sqrt())
@@ -752,7 +763,13 @@ fn cluster_of(p: &[super::patches::Patch], members: Vec<usize>) -> Cluster {
                 .total_cmp(&p[b].centre.distance_squared(centroid))
         })
         .expect("clusters are never empty");
-    Cluster { members, area, centroid, radius, representative }
+    Cluster {
+        members,
+        area,
+        centroid,
+        radius,
+        representative,
+    }
 }
 
 /// The symmetric form-factor kernel `G_ij = cos θ_i cos θ_j / (π r² + (A_i + A_j)/2)`

@@ -174,6 +174,27 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
     }
 }
 
+/// Whether the translucency's precompute is ready.
+fn ready(app: &App) -> bool {
+    matches!(
+        app.world()
+            .resource::<bevy_mesostructure::translucency::TranslucencyStatus>(),
+        bevy_mesostructure::translucency::TranslucencyStatus::Ready { .. }
+    )
+}
+
+/// Runs frames until the precompute (a background task) is ready; fails after 600.
+fn run_until_ready(app: &mut App) {
+    for _ in 0..600 {
+        run(app, 1);
+        if ready(app) {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    panic!("the precompute never finished");
+}
+
 /// sRGB-encoded 8-bit value of a linear one.
 fn srgb8(linear: f32) -> f32 {
     let c = linear.clamp(0.0, 1.0);
@@ -194,7 +215,7 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     };
     use bevy_mesostructure::translucency::{
         TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin, TranslucencySettings,
-        TranslucencyStatus, Translucent, gather::gathered_radiance,
+        Translucent, gather::gathered_radiance,
     };
     if !gpu_or_skip() {
         return;
@@ -245,23 +266,7 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
             eye,
         ))
         .id();
-    for _ in 0..600 {
-        run(&mut app, 1);
-        if matches!(
-            app.world().resource::<TranslucencyStatus>(),
-            TranslucencyStatus::Ready { .. }
-        ) {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    assert!(
-        matches!(
-            app.world().resource::<TranslucencyStatus>(),
-            TranslucencyStatus::Ready { .. }
-        ),
-        "the precompute never finished"
-    );
+    run_until_ready(&mut app);
     run(&mut app, 3);
     let shot = screenshot(&mut app, &image);
 
@@ -337,8 +342,8 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
 #[test]
 fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     use bevy_mesostructure::translucency::{
-        TranslucencyCamera, TranslucencyPlugin, TranslucencySettings, TranslucencyStatus,
-        Translucent, TranslucentMaterials, TranslucentMedium,
+        TranslucencyCamera, TranslucencyPlugin, TranslucencySettings, Translucent,
+        TranslucentMaterials, TranslucentMedium,
     };
     if !gpu_or_skip() {
         return;
@@ -408,23 +413,7 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         TranslucencyCamera,
         Transform::from_xyz(0.0, 0.0, 0.6).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    let ready = |app: &App| {
-        matches!(
-            app.world().resource::<TranslucencyStatus>(),
-            TranslucencyStatus::Ready { .. }
-        )
-    };
-    let wait_ready = |app: &mut App| {
-        for _ in 0..600 {
-            run(app, 1);
-            if ready(app) {
-                return;
-            }
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        }
-        panic!("never ready");
-    };
-    wait_ready(&mut app);
+    run_until_ready(&mut app);
     let causes = warnings(&app);
     for key in [
         "translucency-budget",
@@ -469,7 +458,7 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         assert_eq!(shown(&mut app, good), good_materials.original);
     }
     assert!(warnings(&app).iter().any(|c| c == "translucency-moved"));
-    wait_ready(&mut app);
+    run_until_ready(&mut app);
     assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
 }
 
@@ -477,7 +466,7 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
 fn a_kept_transport_is_read_back_instead_of_built_again() {
     use bevy_mesostructure::translucency::{
         TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin, TranslucencySettings,
-        TranslucencyStatus, Translucent,
+        Translucent,
     };
     if !gpu_or_skip() {
         return;
@@ -513,23 +502,14 @@ fn a_kept_transport_is_read_back_instead_of_built_again() {
             TranslucencyCamera,
             Transform::from_xyz(0.0, 0.0, 0.4).looking_at(Vec3::ZERO, Vec3::Y),
         ));
-        for _ in 0..600 {
-            run(&mut app, 1);
-            if matches!(
-                app.world().resource::<TranslucencyStatus>(),
-                TranslucencyStatus::Ready { .. }
-            ) {
-                let (_, scene) = app
-                    .world()
-                    .resource::<TranslucencyFrame>()
-                    .scene
-                    .clone()
-                    .unwrap();
-                return (scene.transport.report.clone(), scene.patches.patches.len());
-            }
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        }
-        panic!("never ready");
+        run_until_ready(&mut app);
+        let (_, scene) = app
+            .world()
+            .resource::<TranslucencyFrame>()
+            .scene
+            .clone()
+            .unwrap();
+        (scene.transport.report.clone(), scene.patches.patches.len())
     };
     let (first, patches) = build(&dir);
     let files: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
@@ -547,7 +527,7 @@ fn ambient_light_reaches_translucent_objects() {
     use bevy::light::GlobalAmbientLight;
     use bevy_mesostructure::translucency::{
         TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin, TranslucencySettings,
-        TranslucencyStatus, Translucent,
+        Translucent,
     };
     if !gpu_or_skip() {
         return;
@@ -592,16 +572,7 @@ fn ambient_light_reaches_translucent_objects() {
         TranslucencyCamera,
         Transform::from_xyz(0.0, 0.0, 0.25).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    for _ in 0..600 {
-        run(&mut app, 1);
-        if matches!(
-            app.world().resource::<TranslucencyStatus>(),
-            TranslucencyStatus::Ready { .. }
-        ) {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
+    run_until_ready(&mut app);
     run(&mut app, 3);
     let (_, direct) = app
         .world()
