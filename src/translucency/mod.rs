@@ -21,8 +21,10 @@
 
 pub mod cache;
 pub mod diffusion;
+mod far_field;
 pub mod gather;
 pub mod iteration;
+mod lights;
 pub mod medium;
 pub mod patches;
 mod plugin;

@@ -18,13 +18,16 @@
 //!   `K_ij = (1 − F_dr,ext) P_ij A_j / A_i`, for pairs of the same object closer than the
 //!   radius that holds [`TransportSettings::diffusion_energy_kept`] of the profile's energy.
 //!   On opaque patches `K_ii = albedo`.
+//!
+//! The kernels and far-field clusters of `F` are in `far_field.rs`; the lights' direct part,
+//! re-exported here, in `lights.rs`.
 
 use std::{
     ops::{AddAssign, Mul},
     time::Instant,
 };
 
-use bevy::{math::DVec3, prelude::*};
+use bevy::prelude::*;
 use obvhs::{
     BvhBuildParams,
     cwbvh::{CwBvh, builder::build_cwbvh_from_tris},
@@ -33,12 +36,13 @@ use obvhs::{
 };
 use obvhs_glam::Vec3A;
 
+use super::far_field::{Cluster, clusters, coarser_clusters, disc_kernel, near_kernel};
+pub use super::lights::{DirectLight, PatchLight, direct_irradiance, direct_light};
 use super::{
     diffusion::{DiffusionKernel, DiffusionProfile},
     medium::TranslucentMedium,
     patches::{PatchObject, Patches},
 };
-use crate::volumetric::reference::SpotLight as ReferenceSpot;
 
 /// A sparse matrix in compressed rows, laid out as the GPU reads it.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -196,7 +200,7 @@ impl SceneRays {
 
     /// Whether the segment from `a` towards `b` is free over `[0, length · (1 − 1e-3)]`;
     /// `b = None` with `direction`: free to infinity.
-    fn free(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
+    pub(super) fn free(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
         if self.triangles.is_empty() {
             return true;
         }
@@ -280,7 +284,7 @@ fn threads() -> usize {
 }
 
 /// Runs `f(i)` for `0..n` on every core, interleaved so uneven rows balance; results in order.
-fn parallel_rows<R: Send>(n: usize, f: impl Fn(usize) -> R + Sync) -> Vec<R> {
+pub(super) fn parallel_rows<R: Send>(n: usize, f: impl Fn(usize) -> R + Sync) -> Vec<R> {
     let t = threads().min(n.max(1));
     let mut parts: Vec<Vec<(usize, R)>> = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..t)
@@ -651,317 +655,5 @@ impl EnergyTransport {
             iterations,
             energy_left,
         }
-    }
-}
-
-/// The lights' direct contribution to the patches.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct DirectLight {
-    /// Irradiance `E⁰` per patch.
-    pub irradiance: Vec<Vec3>,
-    /// Exitance `S⁰` per patch besides `K E⁰` (may be empty: none): on translucent patches,
-    /// the single scattering of each beam at its own incidence less the diffuse mean `K`
-    /// already holds.
-    pub exitance: Vec<Vec3>,
-}
-
-/// A far-field cluster.
-#[derive(Clone)]
-struct Cluster {
-    members: Vec<usize>,
-    area: f32,
-    centroid: Vec3,
-    /// Furthest reach of a member's disc from the centroid.
-    radius: f32,
-    /// The member nearest the centroid: where the cluster's ray ends.
-    representative: usize,
-}
-
-fn clusters(p: &[super::patches::Patch], cells: &[f32], clustering: bool) -> Vec<Cluster> {
-    if !clustering {
-        return vec![Cluster {
-            members: (0..p.len()).collect(),
-            area: p.iter().map(|q| q.area).sum(),
-            centroid: Vec3::ZERO,
-            radius: f32::INFINITY,
-            representative: 0,
-        }];
-    }
-    group_by_cell(p.iter().map(|q| {
-        (
-            q.object,
-            (q.centre / cells[q.object as usize]).floor().as_ivec3(),
-            super::patches::normal_axis(q.normal),
-        )
-    }))
-    .into_iter()
-    .map(|members| cluster_of(p, members))
-    .collect()
-}
-
-/// The indices of `keys` grouped by equal key (object, grid cell, normal axis), groups in the
-/// order their keys first appear.
-fn group_by_cell(keys: impl Iterator<Item = (u32, IVec3, u8)>) -> Vec<Vec<usize>> {
-    let mut index: bevy::platform::collections::HashMap<(u32, IVec3, u8), usize> = default();
-    let mut groups: Vec<Vec<usize>> = Vec::new();
-    for (i, key) in keys.enumerate() {
-        let g = *index.entry(key).or_insert_with(|| {
-            groups.push(Vec::new());
-            groups.len() - 1
-        });
-        groups[g].push(i);
-    }
-    groups
-}
-
-/// Groups `fine` clusters into clusters `factor` times wider (by object, normal axis of their
-/// first member and the cell of their centroid); each with the fine clusters it holds.
-fn coarser_clusters(
-    p: &[super::patches::Patch],
-    fine: &[Cluster],
-    factor: f32,
-) -> Vec<(Cluster, Vec<usize>)> {
-    group_by_cell(fine.iter().map(|cluster| {
-        let first = &p[cluster.members[0]];
-        // A cell `factor` of this cluster's own radii across.
-        let cell = (factor * cluster.radius).max(1e-9);
-        (
-            first.object,
-            (cluster.centroid / cell).floor().as_ivec3(),
-            super::patches::normal_axis(first.normal),
-        )
-    }))
-    .into_iter()
-    .map(|fines| {
-        let members: Vec<usize> = fines
-            .iter()
-            .flat_map(|&c| fine[c].members.iter().copied())
-            .collect();
-        (cluster_of(p, members), fines)
-    })
-    .collect()
-}
-
-/// A cluster of the patches `members`: area, centroid, reach and the member nearest the
-/// centroid.
-fn cluster_of(p: &[super::patches::Patch], members: Vec<usize>) -> Cluster {
-    let area: f32 = members.iter().map(|&j| p[j].area).sum();
-    let centroid = members
-        .iter()
-        .map(|&j| p[j].centre * p[j].area)
-        .sum::<Vec3>()
-        / area;
-    let radius = members
-        .iter()
-        .map(|&j| p[j].centre.distance(centroid) + (p[j].area / std::f32::consts::PI).sqrt())
-        .fold(0.0, f32::max);
-    let representative = *members
-        .iter()
-        .min_by(|&&a, &&b| {
-            p[a].centre
-                .distance_squared(centroid)
-                .total_cmp(&p[b].centre.distance_squared(centroid))
-        })
-        .expect("clusters are never empty");
-    Cluster {
-        members,
-        area,
-        centroid,
-        radius,
-        representative,
-    }
-}
-
-/// The symmetric form-factor kernel `G_ij = cos θ_i cos θ_j / (π r² + (A_i + A_j)/2)`
-/// (`F_ij = G_ij A_j`).
-fn disc_kernel(cos_i: f32, cos_j: f32, r2: f32, area_i: f32, area_j: f32) -> f32 {
-    cos_i * cos_j / (std::f32::consts::PI * r2 + 0.5 * (area_i + area_j))
-}
-
-/// `G_ij` of two nearby patches: the disc kernel between every pair of their samples,
-/// area-weighted, `Σ_s Σ_t G_st A_s A_t / (A_i A_j)` (still symmetric).
-fn near_kernel(
-    samples_i: &[super::patches::PatchSample],
-    samples_j: &[super::patches::PatchSample],
-    area_i: f32,
-    area_j: f32,
-) -> f32 {
-    let mut sum = 0.0;
-    for s in samples_i {
-        for t in samples_j {
-            let d = t.position - s.position;
-            let r2 = d.length_squared();
-            if !(r2 > 0.0) {
-                continue;
-            }
-            let dir = d / r2.sqrt();
-            let (cs, ct) = (s.normal.dot(dir), -t.normal.dot(dir));
-            if cs > 0.0 && ct > 0.0 {
-                sum += disc_kernel(cs, ct, r2, s.area, t.area) * s.area * t.area;
-            }
-        }
-    }
-    sum / (area_i * area_j)
-}
-
-/// A light as the transport injects it (Bevy's conventions: colour × intensity per channel).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum PatchLight {
-    /// A directional light.
-    Directional {
-        /// The way the light travels (unit).
-        direction: Vec3,
-        /// Illuminance on a surface facing it, per channel.
-        illuminance: Vec3,
-    },
-    /// A point light.
-    Point {
-        /// Position.
-        position: Vec3,
-        /// Luminous intensity per channel (Bevy: lumens / 4π).
-        intensity: Vec3,
-        /// Bevy's range.
-        range: f32,
-    },
-    /// A spot light.
-    Spot {
-        /// Position.
-        position: Vec3,
-        /// Axis (unit).
-        direction: Vec3,
-        /// Luminous intensity on the axis per channel (Bevy: lumens / 4π).
-        intensity: Vec3,
-        /// Inner half-angle, radians.
-        inner_angle: f32,
-        /// Outer half-angle, radians.
-        outer_angle: f32,
-        /// Bevy's range.
-        range: f32,
-    },
-}
-
-/// Each patch's direct irradiance `E⁰` from `lights`, shadowed by one ray from its centre:
-/// the CPU oracle of the light injection (the seed counts each patch's pixels in the light's
-/// view instead).
-pub fn direct_irradiance(patches: &Patches, lights: &[PatchLight], rays: &SceneRays) -> Vec<Vec3> {
-    direct_light(patches, None, lights, rays).irradiance
-}
-
-/// [`direct_irradiance`], and with `transport` the single-scattering exitance `S⁰` of each
-/// beam at its incidence (see [`DirectLight`]).
-pub fn direct_light(
-    patches: &Patches,
-    transport: Option<&EnergyTransport>,
-    lights: &[PatchLight],
-    rays: &SceneRays,
-) -> DirectLight {
-    let diffuse_shape = super::diffusion::diffuse_single_scattering_shape() as f32;
-    let per_patch = parallel_rows(patches.patches.len(), |i| {
-        let p = &patches.patches[i];
-        let x = p.surface_point + p.normal * (0.05 * patches.size_of(i));
-        let single = transport
-            .and_then(|t| t.single_scattering.get(i))
-            .copied()
-            .unwrap_or(Vec3::ZERO);
-        let (mut irradiance, mut exitance) = (Vec3::ZERO, Vec3::ZERO);
-        for light in lights {
-            let (e, to_light) = match *light {
-                PatchLight::Directional {
-                    direction,
-                    illuminance,
-                } => {
-                    let to_light = -direction.normalize_or_zero();
-                    let cos = p.normal.dot(to_light);
-                    let e = if cos > 0.0 && rays.free(x, to_light, f32::INFINITY) {
-                        illuminance * cos
-                    } else {
-                        Vec3::ZERO
-                    };
-                    (e, to_light)
-                }
-                PatchLight::Point {
-                    position,
-                    intensity,
-                    range,
-                } => (
-                    point_irradiance(p.normal, x, position, intensity, None, range, rays),
-                    (position - x).normalize_or_zero(),
-                ),
-                PatchLight::Spot {
-                    position,
-                    direction,
-                    intensity,
-                    inner_angle,
-                    outer_angle,
-                    range,
-                } => (
-                    point_irradiance(
-                        p.normal,
-                        x,
-                        position,
-                        intensity,
-                        Some((direction, inner_angle, outer_angle)),
-                        range,
-                        rays,
-                    ),
-                    (position - x).normalize_or_zero(),
-                ),
-            };
-            irradiance += e;
-            if single != Vec3::ZERO && e != Vec3::ZERO {
-                let shape =
-                    super::diffusion::single_scattering_shape(p.normal.dot(to_light) as f64) as f32;
-                exitance += single * e * (shape - diffuse_shape);
-            }
-        }
-        (irradiance, exitance)
-    });
-    let has_single =
-        transport.is_some_and(|t| t.single_scattering.iter().any(|s| *s != Vec3::ZERO));
-    DirectLight {
-        exitance: if has_single {
-            per_patch.iter().map(|d| d.1).collect()
-        } else {
-            Vec::new()
-        },
-        irradiance: per_patch.into_iter().map(|d| d.0).collect(),
-    }
-}
-
-fn point_irradiance(
-    normal: Vec3,
-    x: Vec3,
-    position: Vec3,
-    intensity: Vec3,
-    cone: Option<(Vec3, f32, f32)>,
-    range: f32,
-    rays: &SceneRays,
-) -> Vec3 {
-    let d = position - x;
-    let dist2 = d.length_squared();
-    let cos = normal.dot(d) / dist2.sqrt();
-    if !(cos > 0.0) {
-        return Vec3::ZERO;
-    }
-    // Bevy's fall-off and range window, one copy (the volumetric reference's).
-    let spot = ReferenceSpot {
-        position: position.as_dvec3(),
-        direction: cone.map_or(DVec3::Z, |c| c.0.as_dvec3().normalize_or_zero()),
-        intensity: 1.0,
-        inner_angle: cone.map_or(0.0, |c| c.1 as f64),
-        outer_angle: cone.map_or(0.0, |c| c.2 as f64),
-        range: range as f64,
-    };
-    let falloff = if cone.is_some() {
-        spot.falloff(x.as_dvec3())
-    } else {
-        1.0
-    };
-    let window = spot.range_window(dist2.sqrt() as f64);
-    let weight = (falloff * window) as f32 * cos / dist2;
-    if weight > 0.0 && rays.visible(x, position) {
-        intensity * weight
-    } else {
-        Vec3::ZERO
     }
 }

@@ -1,0 +1,184 @@
+//! The lights' direct contribution to the patches (the CPU oracle of the injection): each
+//! patch's irradiance `E⁰` with one shadow ray, and on translucent patches the single
+//! scattering of each beam at its own incidence.
+
+use bevy::{math::DVec3, prelude::*};
+
+use super::{
+    patches::Patches,
+    transport::{EnergyTransport, SceneRays, parallel_rows},
+};
+use crate::volumetric::reference::SpotLight as ReferenceSpot;
+
+/// The lights' direct contribution to the patches.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DirectLight {
+    /// Irradiance `E⁰` per patch.
+    pub irradiance: Vec<Vec3>,
+    /// Exitance `S⁰` per patch besides `K E⁰` (may be empty: none): on translucent patches,
+    /// the single scattering of each beam at its own incidence less the diffuse mean `K`
+    /// already holds.
+    pub exitance: Vec<Vec3>,
+}
+
+/// A light as the transport injects it (Bevy's conventions: colour × intensity per channel).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PatchLight {
+    /// A directional light.
+    Directional {
+        /// The way the light travels (unit).
+        direction: Vec3,
+        /// Illuminance on a surface facing it, per channel.
+        illuminance: Vec3,
+    },
+    /// A point light.
+    Point {
+        /// Position.
+        position: Vec3,
+        /// Luminous intensity per channel (Bevy: lumens / 4π).
+        intensity: Vec3,
+        /// Bevy's range.
+        range: f32,
+    },
+    /// A spot light.
+    Spot {
+        /// Position.
+        position: Vec3,
+        /// Axis (unit).
+        direction: Vec3,
+        /// Luminous intensity on the axis per channel (Bevy: lumens / 4π).
+        intensity: Vec3,
+        /// Inner half-angle, radians.
+        inner_angle: f32,
+        /// Outer half-angle, radians.
+        outer_angle: f32,
+        /// Bevy's range.
+        range: f32,
+    },
+}
+
+/// Each patch's direct irradiance `E⁰` from `lights`, shadowed by one ray from its centre:
+/// the CPU oracle of the light injection (the seed counts each patch's pixels in the light's
+/// view instead).
+pub fn direct_irradiance(patches: &Patches, lights: &[PatchLight], rays: &SceneRays) -> Vec<Vec3> {
+    direct_light(patches, None, lights, rays).irradiance
+}
+
+/// [`direct_irradiance`], and with `transport` the single-scattering exitance `S⁰` of each
+/// beam at its incidence (see [`DirectLight`]).
+pub fn direct_light(
+    patches: &Patches,
+    transport: Option<&EnergyTransport>,
+    lights: &[PatchLight],
+    rays: &SceneRays,
+) -> DirectLight {
+    let diffuse_shape = super::diffusion::diffuse_single_scattering_shape() as f32;
+    let per_patch = parallel_rows(patches.patches.len(), |i| {
+        let p = &patches.patches[i];
+        let x = p.surface_point + p.normal * (0.05 * patches.size_of(i));
+        let single = transport
+            .and_then(|t| t.single_scattering.get(i))
+            .copied()
+            .unwrap_or(Vec3::ZERO);
+        let (mut irradiance, mut exitance) = (Vec3::ZERO, Vec3::ZERO);
+        for light in lights {
+            let (e, to_light) = match *light {
+                PatchLight::Directional {
+                    direction,
+                    illuminance,
+                } => {
+                    let to_light = -direction.normalize_or_zero();
+                    let cos = p.normal.dot(to_light);
+                    let e = if cos > 0.0 && rays.free(x, to_light, f32::INFINITY) {
+                        illuminance * cos
+                    } else {
+                        Vec3::ZERO
+                    };
+                    (e, to_light)
+                }
+                PatchLight::Point {
+                    position,
+                    intensity,
+                    range,
+                } => (
+                    point_irradiance(p.normal, x, position, intensity, None, range, rays),
+                    (position - x).normalize_or_zero(),
+                ),
+                PatchLight::Spot {
+                    position,
+                    direction,
+                    intensity,
+                    inner_angle,
+                    outer_angle,
+                    range,
+                } => (
+                    point_irradiance(
+                        p.normal,
+                        x,
+                        position,
+                        intensity,
+                        Some((direction, inner_angle, outer_angle)),
+                        range,
+                        rays,
+                    ),
+                    (position - x).normalize_or_zero(),
+                ),
+            };
+            irradiance += e;
+            if single != Vec3::ZERO && e != Vec3::ZERO {
+                let shape =
+                    super::diffusion::single_scattering_shape(p.normal.dot(to_light) as f64) as f32;
+                exitance += single * e * (shape - diffuse_shape);
+            }
+        }
+        (irradiance, exitance)
+    });
+    let has_single =
+        transport.is_some_and(|t| t.single_scattering.iter().any(|s| *s != Vec3::ZERO));
+    DirectLight {
+        exitance: if has_single {
+            per_patch.iter().map(|d| d.1).collect()
+        } else {
+            Vec::new()
+        },
+        irradiance: per_patch.into_iter().map(|d| d.0).collect(),
+    }
+}
+
+fn point_irradiance(
+    normal: Vec3,
+    x: Vec3,
+    position: Vec3,
+    intensity: Vec3,
+    cone: Option<(Vec3, f32, f32)>,
+    range: f32,
+    rays: &SceneRays,
+) -> Vec3 {
+    let d = position - x;
+    let dist2 = d.length_squared();
+    let cos = normal.dot(d) / dist2.sqrt();
+    if !(cos > 0.0) {
+        return Vec3::ZERO;
+    }
+    // Bevy's fall-off and range window, one copy (the volumetric reference's).
+    let spot = ReferenceSpot {
+        position: position.as_dvec3(),
+        direction: cone.map_or(DVec3::Z, |c| c.0.as_dvec3().normalize_or_zero()),
+        intensity: 1.0,
+        inner_angle: cone.map_or(0.0, |c| c.1 as f64),
+        outer_angle: cone.map_or(0.0, |c| c.2 as f64),
+        range: range as f64,
+    };
+    let falloff = if cone.is_some() {
+        spot.falloff(x.as_dvec3())
+    } else {
+        1.0
+    };
+    let window = spot.range_window(dist2.sqrt() as f64);
+    let weight = (falloff * window) as f32 * cos / dist2;
+    if weight > 0.0 && rays.visible(x, position) {
+        intensity * weight
+    } else {
+        Vec3::ZERO
+    }
+}
