@@ -18,7 +18,10 @@ use super::{
     apex::ViewApexSets,
     bleeding::BLEEDING_FORMAT,
     gradient::{MHGM_FORMAT, ViewGradientMap},
-    height::{BUMP_NORMAL_FORMAT, CORE_NORMAL_FORMAT, MHM_FORMAT, ViewHeightTextures},
+    height::{
+        BUMP_NORMAL_FORMAT, CORE_NORMAL_FORMAT, MHM_FORMAT, TEXTURE_VISIBILITY_FORMAT,
+        ViewHeightTextures,
+    },
     lighting::{MICRO_SHADOW_FORMAT, ViewMicroShadowTexture},
     occlusion::{OCCLUSION_FORMAT, ViewOcclusionTextures},
 };
@@ -62,6 +65,12 @@ pub struct CapturedFrame {
     /// Micro-shadow visibility per mesostructure pixel, the lowest over the lights (1 = lit);
     /// empty if the lighting pass did not run.
     pub micro_shadow: Vec<f32>,
+    /// The first directional light's shadow-map visibility per mesostructure pixel (1 where it
+    /// has no shadow map or there is none); empty if the lighting pass did not run.
+    pub sun_shadow: Vec<f32>,
+    /// The height pass's texture-space terms of the first directional light per pixel: its
+    /// visibility and its one bounce relative to E0 (−1 where not computed).
+    pub texture_terms: Vec<[f32; 2]>,
     /// The lit opaque image the bleeding gathers from (linear RGBA, exposure applied), before
     /// the bleeding is added; empty if its format cannot be read back.
     pub lit: Vec<[f32; 4]>,
@@ -279,6 +288,12 @@ pub fn copy_capture(
         copy_buffer(&mut ctx, &device, &apex.stats),
         copy_texture(&mut ctx, &device, &occlusion.occlusion.texture, OCCLUSION_FORMAT),
         copy_texture(&mut ctx, &device, &height.bump_normal.texture, BUMP_NORMAL_FORMAT),
+        copy_texture(
+            &mut ctx,
+            &device,
+            &height.texture_visibility.texture,
+            TEXTURE_VISIBILITY_FORMAT,
+        ),
     ];
     let world_from_clip =
         extracted_view.world_from_view.to_matrix() * extracted_view.clip_from_view.inverse();
@@ -412,6 +427,10 @@ pub fn map_captures(
             }
         });
         let floats = |bytes: Vec<u8>| -> Vec<[f32; 4]> { bytemuck::cast_slice(&bytes).to_vec() };
+        // (micro-shadow visibility, the first directional light's shadow-map visibility)
+        let micro_shadows: Vec<[f32; 2]> = micro_shadow.map_or_else(Vec::new, |r| {
+            bytemuck::cast_slice(&read(&device, &r, size.y)).to_vec()
+        });
         let stats: Vec<u32> = bytemuck::cast_slice(&read(&device, &readbacks[4], 1)).to_vec();
         let frame = CapturedFrame {
             width: size.x,
@@ -425,9 +444,9 @@ pub fn map_captures(
             apex_stats: [stats[0], stats[1], stats[2]],
             occlusion: bytemuck::cast_slice(&read(&device, &readbacks[5], size.y)).to_vec(),
             bump_normal: half4(read(&device, &readbacks[6], size.y)),
-            micro_shadow: micro_shadow.map_or_else(Vec::new, |r| {
-                bytemuck::cast_slice(&read(&device, &r, size.y)).to_vec()
-            }),
+            micro_shadow: micro_shadows.iter().map(|v| v[0]).collect(),
+            sun_shadow: micro_shadows.iter().map(|v| v[1]).collect(),
+            texture_terms: bytemuck::cast_slice(&read(&device, &readbacks[7], size.y)).to_vec(),
             lit,
             bleeding: bleeding.map_or_else(Vec::new, |r| half4(read(&device, &r, size.y))),
             view,

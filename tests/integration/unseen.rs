@@ -95,8 +95,10 @@ fn unseen_content_scores_hold_their_measured_values() {
 /// Measured on the software driver (llvmpipe) with this test's size, step and rays
 /// (`cargo test --test integration unseen_content -- --nocapture`); the goals are AO
 /// MAE ≤ 0.04 with |bias| ≤ 0.015, micro-shadow recall ≥ 0.75 at precision ≥ 0.85, bounce
-/// relative MAE ≤ 0.35 with the mean within ±15 %: the shadows and the bounce's per-pixel error
-/// do not meet them yet (docs/accuracy.md).
+/// relative MAE ≤ 0.35 with the mean within ±15 %: the shadows do not meet them yet, nor the
+/// bounce's per-pixel error on oblique and minified views (docs/accuracy.md). The bounce's
+/// figures are with the first directional light's bounce from texture space (before it:
+/// 0.358 / 0.684 / 0.313 and ratio 0.955 / 0.756 / 0.824).
 const EXPECTED: &[Expected] = &[
     Expected {
         scene: "plane/pebbles/top-down/light35",
@@ -104,8 +106,8 @@ const EXPECTED: &[Expected] = &[
         ao_bias: 0.0123,
         shadow_recall: 0.932,
         shadow_precision: 0.793,
-        bounce_rel_mae: 0.358,
-        bounce_ratio: 0.955,
+        bounce_rel_mae: 0.249,
+        bounce_ratio: 0.877,
     },
     Expected {
         scene: "sphere/cracked/oblique/light35",
@@ -113,8 +115,8 @@ const EXPECTED: &[Expected] = &[
         ao_bias: -0.0016,
         shadow_recall: 0.605,
         shadow_precision: 0.821,
-        bounce_rel_mae: 0.684,
-        bounce_ratio: 0.756,
+        bounce_rel_mae: 0.350,
+        bounce_ratio: 1.042,
     },
     Expected {
         scene: "torus/pebbles/top-down/light60",
@@ -122,8 +124,8 @@ const EXPECTED: &[Expected] = &[
         ao_bias: 0.0401,
         shadow_recall: 0.714,
         shadow_precision: 0.714,
-        bounce_rel_mae: 0.313,
-        bounce_ratio: 0.824,
+        bounce_rel_mae: 0.277,
+        bounce_ratio: 0.799,
     },
 ];
 

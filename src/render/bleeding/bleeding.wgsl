@@ -10,8 +10,13 @@
 // eq. (2)'s (1 − V). With WRITE_VIEW_TARGET the pass also writes the view's next main image:
 // the lit image plus the bleeding, every pixel (Bevy's post-process ping-pong), so no
 // fullscreen fragment pass composites it (fragment work is the scarce kind on some GPUs).
+// The first directional light's bounce comes from texture space instead (`texture_bounce` in
+// height.wgsl: the screen-space gather sees too little of the surface where the view is
+// minified or oblique, docs/accuracy.md): its direct diffuse light is taken out of every
+// gathered colour and its texture-space bounce added, times the mean albedo of what P sees.
 
 #import bevy_render::view::View
+#import bevy_pbr::mesh_view_types::Lights
 #import bevy_pbr::pbr_deferred_types::{unpack_unorm4x8_, unpack_flags, DEFERRED_FLAGS_UNLIT_BIT}
 #import bevy_mesostructure::common::{
     MesostructureUniform, on_screen, unpack_offset, apex_base, apex_set_of,
@@ -31,9 +36,16 @@
 // The occlusion pass's sector record of each pixel (`surface.wgsl`): N', each sector's horizon
 // and the apex that sets it.
 @group(0) @binding(9) var sector_horizons: texture_2d<u32>;
+// The height pass's texture-space terms of the first directional light: (visibility, one
+// bounce relative to E0), each −1 where none.
+@group(0) @binding(10) var texture_terms: texture_2d<f32>;
+// The lighting pass's (micro-shadow visibility, first directional light's shadow-map
+// visibility).
+@group(0) @binding(11) var light_visibility: texture_2d<f32>;
+@group(0) @binding(12) var<uniform> lights: Lights;
 #ifdef WRITE_VIEW_TARGET
 // The view's other main image, which becomes its main image after this pass.
-@group(0) @binding(10) var view_out: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(13) var view_out: texture_storage_2d<rgba16float, write>;
 #endif
 
 const PI: f32 = 3.141592653589793;
@@ -52,6 +64,32 @@ fn diffuse_albedo(p: vec2<i32>) -> vec3<f32> {
     let base = pow(unpack_unorm4x8_(g.r).rgb, vec3(2.2));
     let metallic = unpack_unorm4x8_(g.b).g;
     return base * (1.0 - metallic);
+}
+
+// The direct diffuse radiance the first directional light (irradiance `e0` facing it, from
+// `to_light`) gives sample `q` of the lit image, as the lighting pass shaded it: Bevy's Burley
+// diffuse (`Fd_Burley` in bevy_pbr's lighting.wgsl) with q's albedo, roughness and normal,
+// times the light's texture-space visibility there (where micro-shadows are on), its shadow
+// map and λs. What the texture-space bounce already counts, to take out of q's colour.
+fn first_directional_diffuse(q: vec2<i32>, sq: vec3<f32>, e0: vec3<f32>, to_light: vec3<f32>) -> vec3<f32> {
+    let n = sample_normal(q);
+    let n_dot_l = dot(n, to_light);
+    if n_dot_l <= 0.0 {
+        return vec3(0.0);
+    }
+    let v = normalize(view.world_position - sq);
+    let n_dot_v = max(dot(n, v), 1e-4);
+    let l_dot_h = dot(to_light, normalize(to_light + v));
+    let perceptual = clamp(unpack_unorm4x8_(textureLoad(gbuffer, q, 0).r).a, 0.089, 1.0);
+    let f90 = 0.5 + 2.0 * perceptual * perceptual * l_dot_h * l_dot_h;
+    let burley = (1.0 + (f90 - 1.0) * pow(1.0 - n_dot_l, 5.0))
+        * (1.0 + (f90 - 1.0) * pow(1.0 - n_dot_v, 5.0)) / PI;
+    var visible = textureLoad(light_visibility, q, 0).g;
+    let micro = textureLoad(texture_terms, q, 0).r;
+    if settings.micro_shadows != 0u && micro >= 0.0 {
+        visible *= micro;
+    }
+    return diffuse_albedo(q) * burley * e0 * n_dot_l * visible * settings.weights.y;
 }
 
 // The normal a sample S faces with: its bump-mapped normal, or n0 where it has none.
@@ -92,6 +130,18 @@ fn gather(p: vec2<i32>, size: vec2<i32>) -> vec3<f32> {
     // Per sector, the apex with the highest horizon (as the occlusion pass found it).
     let record = textureLoad(sector_horizons, p, 0);
     let n = sector_normal(record);
+    // The first directional light's texture-space bounce at P (−1: none), its irradiance E0
+    // (exposure applied) and direction.
+    var sun_bounce = -1.0;
+    var sun = vec3(0.0);
+    var to_sun = vec3(0.0, 0.0, 1.0);
+    if settings.texture_space_horizons != 0u && lights.n_directional_lights > 0u {
+        sun_bounce = textureLoad(texture_terms, p, 0).g;
+        sun = lights.directional_lights[0].color.rgb * view.exposure;
+        to_sun = lights.directional_lights[0].direction_to_light;
+    }
+    // Σ ρ_S · band over the visible samples: the mean albedo of what P sees.
+    var seen_albedo = vec3(0.0);
     var irradiance = vec3(0.0);
     // Σ (sin² e_j − sin² e_{j−1}) / 2 over the visible samples: the cosine-weighted solid angle
     // the gather covered, per unit of Δθ.
@@ -126,11 +176,16 @@ fn gather(p: vec2<i32>, size: vec2<i32>) -> vec3<f32> {
             }
             // S must face P (eq. 8's max(0, SP · N_S)); a sample seen from behind still hides
             // what lies beyond it but sends nothing.
+            let band = (s * s - seen * seen) * 0.5;
             if dot(sample_normal(q), -d) > 0.0 {
-                let radiance = textureLoad(lit, q, 0).rgb;
-                irradiance += radiance * (s * s - seen * seen) * 0.5;
+                var radiance = textureLoad(lit, q, 0).rgb;
+                if sun_bounce >= 0.0 {
+                    radiance = max(radiance - first_directional_diffuse(q, sp + d, sun, to_sun), vec3(0.0));
+                }
+                irradiance += radiance * band;
             }
-            covered += (s * s - seen * seen) * 0.5;
+            seen_albedo += diffuse_albedo(q) * band;
+            covered += band;
             seen = s;
         }
     }
@@ -148,6 +203,17 @@ fn gather(p: vec2<i32>, size: vec2<i32>) -> vec3<f32> {
     let gathered = covered * TAU / f32(SECTORS) / PI;
     if settings.texture_space_horizons != 0u && texture_space >= 0.0 && gathered > 1e-4 {
         irradiance *= max(1.0 - texture_space, 0.0) / gathered;
+    }
+    if sun_bounce >= 0.0 {
+        // E1 = ρ_S E0 · bounce, in the light's shadow map at P (where the light does not reach
+        // P, it does not reach the bumps around it either); ρ_S the mean albedo of what the
+        // gather saw, P's own where it saw nothing.
+        var surround = albedo;
+        if covered > 0.0 {
+            surround = seen_albedo / covered;
+        }
+        let shadow = textureLoad(light_visibility, p, 0).g;
+        irradiance += surround * sun * sun_bounce * shadow;
     }
     return settings.weights.z * albedo / PI * irradiance;
 }

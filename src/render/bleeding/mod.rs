@@ -21,8 +21,10 @@ use super::{
     dispatch_per_pixel,
     height::{HeightPhaseItem, ViewHeightTextures},
     occlusion::{ViewOcclusionBindGroup, ViewOcclusionPipeline, ViewOcclusionTextures},
+    lighting::ViewMicroShadowTexture,
     view_has_mesostructure, view_texture,
 };
+use bevy::pbr::{LightMeta, ViewLightsUniformOffset};
 
 /// One-bounce bleeding radiance added to the view (λd · ρ / π · E).
 pub const BLEEDING_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
@@ -71,7 +73,7 @@ pub(super) fn embed_shaders(app: &mut App) {
 #[derive(Resource)]
 pub struct BleedingPipeline {
     /// Lit image, MHM, core normals, bump normals, apex sets, G-buffer, bleeding (storage),
-    /// settings, view, sector records.
+    /// settings, view, sector records, texture-space terms, light visibility, lights.
     pub gather_layout: BindGroupLayoutDescriptor,
     /// The gather pipeline, for views composited by the fullscreen draw.
     pub gather: CachedComputePipelineId,
@@ -104,6 +106,9 @@ pub fn init_bleeding_pipeline(
         uniform_buffer::<MesostructureUniform>(true),
         uniform_buffer::<ViewUniform>(true),
         texture_2d(TextureSampleType::Uint),
+        float(),
+        float(),
+        uniform_buffer::<bevy::pbr::GpuLights>(true),
     );
     let gather_layout = BindGroupLayoutDescriptor::new(
         "mesostructure_bleeding_gather_layout",
@@ -114,10 +119,10 @@ pub fn init_bleeding_pipeline(
         &BindGroupLayoutEntries::sequential(
             ShaderStages::COMPUTE,
             {
-                let (a, b, c, d, e, f, g, h, i, j) = entries;
+                let (a, b, c, d, e, f, g, h, i, j, k, l, m) = entries;
                 let view_out =
                     texture_storage_2d(VIEW_TARGET_FORMAT, StorageTextureAccess::WriteOnly);
-                (a, b, c, d, e, f, g, h, i, j, view_out)
+                (a, b, c, d, e, f, g, h, i, j, k, l, m, view_out)
             },
         ),
     );
@@ -200,9 +205,15 @@ pub fn bleeding_pass(
         &ExtractedView,
         &ViewTarget,
         &ViewPrepassTextures,
-        (&ViewHeightTextures, &ViewApexSets, &ViewOcclusionTextures, &ViewBleedingTexture),
+        (
+            &ViewHeightTextures,
+            &ViewApexSets,
+            &ViewOcclusionTextures,
+            &ViewBleedingTexture,
+            &ViewMicroShadowTexture,
+        ),
         &ViewMesostructureUniformOffset,
-        &ViewUniformOffset,
+        (&ViewUniformOffset, &ViewLightsUniformOffset),
         &ViewBleedingPipeline,
         Option<&super::capture::ExtractedCapture>,
         Option<(&ViewOcclusionPipeline, &ViewOcclusionBindGroup)>,
@@ -212,12 +223,14 @@ pub fn bleeding_pass(
     pipeline_cache: Res<PipelineCache>,
     uniforms: Res<MesostructureUniforms>,
     view_uniforms: Res<ViewUniforms>,
+    light_meta: Res<LightMeta>,
     mut pending: ResMut<super::capture::PendingCaptures>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, target, prepass, images, offset, view_offset, composite, capture, occlusion) =
+    let (extracted_view, target, prepass, images, offset, offsets, composite, capture, occlusion) =
         view.into_inner();
-    let (height, apex, occlusion_outputs, bleeding) = images;
+    let (view_offset, lights_offset) = offsets;
+    let (height, apex, occlusion_outputs, bleeding, light_visibility) = images;
     if !view_has_mesostructure(&phases, extracted_view)
         || !sector_records_stored(&pipeline_cache, occlusion)
     {
@@ -229,12 +242,20 @@ pub fn bleeding_pass(
     } else {
         pipeline.gather
     };
-    let (Some(gather), Some(_), Some(settings), Some(view_binding), Some(gbuffer)) = (
+    let (
+        Some(gather),
+        Some(_),
+        Some(settings),
+        Some(view_binding),
+        Some(gbuffer),
+        Some(lights_binding),
+    ) = (
         pipeline_cache.get_compute_pipeline(gather_id),
         pipeline_cache.get_render_pipeline(composite.0),
         uniforms.0.binding(),
         view_uniforms.uniforms.binding(),
         prepass.deferred_view(),
+        light_meta.view_gpu_lights.binding(),
     ) else {
         return;
     };
@@ -251,6 +272,9 @@ pub fn bleeding_pass(
             settings.clone(),
             view_binding.clone(),
             &occlusion_outputs.sector_horizons.default_view,
+            &height.texture_visibility.default_view,
+            &light_visibility.0.default_view,
+            lights_binding.clone(),
         )
     };
     let gather_group = if to_view {
@@ -261,8 +285,8 @@ pub fn bleeding_pass(
             "mesostructure_bleeding_gather_to_view_bind_group",
             &pipeline_cache.get_bind_group_layout(&pipeline.gather_to_view_layout),
             &BindGroupEntries::sequential({
-                let (a, b, c, d, e, f, g, h, i, j) = entries(post.source);
-                (a, b, c, d, e, f, g, h, i, j, post.destination)
+                let (a, b, c, d, e, f, g, h, i, j, k, l, m) = entries(post.source);
+                (a, b, c, d, e, f, g, h, i, j, k, l, m, post.destination)
             }),
         )
     } else {
@@ -277,7 +301,7 @@ pub fn bleeding_pass(
         "mesostructure/bleeding",
         gather,
         &gather_group,
-        &[offset.0, view_offset.offset],
+        &[offset.0, view_offset.offset, lights_offset.offset],
         height.size,
         |_| {},
     );

@@ -77,6 +77,9 @@ pub struct HeightComputePipeline {
     pub screen_space_only: CachedComputePipelineId,
     /// With them (`Mesostructure::texture_space_horizons`).
     pub texture_space_horizons: CachedComputePipelineId,
+    /// With them and the first directional light's texture-space bounce (where the bleeding
+    /// runs).
+    pub texture_space_bounce: CachedComputePipelineId,
     /// Group 0: surface, core normal, MHM, bump normal and visibility out, view, lights,
     /// prepass depth, deferred lighting pass ids.
     pub view_layout: BindGroupLayoutDescriptor,
@@ -121,8 +124,8 @@ pub fn init_height_compute_pipeline(
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "height.wgsl");
     // One pipeline per key (as Bevy keys its SSAO): the texture-space horizons compiled in or
-    // out.
-    let specialize = |texture_space_horizons: bool| {
+    // out, and with them the texture-space bounce.
+    let specialize = |texture_space_horizons: bool, texture_space_bounce: bool| {
         let mut shader_defs = vec![
             // The horizon map's layout, from the one definition in `height_map_import`.
             bevy::shader::ShaderDefVal::UInt(
@@ -141,6 +144,13 @@ pub fn init_height_compute_pipeline(
         if texture_space_horizons {
             shader_defs.push("TEXTURE_SPACE_HORIZONS".into());
         }
+        if texture_space_bounce {
+            shader_defs.push("TEXTURE_SPACE_BOUNCE".into());
+            shader_defs.push(bevy::shader::ShaderDefVal::UInt(
+                "TEXTURE_BOUNCE_SAMPLES".into(),
+                crate::height_map_import::TEXTURE_BOUNCE_SAMPLES,
+            ));
+        }
         pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
             label: Some("mesostructure_height_pipeline".into()),
             layout: vec![view_layout.clone(), parameter_layout.clone()],
@@ -151,11 +161,26 @@ pub fn init_height_compute_pipeline(
         })
     };
     commands.insert_resource(HeightComputePipeline {
-        screen_space_only: specialize(false),
-        texture_space_horizons: specialize(true),
+        screen_space_only: specialize(false, false),
+        texture_space_horizons: specialize(true, false),
+        texture_space_bounce: specialize(true, true),
         view_layout,
         parameter_layout,
     });
+}
+
+impl HeightComputePipeline {
+    /// The pipeline a view's settings key.
+    pub fn for_settings(
+        &self,
+        settings: &crate::render::view_settings::ViewSettings,
+    ) -> CachedComputePipelineId {
+        match (settings.texture_space_horizons, settings.bleeding_runs()) {
+            (false, _) => self.screen_space_only,
+            (true, false) => self.texture_space_horizons,
+            (true, true) => self.texture_space_bounce,
+        }
+    }
 }
 
 /// The compute half's per-view bind group (render `PrepareBindGroups`).
@@ -235,12 +260,8 @@ pub fn height_compute_pass(
     {
         return;
     }
-    let id = if settings.0.texture_space_horizons {
-        pipeline.texture_space_horizons
-    } else {
-        pipeline.screen_space_only
-    };
-    let Some(compute) = pipeline_cache.get_compute_pipeline(id) else {
+    let Some(compute) = pipeline_cache.get_compute_pipeline(pipeline.for_settings(&settings.0))
+    else {
         return;
     };
     let diagnostics = ctx.diagnostic_recorder();

@@ -24,8 +24,9 @@
 // (N' by Blinn bump mapping in world space, or 0 where the material has a normal map;
 // texture-space occlusion, or −1 where none).
 @group(0) @binding(3) var bump_out: texture_storage_2d<rgba16float, write>;
-// Texture-space visibility of the first directional light, or −1 where none.
-@group(0) @binding(4) var visibility_out: texture_storage_2d<r32float, write>;
+// Texture-space terms of the first directional light: its visibility and its one bounce
+// relative to E0 (`texture_bounce`), each −1 where none.
+@group(0) @binding(4) var visibility_out: texture_storage_2d<rg32float, write>;
 @group(0) @binding(5) var<uniform> view: View;
 @group(0) @binding(6) var<uniform> lights: Lights;
 // Bevy's prepass depth and deferred lighting pass ids: which raster texels are this frame's.
@@ -61,6 +62,10 @@ const AZIMUTH_BLOCKS: i32 = i32(HORIZON_AZIMUTHS / 4u);
 // Distance bands (`height_map_import::HORIZON_BANDS`).
 const HORIZON_BANDS: i32 = #{HORIZON_BANDS};
 const HORIZON_BLOCKS: i32 = HORIZON_BANDS * AZIMUTH_BLOCKS + 1;
+#ifdef TEXTURE_SPACE_BOUNCE
+// Points per azimuth of the texture-space bounce (`height_map_import::TEXTURE_BOUNCE_SAMPLES`).
+const TEXTURE_BOUNCE_SAMPLES: u32 = #{TEXTURE_BOUNCE_SAMPLES}u;
+#endif
 
 fn height_texel(p: vec2<i32>, level: i32, size: vec2<i32>) -> f32 {
     // Repeat addressing: height maps tile. The UVs come in wrapped to [0, 1), so a tap is at
@@ -341,6 +346,110 @@ fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_p
     return mix(magnified_terms, minified_terms, minified);
 }
 
+#ifdef TEXTURE_SPACE_BOUNCE
+// The true normal at `texel` of the horizon map by Blinn's formula with the map's gradient.
+fn texel_true_normal(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame) -> vec3<f32> {
+    let gradient = textureLoad(horizons, texel + vec2((HORIZON_BLOCKS - 1) * level.x, 0), 0).xy;
+    return normalize(blinn_normal(core.n, core.pu, core.pv, core.k * gradient.x, core.k * gradient.y));
+}
+
+// The bilinear height at texel coordinates `p` (texel centres at integers) of the height
+// chain's level `mip`, the horizon map's level (`level` texels), wrapped however far.
+fn level_height(p: vec2<f32>, mip: i32, level: vec2<i32>) -> f32 {
+    let base = vec2<i32>(floor(p));
+    let f = p - floor(p);
+    let h00 = textureLoad(height_mips, horizon_texel(base, vec2(0, 0), level), mip).r;
+    let h10 = textureLoad(height_mips, horizon_texel(base, vec2(1, 0), level), mip).r;
+    let h01 = textureLoad(height_mips, horizon_texel(base, vec2(0, 1), level), mip).r;
+    let h11 = textureLoad(height_mips, horizon_texel(base, vec2(1, 1), level), mip).r;
+    return mix(mix(h00, h10, f.x), mix(h01, h11, f.x), f.y);
+}
+
+// The texture-space occlusion at `uv`: the four texels around it mixed bilinearly (the
+// magnified branch of `footprint_terms`).
+fn uv_occlusion(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame) -> f32 {
+    let p = fract(uv) * vec2<f32>(level) - 0.5;
+    let base = vec2<i32>(floor(p));
+    let f = p - floor(p);
+    let o00 = texel_occlusion(horizon_texel(base, vec2(0, 0), level), level, core);
+    let o10 = texel_occlusion(horizon_texel(base, vec2(1, 0), level), level, core);
+    let o01 = texel_occlusion(horizon_texel(base, vec2(0, 1), level), level, core);
+    let o11 = texel_occlusion(horizon_texel(base, vec2(1, 1), level), level, core);
+    return mix(mix(o00, o10, f.x), mix(o01, o11, f.x), f.y);
+}
+
+// One bounce of the light from `to_light` at `uv`, relative to E0 (the irradiance of a surface
+// facing the light), every surface white — what a ray tracer finds by following the rays that
+// hit the surface to their lit points, here from the horizon map, in texture space (so it does
+// not flatten where the view is minified or oblique, as the screen-space gather does). Along
+// each azimuth, TEXTURE_BOUNCE_SAMPLES points S between the point and the distance where its
+// horizon is reached (beyond, the rays escape), lowered by the core's fall κ D² / 2; those seen
+// at rising elevations above the true tangent plane each stand for the band of cosine-weighted
+// solid angle below them, (sin² e_j − sin² e_{j−1}) / 2 · Δθ (paper eq. 8 with the band's area),
+// and send max(0, N_S · l) V(S) if they face the point (N_S and V of S's nearest texel). The
+// sum is rescaled to the blocked part of the hemisphere by the texture-space occlusion
+// `occlusion`: the samples give the mean radiance of what the point sees instead of the sky,
+// the occlusion how much of it. Mirrors `reference::texture_space::texture_bounce`.
+fn texture_bounce(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame, to_light: vec3<f32>, occlusion: f32) -> f32 {
+    // The height chain's level as wide as the horizon map's (built from it, power-of-two apart).
+    let mip = i32(countTrailingZeros(u32(textureDimensions(height_mips, 0).x) / u32(level.x)));
+    let p = fract(uv) * vec2<f32>(level) - 0.5;
+    let base = vec2<i32>(floor(p));
+    let f = p - floor(p);
+    let gradient_offset = vec2((HORIZON_BLOCKS - 1) * level.x, 0);
+    let g00 = textureLoad(horizons, horizon_texel(base, vec2(0, 0), level) + gradient_offset, 0).xy;
+    let g10 = textureLoad(horizons, horizon_texel(base, vec2(1, 0), level) + gradient_offset, 0).xy;
+    let g01 = textureLoad(horizons, horizon_texel(base, vec2(0, 1), level) + gradient_offset, 0).xy;
+    let g11 = textureLoad(horizons, horizon_texel(base, vec2(1, 1), level) + gradient_offset, 0).xy;
+    let gradient = mix(mix(g00, g10, f.x), mix(g01, g11, f.x), f.y);
+    let normal = normalize(blinn_normal(core.n, core.pu, core.pv, core.k * gradient.x, core.k * gradient.y));
+    let h0 = level_height(p, mip, level);
+    let nearest = horizon_texel(vec2<i32>(round(p)), vec2(0), level);
+    var irradiance = 0.0;
+    var covered = 0.0;
+    for (var i = 0u; i < HORIZON_AZIMUTHS; i++) {
+        let a = f32(i) * 2.0 * PI / f32(HORIZON_AZIMUTHS);
+        let direction = vec2(cos(a), sin(a));
+        let curvature = along_direction(core, direction).curvature;
+        let block = vec2(i32(i / 4u) * level.x, 0);
+        let distance = f32(textureLoad(horizon_distances, nearest + block, 0)[i % 4u]);
+        var seen = 0.0;
+        for (var j = 1u; j <= TEXTURE_BOUNCE_SAMPLES; j++) {
+            let t = distance * f32(j) / f32(TEXTURE_BOUNCE_SAMPLES);
+            let s = p + t * direction;
+            let along = core.pu * (t * direction.x / f32(level.x)) + core.pv * (t * direction.y / f32(level.y));
+            // The core falls κ D² / 2 below its tangent plane at world distance D.
+            let fall = 0.5 * curvature * dot(along, along);
+            let d = along + core.n * (core.k * (level_height(s, mip, level) - h0) - fall);
+            let len = length(d);
+            if len <= 0.0 {
+                continue;
+            }
+            let sine = dot(d, normal) / len;
+            if sine <= seen {
+                continue;
+            }
+            let band = 0.5 * (sine * sine - seen * seen);
+            let q = horizon_texel(vec2<i32>(round(s)), vec2(0), level);
+            let n_s = texel_true_normal(q, level, core);
+            let cos_l = dot(n_s, to_light);
+            if dot(n_s, -d) > 0.0 && cos_l > 0.0 {
+                irradiance += cos_l * band * texel_light_visibility(q, level, core, to_light);
+            }
+            covered += band;
+            seen = sine;
+        }
+    }
+    // Both sums times Δθ / π; their ratio needs none.
+    let scale = 2.0 / f32(HORIZON_AZIMUTHS);
+    let gathered = covered * scale;
+    if gathered > 1e-4 {
+        return irradiance * scale * max(1.0 - occlusion, 0.0) / gathered;
+    }
+    return irradiance * scale;
+}
+#endif
+
 // Whether the raster half drew texel `s` of pixel `q` this frame (it is never cleared): Bevy's
 // prepass left a mesostructure material there, at this depth (the raster half passes only
 // where its depth is the prepass's; a hair of slack for vertex shaders compiled apart).
@@ -453,6 +562,7 @@ fn height(@builtin(global_invocation_id) id: vec3<u32>) {
     // could not be computed (no UV derivatives), which the later passes read as "none".
     var texture_occlusion = -1.0;
     var texture_visibility = -1.0;
+    var texture_bounce_value = -1.0;
     let det = duv1.x * duv2.y - duv1.y * duv2.x;
     if has_normal && x.valid && y.valid && abs(det) > 1e-12 {
         let dp1 = x.position;
@@ -481,6 +591,22 @@ fn height(@builtin(global_invocation_id) id: vec3<u32>) {
         let terms = footprint_terms(uv, duv1, duv2, texels_per_pixel, core, has_light, to_light);
         texture_occlusion = terms.x;
         texture_visibility = select(-1.0, terms.y, has_light);
+#ifdef TEXTURE_SPACE_BOUNCE
+        if has_light {
+            // At the pixel's own UV, not averaged over its footprint like the occlusion: 16
+            // azimuths × TEXTURE_BOUNCE_SAMPLES points cost too much to take four times. So
+            // rescaled with the occlusion at that UV too (the texels' bilinear mix, which the
+            // footprint's value is where the surface is magnified): the mean over a minified
+            // footprint paired with one point's bounce was off by the difference.
+            let block = i32(textureDimensions(horizons).x) / HORIZON_BLOCKS;
+            let level = vec2<i32>(block, i32(textureDimensions(horizons).y));
+            var occlusion_here = texture_occlusion;
+            if texels_per_pixel * f32(block) / size0.x > 0.75 {
+                occlusion_here = uv_occlusion(uv, level, core);
+            }
+            texture_bounce_value = texture_bounce(uv, level, core, to_light, occlusion_here);
+        }
+#endif
 #endif
         if material.bump > 0.0 {
             // Central differences over two texels of level l0, per UV unit.
@@ -495,5 +621,5 @@ fn height(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     textureStore(mhm_out, p, vec4<f32>(dis * material.scale, here.z, here.w, dis));
     textureStore(bump_out, p, vec4<f32>(bump, texture_occlusion));
-    textureStore(visibility_out, p, vec4<f32>(texture_visibility));
+    textureStore(visibility_out, p, vec4<f32>(texture_visibility, texture_bounce_value, 0.0, 0.0));
 }

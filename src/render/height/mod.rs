@@ -79,8 +79,9 @@ pub const CORE_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
 /// Shading normal by Blinn bump mapping (world space; 0 where the material has a normal map);
 /// `w` the texture-space occlusion (−1: none).
 pub const BUMP_NORMAL_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
-/// Texture-space visibility of the first directional light (−1: none).
-pub const TEXTURE_VISIBILITY_FORMAT: TextureFormat = TextureFormat::R32Float;
+/// Texture-space terms of the first directional light: its visibility and its one bounce
+/// relative to E0 (each −1: none).
+pub const TEXTURE_VISIBILITY_FORMAT: TextureFormat = TextureFormat::Rg32Float;
 
 /// The height pass's images of one view, which every later pass reads.
 #[derive(Component)]
@@ -93,7 +94,7 @@ pub struct ViewHeightTextures {
     pub core_normal: CachedTexture,
     /// Bump-mapped shading normals.
     pub bump_normal: CachedTexture,
-    /// Texture-space visibility of the first directional light.
+    /// Texture-space visibility and one bounce of the first directional light.
     pub texture_visibility: CachedTexture,
     /// Size in pixels (the render target's), that of every working image of the view.
     pub size: UVec2,

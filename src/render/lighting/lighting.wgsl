@@ -35,7 +35,9 @@
 @group(2) @binding(3) var sector_horizons: texture_2d<u32>;
 @group(2) @binding(4) var<uniform> settings: MesostructureUniform;
 @group(2) @binding(5) var bump_normal: texture_2d<f32>;
-@group(2) @binding(6) var micro_shadow_out: texture_storage_2d<r32float, write>;
+// (micro-shadow visibility for the debug view, the first directional light's shadow-map
+// visibility for the bleeding pass's texture-space bounce of that light).
+@group(2) @binding(6) var micro_shadow_out: texture_storage_2d<rg32float, write>;
 // The height pass's texture-space visibility of the first directional light (−1: none).
 @group(2) @binding(7) var texture_visibility: texture_2d<f32>;
 
@@ -207,6 +209,22 @@ fn direct_terms(in: PbrInput, p: vec2<i32>) -> DirectTerms {
     return terms;
 }
 
+// The first directional light's shadow-map visibility at P (1 where it casts no shadow, P
+// receives none, or there is no such light). The bleeding pass's texture-space bounce of that
+// light (`texture_bounce` in height.wgsl) needs it at P, which the bounce reaches only where
+// the light does, and at the gathered points, whose lit colour it must not count twice.
+fn first_directional_shadow(in: PbrInput) -> f32 {
+    if lights.n_directional_lights == 0u
+        || (in.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u
+        || (lights.directional_lights[0].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
+        return 1.0;
+    }
+    let view_z = dot(vec4<f32>(
+        view.view_from_world[0].z, view.view_from_world[1].z,
+        view.view_from_world[2].z, view.view_from_world[3].z), in.world_position);
+    return shadows::fetch_directional_shadow(0u, in.world_position, in.world_normal, view_z, in.frag_coord.xy);
+}
+
 struct FullscreenVertexOutput {
     @builtin(position) position: vec4<f32>,
     @location(0) uv: vec2<f32>,
@@ -277,7 +295,11 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
             max(output_color.rgb + (direct_weight - 1.0) * direct.all - direct_weight * direct.shadowed, vec3(0.0)),
             output_color.a,
         );
-        textureStore(micro_shadow_out, pixel, vec4(direct.visibility));
+        var sun_shadow = 1.0;
+        if settings.texture_space_horizons != 0u && settings.bleeding_enabled != 0u && settings.weights.z > 0.0 {
+            sun_shadow = first_directional_shadow(pbr_input);
+        }
+        textureStore(micro_shadow_out, pixel, vec4(direct.visibility, sun_shadow, 0.0, 0.0));
     } else {
         textureStore(micro_shadow_out, pixel, vec4(1.0));
         output_color = pbr_input.material.base_color;

@@ -33,8 +33,9 @@ use super::{
 use crate::render::view_settings::ExtractedMesostructure;
 
 /// Micro-shadow visibility, the lowest over the lights (1 = lit), for the debug view and
-/// captures.
-pub const MICRO_SHADOW_FORMAT: TextureFormat = TextureFormat::R32Float;
+/// captures; and the first directional light's shadow-map visibility (1: no shadow map),
+/// which the bleeding pass needs for that light's texture-space bounce.
+pub const MICRO_SHADOW_FORMAT: TextureFormat = TextureFormat::Rg32Float;
 
 /// The lighting pass's micro-shadow image of one view.
 #[derive(Component)]
@@ -130,7 +131,7 @@ pub fn init_lighting_pipeline(
         "mesostructure_no_micro_shadow",
         MICRO_SHADOW_FORMAT,
         TextureUsages::STORAGE_BINDING,
-        &1.0f32.to_le_bytes(),
+        bytemuck::cast_slice(&[1.0f32, 1.0]),
     );
     // Every sector's horizon at 0: no micro-shadow.
     let open_horizons = texel(
@@ -276,11 +277,7 @@ pub fn lighting_pass(
     };
     // The height pass's compute half (texture-space visibility) compiles in the background
     // too: until it has, "visible".
-    let height_computed = compiled(if settings.0.texture_space_horizons {
-        height_compute.texture_space_horizons
-    } else {
-        height_compute.screen_space_only
-    });
+    let height_computed = compiled(height_compute.for_settings(&settings.0));
     let (mhm, core_normal, bump_normal, texture_visibility) = match height {
         Some(h) if height_computed => (
             &h.mhm.default_view,
