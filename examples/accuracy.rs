@@ -320,7 +320,8 @@ struct Args {
     /// medium, high, ultra), `search=N` (the brute-force horizon search with N samples),
     /// `radius=PX` (high with that `max_sample_radius`), `directions=N`, `steps=N`,
     /// `softness=S` (micro-shadow edge), `samples=N` (bleeding samples), `no-coarse`,
-    /// `screen-space` (high without the texture-space occlusion of minified maps)
+    /// `no-texture-bounce` (the bounce from the screen-space gather alone), `screen-space`
+    /// (high without the texture-space occlusion of minified maps)
     #[arg(long, default_value = "high", value_delimiter = ',')]
     variants: Vec<String>,
     /// `--suite unseen`: score every N-th pixel in x and y.
@@ -770,6 +771,10 @@ fn variant_settings(name: &str) -> Option<common::unseen::Variant> {
             },
             "screen-space" => Mesostructure {
                 texture_space_horizons: false,
+                ..default()
+            },
+            "no-texture-bounce" => Mesostructure {
+                texture_space_bounce: false,
                 ..default()
             },
             _ => return None,

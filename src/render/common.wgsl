@@ -20,6 +20,8 @@ struct MesostructureUniform {
     bleeding_samples: u32,
     coarse_occlusion: u32,
     texture_space_horizons: u32,
+    // The first directional light's bounce from texture space (`texture_bounce`, height pass).
+    texture_space_bounce: u32,
     // Side of the pixel block that shares one apex set (1, 2 or 4: the working resolution).
     apex_block: u32,
     // λa, λs, λd of eq. (2), spare.

@@ -30,6 +30,7 @@ pub struct ViewSettings {
     pub horizon_search_steps: u32,
     pub coarse_occlusion: bool,
     pub texture_space_horizons: bool,
+    pub texture_space_bounce: bool,
     pub micro_shadows: bool,
     pub micro_shadow_softness: f32,
     pub bump_mapping: bool,
@@ -63,6 +64,7 @@ impl ViewSettings {
             horizon_search_steps: baseline.map_or(0, |b| b.steps),
             coarse_occlusion: m.coarse_occlusion,
             texture_space_horizons: m.texture_space_horizons,
+            texture_space_bounce: m.texture_space_bounce,
             micro_shadows: m.micro_shadows,
             micro_shadow_softness: m.micro_shadow_softness,
             bump_mapping: m.bump_mapping,
@@ -151,6 +153,12 @@ impl ViewSettings {
         self.bleeding && self.bleeding_weight > 0.0
     }
 
+    /// Whether the first directional light's bounce comes from texture space: asked for, and
+    /// both the texture-space horizons and the bleeding run.
+    pub fn texture_space_bounce_runs(&self) -> bool {
+        self.texture_space_bounce && self.texture_space_horizons && self.bleeding_runs()
+    }
+
     /// The depth-continuity test these settings describe.
     pub fn depth_continuity(&self) -> DepthContinuity {
         DepthContinuity {
@@ -201,6 +209,8 @@ pub struct MesostructureUniform {
     pub coarse_occlusion: u32,
     /// Whether the texture-space horizon map's terms are used (1) or not (0).
     pub texture_space_horizons: u32,
+    /// Whether the first directional light's bounce comes from texture space (1) or not (0).
+    pub texture_space_bounce: u32,
     /// Side of the pixel block sharing one apex set (the working resolution).
     pub apex_block: u32,
     /// λa, λs, λd of eq. (2), and one spare float.
@@ -242,6 +252,7 @@ impl From<&ViewSettings> for MesostructureUniform {
             bleeding_samples: s.bleeding_samples,
             coarse_occlusion: s.coarse_occlusion as u32,
             texture_space_horizons: s.texture_space_horizons as u32,
+            texture_space_bounce: s.texture_space_bounce_runs() as u32,
             apex_block: s.working_resolution.block(),
             weights: Vec4::new(s.ambient_weight, s.direct_weight, s.bleeding_weight, 0.0),
             directions,

@@ -825,6 +825,21 @@ fn texture_space_bounce_matches_its_cpu_mirror() {
     );
     assert!(largest > 0.05, "the scene has a bounce to compare: largest {largest}");
     assert!(close * 100 >= count * 99, "only {close} of {count} within 0.005");
+    // Turned off on its own: the height pass compiles it out (the bounce reads "none"), the
+    // light's texture-space visibility stays.
+    app.world_mut().entity_mut(camera).insert(Mesostructure {
+        texture_space_bounce: false,
+        ..default()
+    });
+    let off = capture(&mut app, camera, 20);
+    let inner = |i: usize| {
+        let (x, y) = (i as u32 % SIZE, i as u32 / SIZE);
+        (4..SIZE - 4).contains(&x) && (4..SIZE - 4).contains(&y)
+    };
+    let terms: Vec<[f32; 2]> =
+        off.texture_terms.iter().enumerate().filter(|(i, _)| inner(*i)).map(|(_, t)| *t).collect();
+    assert!(terms.iter().all(|t| t[1] == -1.0), "no texture-space bounce when it is off");
+    assert!(terms.iter().all(|t| t[0] >= 0.0), "the visibility is still computed");
 }
 
 /// Every variant of the specialised occlusion pipeline (shader defs for the integral, the

@@ -135,7 +135,7 @@ fn gather(p: vec2<i32>, size: vec2<i32>) -> vec3<f32> {
     var sun_bounce = -1.0;
     var sun = vec3(0.0);
     var to_sun = vec3(0.0, 0.0, 1.0);
-    if settings.texture_space_horizons != 0u && lights.n_directional_lights > 0u {
+    if settings.texture_space_bounce != 0u && lights.n_directional_lights > 0u {
         sun_bounce = textureLoad(texture_terms, p, 0).g;
         sun = lights.directional_lights[0].color.rgb * view.exposure;
         to_sun = lights.directional_lights[0].direction_to_light;

@@ -175,7 +175,7 @@ impl HeightComputePipeline {
         &self,
         settings: &crate::render::view_settings::ViewSettings,
     ) -> CachedComputePipelineId {
-        match (settings.texture_space_horizons, settings.bleeding_runs()) {
+        match (settings.texture_space_horizons, settings.texture_space_bounce_runs()) {
             (false, _) => self.screen_space_only,
             (true, false) => self.texture_space_horizons,
             (true, true) => self.texture_space_bounce,

@@ -296,7 +296,7 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
             output_color.a,
         );
         var sun_shadow = 1.0;
-        if settings.texture_space_horizons != 0u && settings.bleeding_enabled != 0u && settings.weights.z > 0.0 {
+        if settings.texture_space_bounce != 0u {
             sun_shadow = first_directional_shadow(pbr_input);
         }
         textureStore(micro_shadow_out, pixel, vec4(direct.visibility, sun_shadow, 0.0, 0.0));
