@@ -776,8 +776,9 @@ pub struct SceneResult {
 
 /// Runs one scene: renders it, casts the truth at every `step`-th covered pixel. With
 /// `UNSEEN_DUMP=DIR` in the environment it also writes each scene's micro-shadow confusion map
-/// (true positives green, false positives red, misses blue) and AO error map (`_ao`: red too
-/// open, blue too dark, full colour at ±0.25) to `DIR`.
+/// (true positives green, false positives red, misses blue), AO error map (`_ao`: red too
+/// open, blue too dark, full colour at ±0.25) and bounce error map (`_bounce`: red too strong,
+/// blue too weak, full colour at ±0.1 of E0) to `DIR`.
 pub fn run_scene(
     plugins: impl Fn() -> bevy::app::PluginGroupBuilder,
     scene: &Scene,
@@ -826,6 +827,7 @@ pub fn run_scene(
         // error map: red where the method is too open, blue where too dark (full at ±0.25).
         let mut shadows = image::RgbImage::new(size / step, size / step);
         let mut ao = image::RgbImage::new(size / step, size / step);
+        let mut bounce = image::RgbImage::new(size / step, size / step);
         let scored = pixels.iter().zip(&truths).filter_map(|(p, t)| Some((p, t.as_ref()?)));
         for ((&(x, y), t), e) in scored.zip(&estimates) {
             let colour = if !t.facing || t.core_shadowed {
@@ -842,9 +844,19 @@ pub fn run_scene(
             let error = ((e.ao - t.ao) / 0.25).clamp(-1.0, 1.0);
             let fade = |e: f32| (255.0 * (1.0 - e.max(0.0))) as u8;
             ao.put_pixel(x / step, y / step, image::Rgb([fade(-error), fade(error.abs()), fade(error)]));
+            let error = ((e.bounce - t.bounce) / 0.1).clamp(-1.0, 1.0);
+            bounce.put_pixel(
+                x / step,
+                y / step,
+                image::Rgb([fade(-error), fade(error.abs()), fade(error)]),
+            );
         }
         let name = scene.name.replace('/', "_");
-        for (image, file) in [(shadows, format!("{name}.png")), (ao, format!("{name}_ao.png"))] {
+        for (image, file) in [
+            (shadows, format!("{name}.png")),
+            (ao, format!("{name}_ao.png")),
+            (bounce, format!("{name}_bounce.png")),
+        ] {
             image.save(Path::new(&dir).join(file)).expect("cannot write the dump");
         }
     }

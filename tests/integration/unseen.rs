@@ -106,8 +106,8 @@ const EXPECTED: &[Expected] = &[
         ao_bias: 0.0123,
         shadow_recall: 0.932,
         shadow_precision: 0.793,
-        bounce_rel_mae: 0.249,
-        bounce_ratio: 0.877,
+        bounce_rel_mae: 0.244,
+        bounce_ratio: 0.894,
     },
     Expected {
         scene: "sphere/cracked/oblique/light35",
@@ -115,8 +115,8 @@ const EXPECTED: &[Expected] = &[
         ao_bias: -0.0016,
         shadow_recall: 0.605,
         shadow_precision: 0.821,
-        bounce_rel_mae: 0.350,
-        bounce_ratio: 1.042,
+        bounce_rel_mae: 0.294,
+        bounce_ratio: 1.023,
     },
     Expected {
         scene: "torus/pebbles/top-down/light60",
@@ -124,8 +124,8 @@ const EXPECTED: &[Expected] = &[
         ao_bias: 0.0401,
         shadow_recall: 0.714,
         shadow_precision: 0.714,
-        bounce_rel_mae: 0.277,
-        bounce_ratio: 0.799,
+        bounce_rel_mae: 0.265,
+        bounce_ratio: 0.818,
     },
 ];
 

@@ -347,9 +347,17 @@ fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_p
 }
 
 #ifdef TEXTURE_SPACE_BOUNCE
-// The true normal at `texel` of the horizon map by Blinn's formula with the map's gradient.
-fn texel_true_normal(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame) -> vec3<f32> {
-    let gradient = textureLoad(horizons, texel + vec2((HORIZON_BLOCKS - 1) * level.x, 0), 0).xy;
+// The true normal at texel coordinates `p` (texel centres at integers) of the horizon map, by
+// Blinn's formula with the map's gradient mixed bilinearly between the four texels around it.
+fn true_normal_at(p: vec2<f32>, level: vec2<i32>, core: CoreFrame) -> vec3<f32> {
+    let base = vec2<i32>(floor(p));
+    let f = p - floor(p);
+    let offset = vec2((HORIZON_BLOCKS - 1) * level.x, 0);
+    let g00 = textureLoad(horizons, horizon_texel(base, vec2(0, 0), level) + offset, 0).xy;
+    let g10 = textureLoad(horizons, horizon_texel(base, vec2(1, 0), level) + offset, 0).xy;
+    let g01 = textureLoad(horizons, horizon_texel(base, vec2(0, 1), level) + offset, 0).xy;
+    let g11 = textureLoad(horizons, horizon_texel(base, vec2(1, 1), level) + offset, 0).xy;
+    let gradient = mix(mix(g00, g10, f.x), mix(g01, g11, f.x), f.y);
     return normalize(blinn_normal(core.n, core.pu, core.pv, core.k * gradient.x, core.k * gradient.y));
 }
 
@@ -386,7 +394,8 @@ fn uv_occlusion(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame) -> f32 {
 // horizon is reached (beyond, the rays escape), lowered by the core's fall κ D² / 2; those seen
 // at rising elevations above the true tangent plane each stand for the band of cosine-weighted
 // solid angle below them, (sin² e_j − sin² e_{j−1}) / 2 · Δθ (paper eq. 8 with the band's area),
-// and send max(0, N_S · l) V(S) if they face the point (N_S and V of S's nearest texel). The
+// and send max(0, N_S · l) V(S) if they face the point (N_S from the gradient at S, V of S's
+// nearest texel, both about S's own core normal, which the curvature has turned). The
 // sum is rescaled to the blocked part of the hemisphere by the texture-space occlusion
 // `occlusion`: the samples give the mean radiance of what the point sees instead of the sky,
 // the occlusion how much of it. Mirrors `reference::texture_space::texture_bounce`.
@@ -394,15 +403,7 @@ fn texture_bounce(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame, to_light: ve
     // The height chain's level as wide as the horizon map's (built from it, power-of-two apart).
     let mip = i32(countTrailingZeros(u32(textureDimensions(height_mips, 0).x) / u32(level.x)));
     let p = fract(uv) * vec2<f32>(level) - 0.5;
-    let base = vec2<i32>(floor(p));
-    let f = p - floor(p);
-    let gradient_offset = vec2((HORIZON_BLOCKS - 1) * level.x, 0);
-    let g00 = textureLoad(horizons, horizon_texel(base, vec2(0, 0), level) + gradient_offset, 0).xy;
-    let g10 = textureLoad(horizons, horizon_texel(base, vec2(1, 0), level) + gradient_offset, 0).xy;
-    let g01 = textureLoad(horizons, horizon_texel(base, vec2(0, 1), level) + gradient_offset, 0).xy;
-    let g11 = textureLoad(horizons, horizon_texel(base, vec2(1, 1), level) + gradient_offset, 0).xy;
-    let gradient = mix(mix(g00, g10, f.x), mix(g01, g11, f.x), f.y);
-    let normal = normalize(blinn_normal(core.n, core.pu, core.pv, core.k * gradient.x, core.k * gradient.y));
+    let normal = true_normal_at(p, level, core);
     let h0 = level_height(p, mip, level);
     let nearest = horizon_texel(vec2<i32>(round(p)), vec2(0), level);
     var irradiance = 0.0;
@@ -431,10 +432,15 @@ fn texture_bounce(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame, to_light: ve
             }
             let band = 0.5 * (sine * sine - seen * seen);
             let q = horizon_texel(vec2<i32>(round(s)), vec2(0), level);
-            let n_s = texel_true_normal(q, level, core);
+            // S's own core frame: on a curved core the normal has turned by dN = Nu du + Nv dv
+            // on the way, which changes S's light elevation (to below its horizon, and past
+            // its terminator, where no shadow map of ours helps: unlit).
+            var core_s = core;
+            core_s.n = normalize(core.n + core.nu * (t * direction.x / f32(level.x)) + core.nv * (t * direction.y / f32(level.y)));
+            let n_s = true_normal_at(s, level, core_s);
             let cos_l = dot(n_s, to_light);
-            if dot(n_s, -d) > 0.0 && cos_l > 0.0 {
-                irradiance += cos_l * band * texel_light_visibility(q, level, core, to_light);
+            if dot(n_s, -d) > 0.0 && cos_l > 0.0 && dot(core_s.n, to_light) > 0.0 {
+                irradiance += cos_l * band * texel_light_visibility(q, level, core_s, to_light);
             }
             covered += band;
             seen = sine;
