@@ -122,7 +122,9 @@ fn true_normal(gradient: [f32; 2], core: &CoreFrame) -> Vec3 {
 /// Whether light from the unit direction `to_light` reaches texel `(x, y)`: its elevation
 /// above the core plane against the texel's horizon towards its azimuth, the two nearest
 /// azimuths interpolated (horizon mapping, Max 1988). Light from below the core plane or from
-/// the zenith counts as reaching it (n·l's and the shadow maps' job).
+/// the zenith counts as reaching it (n·l's and the shadow maps' job). On a convex core the
+/// horizons lowered by the core's fall are a lower bound and the flat map's an upper one; a
+/// light between them is decided by marching the heights towards it, each lowered by the fall.
 pub fn texel_light_visibility(
     map: &HorizonMap,
     x: u32,
@@ -156,9 +158,36 @@ pub fn texel_light_visibility(
     let i0 = (lower as i64).rem_euclid(HORIZON_AZIMUTHS as i64) as usize;
     let i1 = (i0 + 1) % HORIZON_AZIMUTHS;
     let index = (y * map.width + x) as usize;
-    let h0 = map.tangent(index, i0, k, reach, curvature);
-    let h1 = map.tangent(index, i1, k, reach, curvature);
-    sin_l >= (h0 + (h1 - h0) * (position - lower)) * t2.sqrt()
+    let f = position - lower;
+    let horizon = |curvature: f32| {
+        let h0 = map.tangent(index, i0, k, reach, curvature);
+        h0 + (map.tangent(index, i1, k, reach, curvature) - h0) * f
+    };
+    let tan_l = sin_l / t2.sqrt();
+    if tan_l < horizon(curvature) {
+        return false;
+    }
+    if curvature <= 0.0 || tan_l >= horizon(0.0) {
+        return true;
+    }
+    // The march, as far as the farther of the two azimuths' highest occluders.
+    let steps = map.distances[index][0][i0].max(map.distances[index][0][i1]);
+    let (w, h) = (map.width as i64, map.height as i64);
+    let at = |x: i64, y: i64| map.heights[(y.rem_euclid(h) * w + x.rem_euclid(w)) as usize];
+    let texel_direction = (ab / uv_length * Vec2::new(w as f32, h as f32)).normalize();
+    let uv_step = (texel_direction / Vec2::new(w as f32, h as f32)).length();
+    let h0 = at(x as i64, y as i64);
+    (1..=steps).all(|t| {
+        let p = Vec2::new(x as f32, y as f32) + t as f32 * texel_direction;
+        let base = p.floor();
+        let g = p - base;
+        let (bx, by) = (base.x as i64, base.y as i64);
+        let top = at(bx, by) + (at(bx + 1, by) - at(bx, by)) * g.x;
+        let bottom = at(bx, by + 1) + (at(bx + 1, by + 1) - at(bx, by + 1)) * g.x;
+        let height = top + (bottom - top) * g.y;
+        let d = t as f32 * uv_step * reach;
+        k * (height - h0) - 0.5 * curvature * d * d <= tan_l * d
+    })
 }
 
 /// The one-bounce irradiance at `uv` from the surface lit by a directional light from the
@@ -224,7 +253,6 @@ pub fn texture_bounce(
             }
             let band = 0.5 * (sine * sine - seen * seen);
             let (qx, qy) = (s.x.round() as i64, s.y.round() as i64);
-            let q = wrap(qx, qy);
             // S's own core frame: on a curved core the normal has turned on the way.
             let core_s = CoreFrame {
                 n: (core.n + core.nu * (t * dx / w as f32) + core.nv * (t * dy / h as f32))
@@ -432,5 +460,36 @@ mod tests {
                 assert!((mean - ratio).abs() <= 0.05, "{name} {elevation}°: ratio {mean} against {ratio} ± 0.05");
             }
         }
+    }
+
+    /// On a convex core the map's horizon lowered by the fall at the highest occluder's
+    /// distance is only a lower bound: a nearer, lower wall falls less and can still shadow.
+    /// A low wall 4 texels away and a high one 24 away on a cylinder whose fall hides the high
+    /// one: a light just under the low wall's lowered horizon is shadowed (the march finds
+    /// it), one above it lit, and on the plane both walls count.
+    #[test]
+    fn a_near_wall_still_shadows_where_the_curvature_hides_the_far_one() {
+        let map = HeightMap::from_fn(64, 64, |u, _| {
+            let x = (u * 64.0) as u32;
+            if (20..24).contains(&x) {
+                0.12
+            } else if (40..44).contains(&x) {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        let horizons = HorizonMap::new(&map.values, 64, 64);
+        let (n, pu, pv, k) = (Vec3::Z, Vec3::X * 2.0, Vec3::Y * 2.0, 0.2);
+        // Radius 0.6: the far wall (0.75 away, tangent 0.267 flat) falls 0.47 below the
+        // tangent plane, the near one (0.125 away, tangent 0.192 flat) 0.013: lowered by
+        // κ D / 2, its horizon tangent is 0.088.
+        let cylinder = CoreFrame { nu: Vec3::X * 2.0 / 0.6, ..CoreFrame::flat(n, pu, pv, k) };
+        let light = |tan: f32| Vec3::new(1.0, 0.0, tan).normalize();
+        assert!(!texel_light_visibility(&horizons, 16, 7, &cylinder, light(0.06)), "under the near wall");
+        assert!(texel_light_visibility(&horizons, 16, 7, &cylinder, light(0.12)), "over the near wall");
+        let flat = CoreFrame::flat(n, pu, pv, k);
+        assert!(!texel_light_visibility(&horizons, 16, 7, &flat, light(0.25)), "the far wall on a plane");
+        assert!(texel_light_visibility(&horizons, 16, 7, &flat, light(0.29)), "over both on a plane");
     }
 }

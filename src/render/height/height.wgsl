@@ -254,7 +254,10 @@ fn texel_occlusion(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame) -> f32 {
 // Whether the light coming from `to_light` reaches the true surface at `texel` (1) or not (0):
 // its elevation above the core plane against the texel's horizon towards its azimuth (the two
 // nearest azimuths interpolated, each lowered by the core's curvature) — horizon mapping
-// (Max 1988) on the texture-space horizon map.
+// (Max 1988) on the texture-space horizon map. On a convex core that lowered horizon is a lower
+// bound (the highest occluder's fall at its distance; a nearer, lower one may fall less) and
+// the flat map's an upper one; a light between the two is decided by a march of the heights
+// towards it (`curved_core_light_visibility`).
 fn texel_light_visibility(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame, to_light: vec3<f32>) -> f32 {
     let n = core.n;
     let pu = core.pu;
@@ -290,7 +293,62 @@ fn texel_light_visibility(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame, t
         texel_horizon_tangent(texel, level, i1, horizon_step(i1, level), core.k, reach, along.curvature),
         position - lower);
     // tan of the horizon against tan of the light's elevation.
-    return select(0.0, 1.0, sin_l >= horizon * sqrt(t2));
+    let tan_l = sin_l / sqrt(t2);
+    if tan_l < horizon {
+        return 0.0;
+    }
+    if along.curvature <= 0.0 {
+        return 1.0;
+    }
+    let flat = mix(
+        texel_horizon_tangent(texel, level, i0, horizon_step(i0, level), core.k, reach, 0.0),
+        texel_horizon_tangent(texel, level, i1, horizon_step(i1, level), core.k, reach, 0.0),
+        position - lower);
+    if tan_l >= flat {
+        return 1.0;
+    }
+    // The march goes as far as the farther of the two azimuths' highest occluders: beyond it
+    // nothing rises above the flat horizon, and the fall only lowers it further.
+    let d0 = textureLoad(horizon_distances, texel + vec2(i32(i0 / 4u) * level.x, 0), 0)[i0 % 4u];
+    let d1 = textureLoad(horizon_distances, texel + vec2(i32(i1 / 4u) * level.x, 0), 0)[i1 % 4u];
+    return curved_core_light_visibility(texel, level, core, ab / uv_length, reach, along.curvature, tan_l, max(d0, d1));
+}
+
+// The height chain's mip level as wide as the horizon map's level (built from it, a power of
+// two apart).
+fn horizon_mip(level: vec2<i32>) -> i32 {
+    return i32(countTrailingZeros(u32(textureDimensions(height_mips, 0).x) / u32(level.x)));
+}
+
+// Whether light at elevation tangent `tan_l` towards UV direction `uv_direction` reaches
+// `texel` over a core of normal curvature `curvature` along it (1/world units, convex): the
+// heights marched one texel at a time for `steps` texels, each lowered by the core's fall
+// κ D² / 2 at its world distance D (`reach` world units per UV unit).
+fn curved_core_light_visibility(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame, uv_direction: vec2<f32>, reach: f32, curvature: f32, tan_l: f32, steps: u32) -> f32 {
+    let mip = horizon_mip(level);
+    let texel_direction = normalize(uv_direction * vec2<f32>(level));
+    let uv_step = length(texel_direction / vec2<f32>(level));
+    let h0 = textureLoad(height_mips, texel, mip).r;
+    for (var t = 1u; t <= steps; t++) {
+        let d = f32(t) * uv_step * reach;
+        let rise = core.k * (level_height(vec2<f32>(texel) + f32(t) * texel_direction, mip, level) - h0) - 0.5 * curvature * d * d;
+        if rise > tan_l * d {
+            return 0.0;
+        }
+    }
+    return 1.0;
+}
+
+// The bilinear height at texel coordinates `p` (texel centres at integers) of the height
+// chain's level `mip`, the horizon map's level (`level` texels), wrapped however far.
+fn level_height(p: vec2<f32>, mip: i32, level: vec2<i32>) -> f32 {
+    let base = vec2<i32>(floor(p));
+    let f = p - floor(p);
+    let h00 = textureLoad(height_mips, horizon_texel(base, vec2(0, 0), level), mip).r;
+    let h10 = textureLoad(height_mips, horizon_texel(base, vec2(1, 0), level), mip).r;
+    let h01 = textureLoad(height_mips, horizon_texel(base, vec2(0, 1), level), mip).r;
+    let h11 = textureLoad(height_mips, horizon_texel(base, vec2(1, 1), level), mip).r;
+    return mix(mix(h00, h10, f.x), mix(h01, h11, f.x), f.y);
 }
 
 // The texel of the horizon map `i` texels from `base`, wrapped (height maps tile).
@@ -361,17 +419,6 @@ fn true_normal_at(p: vec2<f32>, level: vec2<i32>, core: CoreFrame) -> vec3<f32> 
     return normalize(blinn_normal(core.n, core.pu, core.pv, core.k * gradient.x, core.k * gradient.y));
 }
 
-// The bilinear height at texel coordinates `p` (texel centres at integers) of the height
-// chain's level `mip`, the horizon map's level (`level` texels), wrapped however far.
-fn level_height(p: vec2<f32>, mip: i32, level: vec2<i32>) -> f32 {
-    let base = vec2<i32>(floor(p));
-    let f = p - floor(p);
-    let h00 = textureLoad(height_mips, horizon_texel(base, vec2(0, 0), level), mip).r;
-    let h10 = textureLoad(height_mips, horizon_texel(base, vec2(1, 0), level), mip).r;
-    let h01 = textureLoad(height_mips, horizon_texel(base, vec2(0, 1), level), mip).r;
-    let h11 = textureLoad(height_mips, horizon_texel(base, vec2(1, 1), level), mip).r;
-    return mix(mix(h00, h10, f.x), mix(h01, h11, f.x), f.y);
-}
 
 // The texture-space occlusion at `uv`: the four texels around it mixed bilinearly (the
 // magnified branch of `footprint_terms`).
@@ -400,8 +447,7 @@ fn uv_occlusion(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame) -> f32 {
 // `occlusion`: the samples give the mean radiance of what the point sees instead of the sky,
 // the occlusion how much of it. Mirrors `reference::texture_space::texture_bounce`.
 fn texture_bounce(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame, to_light: vec3<f32>, occlusion: f32) -> f32 {
-    // The height chain's level as wide as the horizon map's (built from it, power-of-two apart).
-    let mip = i32(countTrailingZeros(u32(textureDimensions(height_mips, 0).x) / u32(level.x)));
+    let mip = horizon_mip(level);
     let p = fract(uv) * vec2<f32>(level) - 0.5;
     let normal = true_normal_at(p, level, core);
     let h0 = level_height(p, mip, level);
