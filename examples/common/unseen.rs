@@ -841,15 +841,14 @@ pub fn run_scene(
                 }
             };
             shadows.put_pixel(x / step, y / step, image::Rgb(colour));
-            let error = ((e.ao - t.ao) / 0.25).clamp(-1.0, 1.0);
-            let fade = |e: f32| (255.0 * (1.0 - e.max(0.0))) as u8;
-            ao.put_pixel(x / step, y / step, image::Rgb([fade(-error), fade(error.abs()), fade(error)]));
-            let error = ((e.bounce - t.bounce) / 0.1).clamp(-1.0, 1.0);
-            bounce.put_pixel(
-                x / step,
-                y / step,
-                image::Rgb([fade(-error), fade(error.abs()), fade(error)]),
-            );
+            // Red where the method is above the truth, blue below, full at ±`full`.
+            let error_colour = |method: f32, truth: f32, full: f32| {
+                let error = ((method - truth) / full).clamp(-1.0, 1.0);
+                let fade = |e: f32| (255.0 * (1.0 - e.max(0.0))) as u8;
+                image::Rgb([fade(-error), fade(error.abs()), fade(error)])
+            };
+            ao.put_pixel(x / step, y / step, error_colour(e.ao, t.ao, 0.25));
+            bounce.put_pixel(x / step, y / step, error_colour(e.bounce, t.bounce, 0.1));
         }
         let name = scene.name.replace('/', "_");
         for (image, file) in [

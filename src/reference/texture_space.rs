@@ -54,14 +54,9 @@ fn slice_antiderivative(phi: f32, gamma: f32) -> f32 {
 /// through the core normal), each lowered by the core's curvature along it
 /// ([`crate::height_map_import::horizon_tangent`]), each slice integrated in closed form.
 pub fn texel_occlusion(map: &HorizonMap, x: u32, y: u32, core: &CoreFrame) -> f32 {
-    let CoreFrame { n, pu, pv, k, .. } = *core;
+    let CoreFrame { n, k, .. } = *core;
     let i = (y * map.width + x) as usize;
-    let gradient = map.gradient[i];
-    let base = pu.cross(pv);
-    let orientation = if base.dot(n) >= 0.0 { 1.0 } else { -1.0 };
-    let true_normal = (orientation
-        * (base + k * gradient[0] * n.cross(pv) - k * gradient[1] * n.cross(pu)))
-        .normalize();
+    let true_normal = true_normal(map.gradient[i], core);
     let half = HORIZON_AZIMUTHS / 2;
     let mut sum = 0.0;
     for s in 0..half {
@@ -105,18 +100,30 @@ pub fn magnified_occlusion(map: &HorizonMap, uv: Vec2, core: &CoreFrame) -> f32 
     top * (1.0 - f.y) + bottom * f.y
 }
 
-/// The true normal at texel `index` by Blinn's formula with the map's gradient (oriented like
-/// the core normal), as the bump normal is made.
-pub fn texel_normal(map: &HorizonMap, index: usize, core: &CoreFrame) -> Vec3 {
-    true_normal(map.gradient[index], core)
-}
-
+/// The true normal for the map's `gradient` by Blinn's formula (oriented like the core
+/// normal), as the bump normal is made.
 fn true_normal(gradient: [f32; 2], core: &CoreFrame) -> Vec3 {
     let CoreFrame { n, pu, pv, k, .. } = *core;
     let base = pu.cross(pv);
     let orientation = if base.dot(n) >= 0.0 { 1.0 } else { -1.0 };
     (orientation * (base + k * gradient[0] * n.cross(pv) - k * gradient[1] * n.cross(pu)))
         .normalize()
+}
+
+/// The bilinear value of `values` (one per texel of `map`, row-major) at texel coordinates `p`
+/// (texel centres at integers), wrapped however far.
+fn bilinear<T>(map: &HorizonMap, values: impl Fn(usize) -> T, p: Vec2) -> T
+where
+    T: std::ops::Add<Output = T> + std::ops::Mul<f32, Output = T> + Copy,
+{
+    let (w, h) = (map.width as i64, map.height as i64);
+    let at = |x: i64, y: i64| values((y.rem_euclid(h) * w + x.rem_euclid(w)) as usize);
+    let base = p.floor();
+    let f = p - base;
+    let (x0, y0) = (base.x as i64, base.y as i64);
+    let top = at(x0, y0) * (1.0 - f.x) + at(x0 + 1, y0) * f.x;
+    let bottom = at(x0, y0 + 1) * (1.0 - f.x) + at(x0 + 1, y0 + 1) * f.x;
+    top * (1.0 - f.y) + bottom * f.y
 }
 
 /// Whether light from the unit direction `to_light` reaches texel `(x, y)`: its elevation
@@ -172,19 +179,13 @@ pub fn texel_light_visibility(
     }
     // The march, as far as the farther of the two azimuths' highest occluders.
     let steps = map.distances[index][0][i0].max(map.distances[index][0][i1]);
-    let (w, h) = (map.width as i64, map.height as i64);
-    let at = |x: i64, y: i64| map.heights[(y.rem_euclid(h) * w + x.rem_euclid(w)) as usize];
-    let texel_direction = (ab / uv_length * Vec2::new(w as f32, h as f32)).normalize();
-    let uv_step = (texel_direction / Vec2::new(w as f32, h as f32)).length();
-    let h0 = at(x as i64, y as i64);
+    let size = Vec2::new(map.width as f32, map.height as f32);
+    let texel_direction = (ab / uv_length * size).normalize();
+    let uv_step = (texel_direction / size).length();
+    let h0 = map.heights[index];
     (1..=steps).all(|t| {
         let p = Vec2::new(x as f32, y as f32) + t as f32 * texel_direction;
-        let base = p.floor();
-        let g = p - base;
-        let (bx, by) = (base.x as i64, base.y as i64);
-        let top = at(bx, by) + (at(bx + 1, by) - at(bx, by)) * g.x;
-        let bottom = at(bx, by + 1) + (at(bx + 1, by + 1) - at(bx, by + 1)) * g.x;
-        let height = top + (bottom - top) * g.y;
+        let height = bilinear(map, |i| map.heights[i], p);
         let d = t as f32 * uv_step * reach;
         k * (height - h0) - 0.5 * curvature * d * d <= tan_l * d
     })
@@ -214,20 +215,12 @@ pub fn texture_bounce(
 ) -> f32 {
     let (w, h) = (map.width as i64, map.height as i64);
     let wrap = |x: i64, y: i64| (y.rem_euclid(h) * w + x.rem_euclid(w)) as usize;
-    let bilinear = |values: &dyn Fn(usize) -> Vec2, p: Vec2| {
-        let base = p.floor();
-        let f = p - base;
-        let (x0, y0) = (base.x as i64, base.y as i64);
-        let top = values(wrap(x0, y0)).lerp(values(wrap(x0 + 1, y0)), f.x);
-        let bottom = values(wrap(x0, y0 + 1)).lerp(values(wrap(x0 + 1, y0 + 1)), f.x);
-        top.lerp(bottom, f.y)
-    };
-    let height = |i: usize| Vec2::splat(map.heights[i]);
-    let gradient = |i: usize| Vec2::from(map.gradient[i]);
+    let height = |p: Vec2| bilinear(map, |i| map.heights[i], p);
+    let gradient = |p: Vec2| bilinear(map, |i| Vec2::from(map.gradient[i]), p).into();
     // Texel coordinates (texel centres at integers), as the horizon map was built.
     let p = uv.fract_gl() * Vec2::new(w as f32, h as f32) - 0.5;
-    let h0 = bilinear(&height, p).x;
-    let normal = true_normal(bilinear(&gradient, p).into(), core);
+    let h0 = height(p);
+    let normal = true_normal(gradient(p), core);
     let nearest = wrap(p.x.round() as i64, p.y.round() as i64);
     let mut irradiance = 0.0;
     let mut covered = 0.0;
@@ -242,7 +235,7 @@ pub fn texture_bounce(
             let along = core.pu * (t * dx / w as f32) + core.pv * (t * dy / h as f32);
             // The core falls κ D² / 2 below its tangent plane at world distance D.
             let fall = 0.5 * curvature * along.length_squared();
-            let d = along + core.n * (core.k * (bilinear(&height, s).x - h0) - fall);
+            let d = along + core.n * (core.k * (height(s) - h0) - fall);
             let length = d.length();
             if length <= 0.0 {
                 continue;
@@ -259,7 +252,7 @@ pub fn texture_bounce(
                     .normalize(),
                 ..*core
             };
-            let n_s = true_normal(bilinear(&gradient, s).into(), &core_s);
+            let n_s = true_normal(gradient(s), &core_s);
             let cos_l = n_s.dot(to_light);
             if n_s.dot(-d) > 0.0
                 && cos_l > 0.0

@@ -351,6 +351,32 @@ fn level_height(p: vec2<f32>, mip: i32, level: vec2<i32>) -> f32 {
     return mix(mix(h00, h10, f.x), mix(h01, h11, f.x), f.y);
 }
 
+// The size of the horizon map's level: one block of its image.
+fn horizon_level() -> vec2<i32> {
+    let size = vec2<i32>(textureDimensions(horizons));
+    return vec2<i32>(size.x / HORIZON_BLOCKS, size.y);
+}
+
+// The texture-space occlusion and the visibility of `to_light` (1 with `has_light` false) at
+// `uv`: the four texels around it mixed bilinearly, so that texels do not show as blocks.
+fn magnified_texel_terms(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame, has_light: bool, to_light: vec3<f32>) -> vec2<f32> {
+    let p = fract(uv) * vec2<f32>(level) - 0.5;
+    let base = vec2<i32>(floor(p));
+    let f = p - floor(p);
+    var corners: array<vec2<f32>, 4>;
+    for (var corner = 0; corner < 4; corner++) {
+        let texel = horizon_texel(base, vec2<i32>(corner & 1, corner >> 1u), level);
+        var visible = 1.0;
+        if has_light {
+            visible = texel_light_visibility(texel, level, core, to_light);
+        }
+        corners[corner] = vec2(texel_occlusion(texel, level, core), visible);
+    }
+    // Nested mixes: four equal corners give exactly their value (an open, lit flat map stays
+    // exactly 1).
+    return mix(mix(corners[0], corners[1], f.x), mix(corners[2], corners[3], f.x), f.y);
+}
+
 // The texel of the horizon map `i` texels from `base`, wrapped (height maps tile).
 fn horizon_texel(base: vec2<i32>, i: vec2<i32>, level: vec2<i32>) -> vec2<i32> {
     return ((base + i) % level + level) % level;
@@ -364,29 +390,13 @@ fn horizon_texel(base: vec2<i32>, i: vec2<i32>, level: vec2<i32>) -> vec2<i32> {
 // (which flattens the relief): 2 × 2 taps spread over the footprint (UV derivatives `duv1`,
 // `duv2`). Between 0.75 and 1.5 texels per pixel, a blend of the two.
 fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_pixel: f32, core: CoreFrame, has_light: bool, to_light: vec3<f32>) -> vec2<f32> {
-    let size = vec2<i32>(textureDimensions(horizons));
-    let block = size.x / HORIZON_BLOCKS;
-    let level = vec2<i32>(block, size.y);
+    let level = horizon_level();
     // Texels per pixel of the horizon map's level (it may be coarser than level 0).
-    let horizon_texels = texels_per_pixel * f32(block) / f32(textureDimensions(height_mips, 0).x);
+    let horizon_texels = texels_per_pixel * f32(level.x) / f32(textureDimensions(height_mips, 0).x);
     let minified = smoothstep(0.75, 1.5, horizon_texels);
     var magnified_terms = vec2(0.0);
     if minified < 1.0 {
-        let p = fract(uv) * vec2<f32>(level) - 0.5;
-        let base = vec2<i32>(floor(p));
-        let f = p - floor(p);
-        var corners: array<vec2<f32>, 4>;
-        for (var corner = 0; corner < 4; corner++) {
-            let texel = horizon_texel(base, vec2<i32>(corner & 1, corner >> 1u), level);
-            var visible = 1.0;
-            if has_light {
-                visible = texel_light_visibility(texel, level, core, to_light);
-            }
-            corners[corner] = vec2(texel_occlusion(texel, level, core), visible);
-        }
-        // Nested mixes: four equal corners give exactly their value (an open, lit flat map
-        // stays exactly 1).
-        magnified_terms = mix(mix(corners[0], corners[1], f.x), mix(corners[2], corners[3], f.x), f.y);
+        magnified_terms = magnified_texel_terms(uv, level, core, has_light, to_light);
     }
     var minified_terms = vec2(0.0);
     if minified > 0.0 {
@@ -419,19 +429,6 @@ fn true_normal_at(p: vec2<f32>, level: vec2<i32>, core: CoreFrame) -> vec3<f32> 
     return normalize(blinn_normal(core.n, core.pu, core.pv, core.k * gradient.x, core.k * gradient.y));
 }
 
-
-// The texture-space occlusion at `uv`: the four texels around it mixed bilinearly (the
-// magnified branch of `footprint_terms`).
-fn uv_occlusion(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame) -> f32 {
-    let p = fract(uv) * vec2<f32>(level) - 0.5;
-    let base = vec2<i32>(floor(p));
-    let f = p - floor(p);
-    let o00 = texel_occlusion(horizon_texel(base, vec2(0, 0), level), level, core);
-    let o10 = texel_occlusion(horizon_texel(base, vec2(1, 0), level), level, core);
-    let o01 = texel_occlusion(horizon_texel(base, vec2(0, 1), level), level, core);
-    let o11 = texel_occlusion(horizon_texel(base, vec2(1, 1), level), level, core);
-    return mix(mix(o00, o10, f.x), mix(o01, o11, f.x), f.y);
-}
 
 // One bounce of the light from `to_light` at `uv`, relative to E0 (the irradiance of a surface
 // facing the light), every surface white — what a ray tracer finds by following the rays that
@@ -650,11 +647,10 @@ fn height(@builtin(global_invocation_id) id: vec3<u32>) {
             // rescaled with the occlusion at that UV too (the texels' bilinear mix, which the
             // footprint's value is where the surface is magnified): the mean over a minified
             // footprint paired with one point's bounce was off by the difference.
-            let block = i32(textureDimensions(horizons).x) / HORIZON_BLOCKS;
-            let level = vec2<i32>(block, i32(textureDimensions(horizons).y));
+            let level = horizon_level();
             var occlusion_here = texture_occlusion;
-            if texels_per_pixel * f32(block) / size0.x > 0.75 {
-                occlusion_here = uv_occlusion(uv, level, core);
+            if texels_per_pixel * f32(level.x) / size0.x > 0.75 {
+                occlusion_here = magnified_texel_terms(uv, level, core, false, to_light).x;
             }
             texture_bounce_value = texture_bounce(uv, level, core, to_light, occlusion_here);
         }

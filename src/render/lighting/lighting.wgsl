@@ -125,6 +125,11 @@ struct DirectTerms {
     all: vec3<f32>,
     shadowed: vec3<f32>,
     visibility: f32,
+    // The first directional light's shadow-map visibility at P (1 where it casts no shadow, P
+    // receives none, or there is no such light), fetched where the texture-space bounce needs
+    // it: the bleeding pass's bounce of that light reaches P only where the light does, and
+    // must not count the light twice in the gathered colours.
+    sun_shadow: f32,
 }
 
 fn add_light(terms: ptr<function, DirectTerms>, contribution: vec3<f32>, shadow: f32, visible: f32) {
@@ -141,9 +146,11 @@ fn add_light(terms: ptr<function, DirectTerms>, contribution: vec3<f32>, shadow:
 fn direct_terms(in: PbrInput, p: vec2<i32>) -> DirectTerms {
     var terms: DirectTerms;
     terms.visibility = 1.0;
+    terms.sun_shadow = 1.0;
     let micro = settings.micro_shadows != 0u;
     let every_light = settings.weights.y != 1.0;
-    if !micro && !every_light {
+    let sun_shadow = settings.texture_space_bounce != 0u;
+    if !micro && !every_light && !sun_shadow {
         return terms;
     }
     var input = lighting_input(in);
@@ -195,34 +202,25 @@ fn direct_terms(in: PbrInput, p: vec2<i32>) -> DirectTerms {
         if micro && i == 0u && settings.texture_space_horizons != 0u && texture_visible >= 0.0 {
             visible = texture_visible;
         }
-        if visible >= 1.0 && !every_light {
+        let skip = visible >= 1.0 && !every_light;
+        if skip && !(sun_shadow && i == 0u) {
             continue;
         }
         var shadow = 1.0;
         if receiver && (lights.directional_lights[i].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             shadow = shadows::fetch_directional_shadow(i, in.world_position, in.world_normal, view_z, in.frag_coord.xy);
         }
+        if i == 0u {
+            terms.sun_shadow = shadow;
+        }
+        if skip {
+            continue;
+        }
         add_light(&terms, lighting::directional_light(i, &input, true), shadow, visible);
     }
     terms.all *= view.exposure;
     terms.shadowed *= view.exposure;
     return terms;
-}
-
-// The first directional light's shadow-map visibility at P (1 where it casts no shadow, P
-// receives none, or there is no such light). The bleeding pass's texture-space bounce of that
-// light (`texture_bounce` in height.wgsl) needs it at P, which the bounce reaches only where
-// the light does, and at the gathered points, whose lit colour it must not count twice.
-fn first_directional_shadow(in: PbrInput) -> f32 {
-    if lights.n_directional_lights == 0u
-        || (in.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) == 0u
-        || (lights.directional_lights[0].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) == 0u {
-        return 1.0;
-    }
-    let view_z = dot(vec4<f32>(
-        view.view_from_world[0].z, view.view_from_world[1].z,
-        view.view_from_world[2].z, view.view_from_world[3].z), in.world_position);
-    return shadows::fetch_directional_shadow(0u, in.world_position, in.world_normal, view_z, in.frag_coord.xy);
 }
 
 struct FullscreenVertexOutput {
@@ -295,11 +293,7 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
             max(output_color.rgb + (direct_weight - 1.0) * direct.all - direct_weight * direct.shadowed, vec3(0.0)),
             output_color.a,
         );
-        var sun_shadow = 1.0;
-        if settings.texture_space_bounce != 0u {
-            sun_shadow = first_directional_shadow(pbr_input);
-        }
-        textureStore(micro_shadow_out, pixel, vec4(direct.visibility, sun_shadow, 0.0, 0.0));
+        textureStore(micro_shadow_out, pixel, vec4(direct.visibility, direct.sun_shadow, 0.0, 0.0));
     } else {
         textureStore(micro_shadow_out, pixel, vec4(1.0));
         output_color = pbr_input.material.base_color;
