@@ -1,5 +1,6 @@
 //! Speed against accuracy of volumetric spot lights: this crate's equal-angle pass at 4, 8,
-//! 16 and 32 samples against Bevy's `VolumetricFog` at 16, 32, 64 and 128 steps, on issue 12's
+//! 16 and 32 samples and seed 004's slicing planes at 4, 8, 16 and 32 planes against Bevy's
+//! `VolumetricFog` at 16, 32, 64 and 128 steps, on issue 12's
 //! reference set-up (a spot at (0, 4, 0) aimed at (0.5, 0, 0), outer 30°, inner 20°, 20 000 lm,
 //! range 100, in a 20 × 10 × 20 m fog volume of σs 0.10, σa 0.01; all surfaces black), with and
 //! without a 1 m cube casting a shaft. Each run's fog-only radiance (HDR, read back) is scored
@@ -40,7 +41,7 @@ use bevy::{
     },
 };
 use bevy_mesostructure::volumetric::{
-    VolumetricMedium, VolumetricResolution, VolumetricSpot, VolumetricSpotsPlugin,
+    VolumetricMedium, VolumetricMethod, VolumetricResolution, VolumetricSpot, VolumetricSpotsPlugin,
     reference::Occluder,
 };
 use spot_scene::{ABSORPTION, EV100, SCATTERING};
@@ -97,7 +98,7 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
                 .label_style(("sans-serif", 14))
                 .draw()
                 .expect("draw");
-            for (i, method) in ["equal_angle", "equal_angle (reduced)", "bevy_fog"]
+            for (i, method) in ["equal_angle", "equal_angle (reduced)", "planes", "bevy_fog"]
                 .into_iter()
                 .enumerate()
             {
@@ -107,7 +108,7 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
                     .map(|r| (r.gpu_ms.max(0.0), r.rel_l1.max(1e-4)))
                     .collect();
                 points.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let color = [RED, MAGENTA, BLUE][i].to_rgba();
+                let color = [RED, MAGENTA, GREEN, BLUE][i].to_rgba();
                 common::chart::line_with_points(&mut chart, method, &points, color);
             }
             common::chart::legend(&mut chart);
@@ -122,6 +123,8 @@ enum Method {
     EqualAngle(u32),
     /// 16 samples at a reduced resolution.
     EqualAngleReduced(VolumetricResolution),
+    /// Seed 004's slicing planes, this many per spot.
+    Planes(u32),
     BevyFog(u32),
 }
 
@@ -159,7 +162,7 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
     // VOLUMETRIC flag needs them); the unshadowed scene has nothing to cast a shadow.
     let mut spot = world.spawn((spot_scene::bevy_spot(true), spot_scene::spot_transform()));
     match method {
-        Method::EqualAngle(samples) => {
+        Method::EqualAngle(samples) | Method::Planes(samples) => {
             spot.insert(VolumetricSpot {
                 samples,
                 ..default()
@@ -187,7 +190,7 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
         Transform::from_translation(EYE).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y),
     ));
     match method {
-        Method::EqualAngle(_) | Method::EqualAngleReduced(_) => {
+        Method::EqualAngle(_) | Method::EqualAngleReduced(_) | Method::Planes(_) => {
             camera.insert(VolumetricMedium {
                 scattering: SCATTERING,
                 absorption: ABSORPTION,
@@ -195,6 +198,10 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
                 resolution: match method {
                     Method::EqualAngleReduced(r) => r,
                     _ => VolumetricResolution::Full,
+                },
+                method: match method {
+                    Method::Planes(_) => VolumetricMethod::SlicingPlanes,
+                    _ => VolumetricMethod::EqualAngleRays,
                 },
             });
         }
@@ -339,6 +346,7 @@ fn main() {
                     "16@quarter".to_string(),
                 ),
             ])
+            .chain([4, 8, 16, 32].map(|n| ("planes", Method::Planes(n), n.to_string())))
             .chain([16, 32, 64, 128].map(|n| ("bevy_fog", Method::BevyFog(n), n.to_string())));
         for (name, method, setting) in methods {
             let (values, ms, adapter) = run(cli.size, cli.frames, cli.g, shadowed, method);

@@ -8,7 +8,7 @@
 //!
 //! ```text
 //! cargo run --example volumetric_spots -- [--frames N] [--out DIR] [--size WxH] [--headless]
-//!     [--samples N] [--scattering S] [--asymmetry G]
+//!     [--samples N] [--scattering S] [--asymmetry G] [--method equal-angle|planes]
 //! ```
 
 #[path = "common/mod.rs"]
@@ -17,7 +17,7 @@ mod common;
 use bevy::{camera::Hdr, prelude::*};
 use bevy_mesostructure::{
     prelude::*,
-    volumetric::{VolumetricMedium, VolumetricSpot, VolumetricSpotsPlugin},
+    volumetric::{VolumetricMedium, VolumetricMethod, VolumetricSpot, VolumetricSpotsPlugin},
 };
 
 /// A dark room lit by swinging spot lights in a haze; a window with the tuning panel, or
@@ -27,7 +27,7 @@ use bevy_mesostructure::{
 struct Cli {
     #[command(flatten)]
     common: common::CommonArgs,
-    /// Points per pixel and spot at equal angles around the light (1–64)
+    /// Points per pixel and spot at equal angles around the light, or planes per spot (1–64)
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=64))]
     samples: u32,
     /// Scattering coefficient of the haze, per metre (> 0)
@@ -36,6 +36,16 @@ struct Cli {
     /// Henyey–Greenstein asymmetry of the haze (−0.95 to 0.95)
     #[arg(long, default_value_t = 0.3, allow_negative_numbers = true, value_parser = parse_asymmetry)]
     asymmetry: f32,
+    /// How the in-scatter is sampled: per-pixel rays at equal angles, or seed 004's slicing
+    /// planes (`samples` per spot)
+    #[arg(long, value_enum, default_value_t = Method::EqualAngle)]
+    method: Method,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Method {
+    EqualAngle,
+    Planes,
 }
 
 fn parse_asymmetry(s: &str) -> Result<f32, String> {
@@ -80,6 +90,10 @@ fn main() {
             scattering: cli.scattering,
             absorption: 0.01,
             asymmetry: cli.asymmetry,
+            method: match cli.method {
+                Method::EqualAngle => VolumetricMethod::EqualAngleRays,
+                Method::Planes => VolumetricMethod::SlicingPlanes,
+            },
             ..default()
         },
         cli.samples,

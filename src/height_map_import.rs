@@ -143,6 +143,12 @@ pub const HORIZON_DISTANCE_BLOCKS: usize = HORIZON_BANDS * (HORIZON_AZIMUTHS / 4
 /// gave a relative error 0.17–0.39, 6 gave 0.13–0.29, 8 gave 0.12–0.25, every texel step
 /// 0.11–0.24 (docs/accuracy.md).
 pub const TEXTURE_BOUNCE_SAMPLES: u32 = 6;
+/// The most light a pixel keeps, in percent, where the point test at a shadow edge finds it in
+/// shadow (`point_light_visibility` in `render/height/height.wgsl`, mirrored in
+/// `reference::texture_space`): the texels' mix shapes the edge's soft profile, and a
+/// shadowed pixel stays below one half, lit ones at or above it, so that the point's decision
+/// survives any threshold at one half.
+pub const EDGE_SHADOWED_PERCENT: u32 = 49;
 /// How far each horizon is searched, in texels of the horizon map's level.
 pub const HORIZON_RADIUS: u32 = 32;
 // Each slope's distance is stored in texel steps, one byte each.

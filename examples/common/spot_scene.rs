@@ -88,6 +88,18 @@ pub struct Truth {
     pub tip: Vec<bool>,
 }
 
+/// The set-up's spot as the reference lights with it ([`bevy_spot`]'s light).
+pub fn reference_light() -> reference::SpotLight {
+    reference::SpotLight {
+        position: SPOT_POSITION.as_dvec3(),
+        direction: (SPOT_AIM - SPOT_POSITION).normalize().as_dvec3(),
+        intensity: 20_000.0 / (4.0 * std::f64::consts::PI),
+        inner_angle: 20f64.to_radians(),
+        outer_angle: 30f64.to_radians(),
+        range: 100.0,
+    }
+}
+
 pub fn truth(
     eye: Vec3,
     world_from_clip: Mat4,
@@ -97,14 +109,7 @@ pub fn truth(
     volume: Option<&Occluder>,
     estimator: Option<(Sampling, u32)>,
 ) -> Truth {
-    let spot = reference::SpotLight {
-        position: SPOT_POSITION.as_dvec3(),
-        direction: (SPOT_AIM - SPOT_POSITION).normalize().as_dvec3(),
-        intensity: 20_000.0 / (4.0 * std::f64::consts::PI),
-        inner_angle: 20f64.to_radians(),
-        outer_angle: 30f64.to_radians(),
-        range: 100.0,
-    };
+    let spot = reference_light();
     let medium = Medium {
         scattering: SCATTERING as f64,
         absorption: ABSORPTION as f64,

@@ -25,8 +25,10 @@
 //! is outside a camera's frustum is skipped for it, and pixels outside its projected bounding
 //! rectangle skip it; with no cone in view the pass only dims the surfaces (none at all in a
 //! transparent medium).
-//! **Not yet**: per-tile light culling, a reduced resolution, the seed's plane-slicing method and the
-//! comparison with Bevy's fog. Use an `Hdr` camera: the in-scatter is added in linear light.
+//! Half and quarter resolutions ([`VolumetricResolution`]) upsample by depth; the seed's own
+//! rasterised sampling planes are [`VolumetricMethod::SlicingPlanes`], for comparison.
+//! **Not yet**: per-tile light culling and a compute version. Use an `Hdr` camera: the
+//! in-scatter is added in linear light.
 //! [`reference`](mod@reference) is the exact CPU ground truth.
 
 pub mod reference;
@@ -50,6 +52,8 @@ use render::*;
 
 /// The most spots with [`VolumetricSpot`] drawn per frame (more are skipped, with a warning).
 pub const MAX_VOLUMETRIC_SPOTS: usize = 64;
+/// The most samples (or sampling planes) per spot ([`VolumetricSpot::samples`]).
+pub const MAX_VOLUMETRIC_SAMPLES: u32 = 64;
 
 /// The participating medium a camera sees its volumetric spots through: homogeneous, filling
 /// the world. Coefficients per world unit (per metre at Bevy's scale). Requires the depth
@@ -68,8 +72,28 @@ pub struct VolumetricMedium {
     /// brighter looking into the light). Default 0 (isotropic).
     pub asymmetry: f32,
     /// Where the in-scatter is computed: every pixel, or one pixel in 2×2 or 4×4 with a
-    /// depth-aware upsample (the surfaces' dimming stays per pixel). Default `Full`.
+    /// depth-aware upsample (the surfaces' dimming stays per pixel). Default `Full`. The
+    /// slicing planes are always drawn at full resolution.
     pub resolution: VolumetricResolution,
+    /// How the in-scatter is sampled. Default [`VolumetricMethod::EqualAngleRays`].
+    pub method: VolumetricMethod,
+}
+
+/// How the in-scatter along the view rays is sampled ([`VolumetricMedium::method`]).
+#[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[reflect(Default)]
+pub enum VolumetricMethod {
+    /// Per pixel, the view ray clipped to each cone and sampled at equal angles around the
+    /// light (`samples` of them): seed 004's spacing as a change of variable along each ray,
+    /// exact where the ray passes close to the light.
+    #[default]
+    EqualAngleRays,
+    /// Seed 004 as it rasterises: `samples` planes per spot, perpendicular to the view axis
+    /// and spaced at equal angles around the light, drawn over the cone's part of the screen
+    /// and added where they lie in front of the depth buffer. Shared by every pixel, so a ray
+    /// passing near the light may meet none of them inside the cone (docs/volumetric.md); for
+    /// comparison.
+    SlicingPlanes,
 }
 
 impl Default for VolumetricMedium {
@@ -79,6 +103,7 @@ impl Default for VolumetricMedium {
             absorption: 0.01,
             asymmetry: 0.0,
             resolution: VolumetricResolution::Full,
+            method: VolumetricMethod::EqualAngleRays,
         }
     }
 }
@@ -114,9 +139,10 @@ pub struct VolumetricSpot {
     /// Scale of the light's intensity in the medium (≥ 0; 1 = physical, as the surfaces see
     /// it).
     pub intensity_scale: f32,
-    /// Points per pixel at equal angles around the light (1–64). Default 16: within 1 % of the
-    /// exact in-scatter on unshadowed rays, and 0.1 % on rays passing a few centimetres from
-    /// the light (`reference` tests).
+    /// Points per pixel at equal angles around the light (1–64; with
+    /// [`VolumetricMethod::SlicingPlanes`], planes for this spot). Default 16: within 1 % of
+    /// the exact in-scatter on unshadowed rays, and 0.1 % on rays passing a few centimetres
+    /// from the light (`reference` tests).
     pub samples: u32,
 }
 
@@ -140,6 +166,7 @@ impl Plugin for VolumetricSpotsPlugin {
         bevy::asset::embedded_asset!(app, "spots.wgsl");
         app.register_type::<VolumetricMedium>()
             .register_type::<VolumetricResolution>()
+            .register_type::<VolumetricMethod>()
             .register_type::<VolumetricSpot>()
             .add_plugins(SyncComponentPlugin::<VolumetricMedium>::default());
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {

@@ -58,6 +58,9 @@ pub struct GpuVolumetricSpot {
     /// The part of the view the cone can cover, in NDC: (min x, min y, max x, max y) — its
     /// bounding sphere's projection; pixels outside skip the spot.
     pub screen_rect: Vec4,
+    /// A sphere around the cone out to its range (centre, radius): where the slicing planes
+    /// go.
+    pub bounds: Vec4,
 }
 
 /// One spot of this frame.
@@ -211,6 +214,7 @@ pub fn extract_volumetric_cameras(
                 absorption,
                 asymmetry,
                 resolution: medium.resolution,
+                method: medium.method,
             },
             frustum: *frustum,
             clip_from_world: camera.clip_from_view() * transform.to_matrix().inverse(),
@@ -270,7 +274,7 @@ pub fn extract_volumetric_spots(
             0.0
         };
         let (scale, bad_scale) = finite_at_least(volumetric.intensity_scale, 0.0, 1.0);
-        let samples = volumetric.samples.clamp(1, 64);
+        let samples = volumetric.samples.clamp(1, super::MAX_VOLUMETRIC_SAMPLES);
         if bad_scale || samples != volumetric.samples {
             warned.warn(format!("volumetric spot settings {entity}"), || {
                 format!(
@@ -298,6 +302,7 @@ pub fn extract_volumetric_spots(
             cone: Vec4::new(cos_outer, spot_scale, -cos_outer * spot_scale, -1.0),
             // Per view, in `prepare_volumetric_uniforms`.
             screen_rect: Vec4::new(-1.0, -1.0, 1.0, 1.0),
+            bounds: Vec4::ZERO,
         };
         let axis = transform.forward().as_vec3();
         spots.0.push(ExtractedVolumetricSpot {
@@ -333,6 +338,7 @@ pub fn prepare_volumetric_uniforms(
             }
             let mut gpu = spot.gpu;
             gpu.screen_rect = screen_rect(&spot.bounds, view.clip_from_world);
+            gpu.bounds = Vec3::from(spot.bounds.center).extend(spot.bounds.radius);
             if let Some(index) = clusterables
                 .as_ref()
                 .filter(|_| spot.shadows)
@@ -378,6 +384,8 @@ pub enum VolumetricPass {
     LowResolution(u32),
     /// The depth-aware upsample of that image, blended into the view.
     Upsample(u32),
+    /// Seed 004's sampling planes, blended into the view.
+    SlicingPlanes,
 }
 
 /// Format of the low-resolution in-scatter image.
@@ -392,7 +400,8 @@ pub fn init_volumetric_pipeline(
     let layout = BindGroupLayoutDescriptor::new(
         "volumetric_spots_layout",
         &BindGroupLayoutEntries::sequential(
-            ShaderStages::FRAGMENT,
+            // The slicing planes' vertex stage places them from the spots' data.
+            ShaderStages::VERTEX_FRAGMENT,
             (
                 uniform_buffer::<VolumetricUniform>(true),
                 texture_2d(TextureSampleType::Float { filterable: false }),
@@ -416,11 +425,13 @@ pub fn init_volumetric_pipeline(
 }
 
 /// The volumetric pipelines of a view: the full-resolution one, or the low-resolution pass and
-/// its upsample.
+/// its upsample, or the slicing planes.
 #[derive(Component)]
 pub struct ViewVolumetricPipeline {
-    /// Full resolution, or the upsample.
+    /// Full resolution, the upsample, or the slicing planes.
     pub blend: CachedRenderPipelineId,
+    /// Whether `blend` draws the slicing planes (instanced) rather than one triangle.
+    pub slicing_planes: bool,
     /// The low-resolution pass, where the view has one.
     pub low_resolution: Option<CachedRenderPipelineId>,
 }
@@ -449,7 +460,19 @@ fn specialize(
         VolumetricPass::Full => ("fragment", None),
         VolumetricPass::LowResolution(f) => ("fragment", Some(f)),
         VolumetricPass::Upsample(f) => ("upsample", Some(f)),
+        VolumetricPass::SlicingPlanes => ("plane_fragment", None),
     };
+    if pass == VolumetricPass::SlicingPlanes {
+        descriptor.vertex.entry_point = Some("plane_vertex".into());
+        let defs = [
+            "SLICING_PLANES".into(),
+            bevy::shader::ShaderDefVal::UInt("PLANES_PER_SPOT".into(), super::MAX_VOLUMETRIC_SAMPLES),
+        ];
+        descriptor.vertex.shader_defs.extend(defs.clone());
+        if let Some(fragment) = descriptor.fragment.as_mut() {
+            fragment.shader_defs.extend(defs);
+        }
+    }
     if let Some(fragment) = descriptor.fragment.as_mut() {
         fragment.shader = volumetric.shader.clone();
         fragment.entry_point = Some(entry.into());
@@ -524,12 +547,18 @@ pub fn prepare_volumetric_pipelines(
             .physical_viewport_size
             .unwrap_or_default()
             .max(UVec2::ONE);
-        if factor == 1 {
-            let blend = pipeline(VolumetricPass::Full);
+        let slicing_planes = medium.medium.method == super::VolumetricMethod::SlicingPlanes;
+        if factor == 1 || slicing_planes {
+            let blend = pipeline(if slicing_planes {
+                VolumetricPass::SlicingPlanes
+            } else {
+                VolumetricPass::Full
+            });
             commands
                 .entity(entity)
                 .insert(ViewVolumetricPipeline {
                     blend,
+                    slicing_planes,
                     low_resolution: None,
                 })
                 .remove::<ViewInScatterTexture>();
@@ -558,6 +587,7 @@ pub fn prepare_volumetric_pipelines(
         commands.entity(entity).insert((
             ViewVolumetricPipeline {
                 blend,
+                slicing_planes: false,
                 low_resolution,
             },
             ViewInScatterTexture { texture },
@@ -659,7 +689,13 @@ pub fn volumetric_spots_pass(
         pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
         pass.set_bind_group(1, &mesh_view.binding_array, &[]);
         pass.set_bind_group(2, &bind_group, &[offset.offset]);
-        pass.draw(0..3, 0..1);
+        if pipelines.slicing_planes {
+            // Instance 0 dims the surfaces, then each spot's planes (a quad each; the ones a
+            // spot does not have collapse in the vertex stage).
+            pass.draw(0..6, 0..1 + offset.spots * super::MAX_VOLUMETRIC_SAMPLES);
+        } else {
+            pass.draw(0..3, 0..1);
+        }
     }
     span.end(ctx.command_encoder());
     ctx.command_encoder().pop_debug_group();

@@ -3,7 +3,7 @@
 // angles around the light: t = t_c + h tan γ, for which dt / |x − p|² = dγ / h (no 1/d² spike).
 // Output: the in-scattered radiance (added) and the transmittance to the surface (which
 // multiplies what the surface sends). Mirrors `volumetric::reference::estimate` with
-// `Sampling::EqualAngle`.
+// `Sampling::EqualAngle` (and, under SLICING_PLANES, `Sampling::SlicingPlanes`).
 
 #import bevy_pbr::{
     mesh_view_bindings::{view, clustered_lights},
@@ -21,6 +21,8 @@ struct Spot {
     cone: vec4<f32>,
     // The NDC rectangle the cone can cover (min x, min y, max x, max y).
     screen_rect: vec4<f32>,
+    // A sphere around the cone out to its range: centre, radius.
+    bounds: vec4<f32>,
 }
 
 struct Volumetric {
@@ -144,6 +146,26 @@ fn equal_angle_span(spot: Spot, o: vec3<f32>, d: vec3<f32>, t_a: f32, t_b: f32) 
     return e;
 }
 
+// The integrand in t times |x − p|² at ray parameter t, F · W · V · ρ · e^(−σt (t + |x − p|)),
+// and |x − p|: Bevy's spot fall-off and range window (`pbr_lighting.wgsl`), the spot's shadow
+// map, the phase, extinction along the ray and from the light.
+fn scattered_at(spot: Spot, o: vec3<f32>, d: vec3<f32>, t: f32, frag_coord: vec2<f32>) -> vec2<f32> {
+    let p = spot.position_range.xyz;
+    let v = o + d * t - p;
+    let dist = length(v);
+    let l = v / dist;
+    let a = saturate(dot(l, spot.direction_samples.xyz) * spot.cone.y + spot.cone.z);
+    let f = dist * dist / (spot.position_range.w * spot.position_range.w);
+    let window = saturate(1.0 - f * f);
+    let w = a * a * window * window;
+    if w <= 0.0 {
+        return vec2(0.0, dist);
+    }
+    let visible = spot_visibility(spot, p + v, l, frag_coord);
+    let sigma_t = volumetric.medium.x + volumetric.medium.y;
+    return vec2(w * visible * phase(-dot(l, d), volumetric.medium.z) * exp(-sigma_t * (t + dist)), dist);
+}
+
 fn in_scattered(
     spot: Spot,
     o: vec3<f32>,
@@ -156,34 +178,14 @@ fn in_scattered(
     if e.g_b <= e.g_a {
         return vec3(0.0);
     }
-    let p = spot.position_range.xyz;
-    let t_c = e.t_c;
-    let h = e.h;
-    let g_a = e.g_a;
     let n = max(u32(spot.direction_samples.w), 1u);
-    let step = (e.g_b - g_a) / f32(n);
-    let sigma_s = volumetric.medium.x;
-    let sigma_t = volumetric.medium.x + volumetric.medium.y;
-    let range2 = spot.position_range.w * spot.position_range.w;
+    let step = (e.g_b - e.g_a) / f32(n);
     var sum = 0.0;
     for (var i = 0u; i < n; i++) {
-        let gamma = g_a + (f32(i) + 0.5) * step;
-        let t = t_c + h * tan(gamma);
-        let v = o + d * t - p;
-        let dist = length(v);
-        let l = v / dist;
-        // Bevy's spot fall-off and range window (`pbr_lighting.wgsl`).
-        let a = saturate(dot(l, spot.direction_samples.xyz) * spot.cone.y + spot.cone.z);
-        let f = dist * dist / range2;
-        let window = saturate(1.0 - f * f);
-        let w = a * a * window * window;
-        if w <= 0.0 {
-            continue;
-        }
-        let visible = spot_visibility(spot, p + v, l, frag_coord);
-        sum += w * visible * phase(-dot(l, d), volumetric.medium.z) * exp(-sigma_t * (t + dist));
+        let gamma = e.g_a + (f32(i) + 0.5) * step;
+        sum += scattered_at(spot, o, d, e.t_c + e.h * tan(gamma), frag_coord).x;
     }
-    return spot.color.rgb * (sigma_s / h * sum * step);
+    return spot.color.rgb * (volumetric.medium.x / e.h * sum * step);
 }
 
 struct FullscreenVertexOutput {
@@ -336,5 +338,89 @@ fn upsample(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         weight += w;
     }
     return vec4(sum / max(weight, 1.0e-9) * closed_form, transmittance(r));
+}
+#endif
+
+#ifdef SLICING_PLANES
+// Seed 004's sampling planes as it rasterises them (`VolumetricMethod::SlicingPlanes`), for the
+// comparison: per spot `samples` planes perpendicular to the view axis at view depths
+// z_p + H tan γ_k, equal steps of γ around the light (z_p its view depth, H its distance from the
+// view axis, at least 1 % of the span) over the depths of its cone's bounding sphere; each drawn
+// over the cone's screen rectangle, each pixel in front of the depth buffer adding the
+// integrand where its ray meets the plane times the ray length the plane stands for. Instance 0
+// dims the surfaces; instance 1 + PLANES_PER_SPOT · i + k is plane k of spot i. Mirrors
+// `reference::SlicingPlanes`.
+// `volumetric::MAX_VOLUMETRIC_SAMPLES`.
+const PLANES_PER_SPOT: u32 = #{PLANES_PER_SPOT}u;
+
+struct PlaneVertexOutput {
+    @builtin(position) position: vec4<f32>,
+    // The plane's view depth, the view depth it stands for, its spot (−1: the dimming).
+    @location(0) @interpolate(flat) plane: vec3<f32>,
+}
+
+fn view_forward() -> vec3<f32> {
+    return normalize((view.world_from_view * vec4(0.0, 0.0, -1.0, 0.0)).xyz);
+}
+
+@vertex
+fn plane_vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) instance: u32) -> PlaneVertexOutput {
+    var corners = array<vec2<f32>, 6>(vec2(0.0, 0.0), vec2(1.0, 0.0), vec2(0.0, 1.0), vec2(0.0, 1.0), vec2(1.0, 0.0), vec2(1.0, 1.0));
+    let corner = corners[vertex_index];
+    if instance == 0u {
+        return PlaneVertexOutput(vec4(corner * 2.0 - 1.0, 0.0, 1.0), vec3(0.0, 0.0, -1.0));
+    }
+    // Planes a spot does not have collapse to a point: no fragments.
+    let none = PlaneVertexOutput(vec4(0.0, 0.0, 0.0, 1.0), vec3(0.0, 0.0, -1.0));
+    let i = (instance - 1u) / PLANES_PER_SPOT;
+    let k = (instance - 1u) % PLANES_PER_SPOT;
+    if i >= u32(volumetric.medium.w) {
+        return none;
+    }
+    let spot = volumetric.spots[i];
+    let n = max(u32(spot.direction_samples.w), 1u);
+    if k >= n {
+        return none;
+    }
+    let forward = view_forward();
+    let w = spot.position_range.xyz - view.world_position;
+    let z_p = dot(w, forward);
+    let z_bounds = dot(spot.bounds.xyz - view.world_position, forward);
+    // Bevy's perspective projections keep the near plane's distance in clip_from_view[3][2];
+    // planes in front of an orthographic camera's near plane are clipped.
+    let orthographic = view.clip_from_view[3].w == 1.0;
+    let near = max(z_bounds - spot.bounds.w, select(view.clip_from_view[3][2], 0.0, orthographic));
+    let far = z_bounds + spot.bounds.w;
+    if far <= near {
+        return none;
+    }
+    let h = max(length(w - forward * z_p), 0.01 * (far - near));
+    let g_a = atan((near - z_p) / h);
+    let step = (atan((far - z_p) / h) - g_a) / f32(n);
+    let z = z_p + h * tan(g_a + (f32(k) + 0.5) * step);
+    let dz = h * (tan(g_a + f32(k + 1u) * step) - tan(g_a + f32(k) * step));
+    let clip = view.clip_from_view * vec4(0.0, 0.0, -z, 1.0);
+    let ndc = mix(spot.screen_rect.xy, spot.screen_rect.zw, corner);
+    return PlaneVertexOutput(vec4(ndc * clip.w, clip.z, clip.w), vec3(z, dz, f32(i)));
+}
+
+@fragment
+fn plane_fragment(in: PlaneVertexOutput) -> @location(0) vec4<f32> {
+    let r = view_ray(in.position.xy);
+    if in.plane.z < 0.0 {
+        return vec4(0.0, 0.0, 0.0, transmittance(r));
+    }
+    let spot = volumetric.spots[u32(in.plane.z)];
+    let forward = view_forward();
+    let along = dot(r.d, forward);
+    let t = (in.plane.x - dot(r.o - view.world_position, forward)) / along;
+    // The seed's depth test against the G-buffer, and nothing behind the camera.
+    if along <= 0.0 || t <= 0.0 || t >= r.t_end {
+        return vec4(0.0, 0.0, 0.0, 1.0);
+    }
+    let s = scattered_at(spot, r.o, r.d, t, in.position.xy);
+    // σs · I · integrand / |x − p|² times the ray length the plane stands for.
+    let dt = in.plane.y / along;
+    return vec4(spot.color.rgb * (volumetric.medium.x * s.x / (s.y * s.y) * dt) * view.exposure, 1.0);
 }
 #endif

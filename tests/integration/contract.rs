@@ -778,13 +778,14 @@ fn texture_space_occlusion_matches_its_cpu_mirror() {
     assert!(close * 100 >= count * 99, "only {close} of {count} within 5e-3");
 }
 
-/// The first directional light's texture-space bounce (the height pass's `texture_bounce`)
-/// against its CPU mirror `reference::texture_space::texture_bounce` at each pixel's UV: the same magnified noise plane, four times as
-/// deep, a light at 30° from the side. The bounce within 0.005 on ≥ 99 % of the pixels: the
-/// GPU reads the horizon map's slopes and gradients as half floats, which can move a sample's
-/// visibility.
+/// The first directional light's texture-space visibility and bounce (the height pass's
+/// `point_light_visibility` and `texture_bounce`) against their CPU mirrors in
+/// `reference::texture_space` at each pixel's UV: the same magnified noise plane, four times as
+/// deep, a light at 30° from the side. The visibility on the same side of one half and within
+/// 0.01 on ≥ 99 % of the pixels and the bounce within 0.005 on ≥ 99 %: the GPU reads the horizon map's slopes and gradients as half
+/// floats, which can move a texel's or a sample's visibility.
 #[test]
-fn texture_space_bounce_matches_its_cpu_mirror() {
+fn texture_space_visibility_and_bounce_match_their_cpu_mirror() {
     if !gpu_or_skip() {
         return;
     }
@@ -804,11 +805,15 @@ fn texture_space_bounce_matches_its_cpu_mirror() {
     let horizons = HorizonMap::new(&map.values, map.width, map.height);
     let core = texture_space::CoreFrame::flat(Vec3::Y, Vec3::X * 2.0, Vec3::Z * 2.0, k);
     let (mut close, mut count, mut worst, mut largest) = (0, 0, 0.0f32, 0.0f32);
+    let (mut same, mut shadowed) = (0, 0);
     for y in 4..SIZE - 4 {
         for x in 4..SIZE - 4 {
             let i = (y * SIZE + x) as usize;
-            let [_, gpu] = frame.texture_terms[i];
+            let [visible, gpu] = frame.texture_terms[i];
             let uv = top_down_uv(x, y, SIZE);
+            let cpu_visible = texture_space::point_light_visibility(&horizons, uv, &core, to_light);
+            same += ((visible - cpu_visible).abs() <= 0.01 && (visible < 0.5) == (cpu_visible < 0.5)) as usize;
+            shadowed += (cpu_visible < 0.5) as usize;
             // The height pass's own texture-space occlusion (the bump normal's w), which the
             // bounce is rescaled with.
             let occlusion = frame.bump_normal[i][3];
@@ -823,6 +828,9 @@ fn texture_space_bounce_matches_its_cpu_mirror() {
         "texture-space bounce: {close} of {count} pixels within 0.005 of the CPU mirror (worst \
          {worst:.4}, largest value {largest:.3})"
     );
+    eprintln!("texture-space visibility: {same} of {count} pixels on the CPU mirror's side of one half and within 0.01 ({shadowed} shadowed)");
+    assert!(shadowed * 20 >= count, "the scene has shadows to compare: {shadowed} of {count}");
+    assert!(same * 100 >= count * 99, "only {same} of {count} visibilities agree");
     assert!(largest > 0.05, "the scene has a bounce to compare: largest {largest}");
     assert!(close * 100 >= count * 99, "only {close} of {count} within 0.005");
     // Turned off on its own: the height pass compiles it out (the bounce reads "none"), the

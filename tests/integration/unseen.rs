@@ -95,17 +95,19 @@ fn unseen_content_scores_hold_their_measured_values() {
 /// Measured on the software driver (llvmpipe) with this test's size, step and rays
 /// (`cargo test --test integration unseen_content -- --nocapture`); the goals are AO
 /// MAE ≤ 0.04 with |bias| ≤ 0.015, micro-shadow recall ≥ 0.75 at precision ≥ 0.85, bounce
-/// relative MAE ≤ 0.35 with the mean within ±15 %: the shadows do not meet them yet, nor the
-/// bounce's per-pixel error on oblique and minified views (docs/accuracy.md). The bounce's
-/// figures are with the first directional light's bounce from texture space (before it:
-/// 0.358 / 0.684 / 0.313 and ratio 0.955 / 0.756 / 0.824).
+/// relative MAE ≤ 0.35 with the mean within ±15 %: on the full suite they are met on the
+/// means, not in every scene (the torus seen from above has a handful of shadowed pixels;
+/// docs/accuracy.md). The shadows' figures are with the light's visibility at each pixel's own
+/// point (before it, the texels' 0s and 1s interpolated: recall 0.932 / 0.632 / 0.714,
+/// precision 0.793 / 0.774 / 0.625); the bounce's with the first directional light's bounce
+/// from texture space (before it: 0.358 / 0.684 / 0.313 and ratio 0.955 / 0.756 / 0.824).
 const EXPECTED: &[Expected] = &[
     Expected {
         scene: "plane/pebbles/top-down/light35",
         ao_mae: 0.0338,
         ao_bias: 0.0123,
-        shadow_recall: 0.932,
-        shadow_precision: 0.793,
+        shadow_recall: 1.000,
+        shadow_precision: 0.961,
         bounce_rel_mae: 0.244,
         bounce_ratio: 0.894,
     },
@@ -113,8 +115,8 @@ const EXPECTED: &[Expected] = &[
         scene: "sphere/cracked/oblique/light35",
         ao_mae: 0.0776,
         ao_bias: -0.0016,
-        shadow_recall: 0.632,
-        shadow_precision: 0.774,
+        shadow_recall: 1.000,
+        shadow_precision: 0.905,
         bounce_rel_mae: 0.294,
         bounce_ratio: 1.019,
     },
@@ -123,7 +125,7 @@ const EXPECTED: &[Expected] = &[
         ao_mae: 0.0506,
         ao_bias: 0.0401,
         shadow_recall: 0.714,
-        shadow_precision: 0.625,
+        shadow_precision: 0.556,
         bounce_rel_mae: 0.265,
         bounce_ratio: 0.818,
     },

@@ -137,6 +137,10 @@ pub fn init_height_compute_pipeline(
                 crate::height_map_import::HORIZON_BANDS as i32,
             ),
             bevy::shader::ShaderDefVal::UInt(
+                "EDGE_SHADOWED_PERCENT".into(),
+                crate::height_map_import::EDGE_SHADOWED_PERCENT,
+            ),
+            bevy::shader::ShaderDefVal::UInt(
                 "MESOSTRUCTURE_LIGHTING_PASS_ID".into(),
                 crate::render::lighting::MESOSTRUCTURE_LIGHTING_PASS_ID as u32,
             ),

@@ -62,6 +62,8 @@ const AZIMUTH_BLOCKS: i32 = i32(HORIZON_AZIMUTHS / 4u);
 // Distance bands (`height_map_import::HORIZON_BANDS`).
 const HORIZON_BANDS: i32 = #{HORIZON_BANDS};
 const HORIZON_BLOCKS: i32 = HORIZON_BANDS * AZIMUTH_BLOCKS + 1;
+// The most light a shadowed pixel keeps at a shadow edge (`height_map_import::EDGE_SHADOWED_PERCENT`).
+const EDGE_SHADOWED: f32 = f32(#{EDGE_SHADOWED_PERCENT}u) / 100.0;
 #ifdef TEXTURE_SPACE_BOUNCE
 // Points per azimuth of the texture-space bounce (`height_map_import::TEXTURE_BOUNCE_SAMPLES`).
 const TEXTURE_BOUNCE_SAMPLES: u32 = #{TEXTURE_BOUNCE_SAMPLES}u;
@@ -251,14 +253,27 @@ fn texel_occlusion(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame) -> f32 {
     return clamp(sum / f32(HORIZON_AZIMUTHS / 2u), 0.0, 1.0);
 }
 
-// Whether the light coming from `to_light` reaches the true surface at `texel` (1) or not (0):
-// its elevation above the core plane against the texel's horizon towards its azimuth (the two
-// nearest azimuths interpolated, each lowered by the core's curvature) — horizon mapping
-// (Max 1988) on the texture-space horizon map. On a convex core that lowered horizon is a lower
-// bound (the highest occluder's fall at its distance; a nearer, lower one may fall less) and
-// the flat map's an upper one; a light between the two is decided by a march of the heights
-// towards it (`curved_core_light_visibility`).
-fn texel_light_visibility(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame, to_light: vec3<f32>) -> f32 {
+// The first directional light as the texture-space shadow test sees it over one core frame:
+// the tangent of its elevation above the core plane, its direction in UV space (unit), the
+// world length per UV unit and the core's normal curvature along it, and the two horizon
+// azimuths around it with the weight of the second. `valid` false: the light is below the
+// core plane (n·l's and Bevy's shadow maps' job) or at the zenith, and reaches every point.
+struct LightInUv {
+    valid: bool,
+    tan_l: f32,
+    uv_direction: vec2<f32>,
+    reach: f32,
+    curvature: f32,
+    i0: u32,
+    i1: u32,
+    blend: f32,
+}
+
+fn no_light() -> LightInUv {
+    return LightInUv(false, 0.0, vec2(1.0, 0.0), 0.0, 0.0, 0u, 0u, 0.0);
+}
+
+fn light_in_uv(core: CoreFrame, to_light: vec3<f32>) -> LightInUv {
     let n = core.n;
     let pu = core.pu;
     let pv = core.pv;
@@ -266,77 +281,120 @@ fn texel_light_visibility(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame, t
     let tangential = to_light - n * sin_l;
     let t2 = dot(tangential, tangential);
     if sin_l <= 0.0 || t2 <= 1e-12 {
-        // Below the core plane: n·l's and Bevy's shadow maps' job; from the zenith: open.
-        return 1.0;
+        return no_light();
     }
     // The light's azimuth in UV space: tangential = pu a + pv b (least squares in the plane).
     let g = mat2x2<f32>(dot(pu, pu), dot(pu, pv), dot(pu, pv), dot(pv, pv));
     let det = g[0][0] * g[1][1] - g[0][1] * g[1][0];
     if abs(det) <= 1e-20 {
-        return 1.0;
+        return no_light();
     }
     let r = vec2(dot(tangential, pu), dot(tangential, pv));
     let ab = vec2(g[1][1] * r.x - g[0][1] * r.y, g[0][0] * r.y - g[1][0] * r.x) / det;
     let uv_length = length(ab);
     if uv_length <= 0.0 {
-        return 1.0;
+        return no_light();
     }
     let along = along_direction(core, ab / uv_length);
-    let reach = length(along.along);
     let position = atan2(ab.y, ab.x) / (2.0 * PI) * f32(HORIZON_AZIMUTHS);
     let lower = floor(position);
     let count = i32(HORIZON_AZIMUTHS);
     let i0 = u32((i32(lower) % count + count) % count);
-    let i1 = (i0 + 1u) % HORIZON_AZIMUTHS;
-    let horizon = mix(
-        texel_horizon_tangent(texel, level, i0, horizon_step(i0, level), core.k, reach, along.curvature),
-        texel_horizon_tangent(texel, level, i1, horizon_step(i1, level), core.k, reach, along.curvature),
-        position - lower);
-    // tan of the horizon against tan of the light's elevation.
-    let tan_l = sin_l / sqrt(t2);
-    if tan_l < horizon {
+    return LightInUv(true, sin_l / sqrt(t2), ab / uv_length, length(along.along), along.curvature, i0, (i0 + 1u) % HORIZON_AZIMUTHS, position - lower);
+}
+
+// The horizon tangent at `texel` towards the light's azimuth, the two nearest azimuths
+// interpolated, each lowered by the core's fall with `curvature`.
+fn light_horizon(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame, light: LightInUv, curvature: f32) -> f32 {
+    return mix(
+        texel_horizon_tangent(texel, level, light.i0, horizon_step(light.i0, level), core.k, light.reach, curvature),
+        texel_horizon_tangent(texel, level, light.i1, horizon_step(light.i1, level), core.k, light.reach, curvature),
+        light.blend);
+}
+
+// The farther of the two light azimuths' highest occluders at `texel`, in texel steps: beyond
+// it nothing rises above the flat horizon, and a convex core's fall only lowers it further.
+fn light_occluder_steps(texel: vec2<i32>, level: vec2<i32>, light: LightInUv) -> u32 {
+    let d0 = textureLoad(horizon_distances, texel + vec2(i32(light.i0 / 4u) * level.x, 0), 0)[light.i0 % 4u];
+    let d1 = textureLoad(horizon_distances, texel + vec2(i32(light.i1 / 4u) * level.x, 0), 0)[light.i1 % 4u];
+    return max(d0, d1);
+}
+
+// Whether `light` reaches the true surface at `texel` (1) or not (0): its elevation above the
+// core plane against the texel's horizon towards its azimuth — horizon mapping (Max 1988) on
+// the texture-space horizon map. On a convex core the horizon lowered by the core's curvature
+// is a lower bound (the highest occluder's fall at its distance; a nearer, lower one may fall
+// less) and the flat map's an upper one; a light between the two is decided by a march of the
+// heights towards it (`light_march`). Mirrors `reference::texture_space::texel_light_visibility`.
+fn texel_light_visibility(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame, light: LightInUv) -> f32 {
+    if !light.valid {
+        return 1.0;
+    }
+    if light.tan_l < light_horizon(texel, level, core, light, light.curvature) {
         return 0.0;
     }
-    if along.curvature <= 0.0 {
+    if light.curvature <= 0.0 || light.tan_l >= light_horizon(texel, level, core, light, 0.0) {
         return 1.0;
     }
-    let flat = mix(
-        texel_horizon_tangent(texel, level, i0, horizon_step(i0, level), core.k, reach, 0.0),
-        texel_horizon_tangent(texel, level, i1, horizon_step(i1, level), core.k, reach, 0.0),
-        position - lower);
-    if tan_l >= flat {
+    return light_march(vec2<f32>(texel), level, core, light, 1.0, light_occluder_steps(texel, level, light));
+}
+
+// Whether `light` reaches the true surface at texel coordinates `p` (texel centres at
+// integers): the bilinear heights marched towards it `step` texels at a time for `steps`
+// steps, each lowered by the core's fall κ D² / 2 at its world distance D.
+fn light_march(p: vec2<f32>, level: vec2<i32>, core: CoreFrame, light: LightInUv, step: f32, steps: u32) -> f32 {
+    let mip = horizon_mip(level);
+    let texel_direction = normalize(light.uv_direction * vec2<f32>(level));
+    let uv_step = length(texel_direction / vec2<f32>(level)) * step;
+    let h0 = level_height(p, mip, level);
+    for (var t = 1u; t <= steps; t++) {
+        let d = f32(t) * uv_step * light.reach;
+        let rise = core.k * (level_height(p + f32(t) * step * texel_direction, mip, level) - h0) - 0.5 * light.curvature * d * d;
+        if rise > light.tan_l * d {
+            return 0.0;
+        }
+    }
+    return 1.0;
+}
+
+// Whether `light` reaches the true surface at `uv` itself, as a ray cast at the pixel's centre
+// would find (like Bevy's shadow maps, one point per pixel): the four texels around it decide
+// where they agree; where they do not, a shadow edge crosses them, and a march from `uv` in
+// half-texel steps, as far as their highest occluders plus a texel, places it (interpolating
+// the texels' 0s and 1s alone put every edge halfway between texel centres). At such an edge
+// the march decides the side of one half (lit ≥ 0.5, shadowed below) and the texels' mix
+// shapes the edge's soft profile about a texel wide, so that an edge sweeping over a deforming
+// surface fades instead of switching pixels from 1 to 0. Mirrors
+// `reference::texture_space::point_light_visibility`.
+fn point_light_visibility(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame, light: LightInUv) -> f32 {
+    if !light.valid {
         return 1.0;
     }
-    // The march goes as far as the farther of the two azimuths' highest occluders: beyond it
-    // nothing rises above the flat horizon, and the fall only lowers it further.
-    let d0 = textureLoad(horizon_distances, texel + vec2(i32(i0 / 4u) * level.x, 0), 0)[i0 % 4u];
-    let d1 = textureLoad(horizon_distances, texel + vec2(i32(i1 / 4u) * level.x, 0), 0)[i1 % 4u];
-    return curved_core_light_visibility(texel, level, core, ab / uv_length, reach, along.curvature, tan_l, max(d0, d1));
+    let p = fract(uv) * vec2<f32>(level) - 0.5;
+    let base = vec2<i32>(floor(p));
+    let f = p - floor(p);
+    var corners: array<f32, 4>;
+    var steps = 0u;
+    for (var corner = 0; corner < 4; corner++) {
+        let texel = horizon_texel(base, vec2<i32>(corner & 1, corner >> 1u), level);
+        corners[corner] = texel_light_visibility(texel, level, core, light);
+        steps = max(steps, light_occluder_steps(texel, level, light));
+    }
+    let soft = mix(mix(corners[0], corners[1], f.x), mix(corners[2], corners[3], f.x), f.y);
+    let lit = corners[0] + corners[1] + corners[2] + corners[3];
+    if lit == 0.0 || lit == 4.0 {
+        return soft;
+    }
+    if light_march(p, level, core, light, 0.5, 2u * (steps + 1u)) > 0.5 {
+        return max(soft, 0.5);
+    }
+    return min(soft, EDGE_SHADOWED);
 }
 
 // The height chain's mip level as wide as the horizon map's level (built from it, a power of
 // two apart).
 fn horizon_mip(level: vec2<i32>) -> i32 {
     return i32(countTrailingZeros(u32(textureDimensions(height_mips, 0).x) / u32(level.x)));
-}
-
-// Whether light at elevation tangent `tan_l` towards UV direction `uv_direction` reaches
-// `texel` over a core of normal curvature `curvature` along it (1/world units, convex): the
-// heights marched one texel at a time for `steps` texels, each lowered by the core's fall
-// κ D² / 2 at its world distance D (`reach` world units per UV unit).
-fn curved_core_light_visibility(texel: vec2<i32>, level: vec2<i32>, core: CoreFrame, uv_direction: vec2<f32>, reach: f32, curvature: f32, tan_l: f32, steps: u32) -> f32 {
-    let mip = horizon_mip(level);
-    let texel_direction = normalize(uv_direction * vec2<f32>(level));
-    let uv_step = length(texel_direction / vec2<f32>(level));
-    let h0 = textureLoad(height_mips, texel, mip).r;
-    for (var t = 1u; t <= steps; t++) {
-        let d = f32(t) * uv_step * reach;
-        let rise = core.k * (level_height(vec2<f32>(texel) + f32(t) * texel_direction, mip, level) - h0) - 0.5 * curvature * d * d;
-        if rise > tan_l * d {
-            return 0.0;
-        }
-    }
-    return 1.0;
 }
 
 // The bilinear height at texel coordinates `p` (texel centres at integers) of the height
@@ -357,22 +415,18 @@ fn horizon_level() -> vec2<i32> {
     return vec2<i32>(size.x / HORIZON_BLOCKS, size.y);
 }
 
-// The texture-space occlusion and the visibility of `to_light` (1 with `has_light` false) at
-// `uv`: the four texels around it mixed bilinearly, so that texels do not show as blocks.
-fn magnified_texel_terms(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame, has_light: bool, to_light: vec3<f32>) -> vec2<f32> {
+// The texture-space occlusion at `uv`: the four texels around it mixed bilinearly, so that
+// texels do not show as blocks. Mirrors `reference::texture_space::magnified_occlusion`.
+fn magnified_occlusion(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame) -> f32 {
     let p = fract(uv) * vec2<f32>(level) - 0.5;
     let base = vec2<i32>(floor(p));
     let f = p - floor(p);
-    var corners: array<vec2<f32>, 4>;
+    var corners: array<f32, 4>;
     for (var corner = 0; corner < 4; corner++) {
         let texel = horizon_texel(base, vec2<i32>(corner & 1, corner >> 1u), level);
-        var visible = 1.0;
-        if has_light {
-            visible = texel_light_visibility(texel, level, core, to_light);
-        }
-        corners[corner] = vec2(texel_occlusion(texel, level, core), visible);
+        corners[corner] = texel_occlusion(texel, level, core);
     }
-    // Nested mixes: four equal corners give exactly their value (an open, lit flat map stays
+    // Nested mixes: four equal corners give exactly their value (an open flat map stays
     // exactly 1).
     return mix(mix(corners[0], corners[1], f.x), mix(corners[2], corners[3], f.x), f.y);
 }
@@ -383,35 +437,31 @@ fn horizon_texel(base: vec2<i32>, i: vec2<i32>, level: vec2<i32>) -> vec2<i32> {
 }
 
 // The fine occlusion a pixel shows, from the texture-space horizon map, and the visibility of
-// `to_light` (the camera's first directional light; 1 with `has_light` false). Magnified (less
-// than a texel per pixel): the texels' values interpolated bilinearly between the four texels
-// around `uv`, so that texels do not show as blocks. Minified: the mean over the pixel's
-// footprint, not the occlusion of the filtered heights that the screen-space passes see
-// (which flattens the relief): 2 × 2 taps spread over the footprint (UV derivatives `duv1`,
-// `duv2`). Between 0.75 and 1.5 texels per pixel, a blend of the two.
-fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_pixel: f32, core: CoreFrame, has_light: bool, to_light: vec3<f32>) -> vec2<f32> {
+// `light` (the camera's first directional light) at its centre (`point_light_visibility`).
+// The occlusion magnified (less than a texel per pixel): the texels' values interpolated
+// bilinearly; minified: the mean over the pixel's footprint, not the occlusion of the filtered
+// heights that the screen-space passes see (which flattens the relief): 2 × 2 taps spread over
+// the footprint (UV derivatives `duv1`, `duv2`). Between 0.75 and 1.5 texels per pixel, a
+// blend of the two.
+fn footprint_terms(uv: vec2<f32>, duv1: vec2<f32>, duv2: vec2<f32>, texels_per_pixel: f32, core: CoreFrame, light: LightInUv) -> vec2<f32> {
     let level = horizon_level();
     // Texels per pixel of the horizon map's level (it may be coarser than level 0).
     let horizon_texels = texels_per_pixel * f32(level.x) / f32(textureDimensions(height_mips, 0).x);
     let minified = smoothstep(0.75, 1.5, horizon_texels);
-    var magnified_terms = vec2(0.0);
+    var magnified = 0.0;
     if minified < 1.0 {
-        magnified_terms = magnified_texel_terms(uv, level, core, has_light, to_light);
+        magnified = magnified_occlusion(uv, level, core);
     }
-    var minified_terms = vec2(0.0);
+    var footprint_mean = 0.0;
     if minified > 0.0 {
         for (var tap = 0; tap < 4; tap++) {
             let offset = vec2<f32>(f32(tap & 1), f32(tap >> 1u)) * 0.5 - 0.25;
             let tap_uv = fract(uv + offset.x * duv1 + offset.y * duv2);
             let texel = horizon_texel(vec2<i32>(tap_uv * vec2<f32>(level)), vec2(0), level);
-            var visible = 1.0;
-            if has_light {
-                visible = texel_light_visibility(texel, level, core, to_light);
-            }
-            minified_terms += 0.25 * vec2(texel_occlusion(texel, level, core), visible);
+            footprint_mean += 0.25 * texel_occlusion(texel, level, core);
         }
     }
-    return mix(magnified_terms, minified_terms, minified);
+    return vec2(mix(magnified, footprint_mean, minified), point_light_visibility(uv, level, core, light));
 }
 
 #ifdef TEXTURE_SPACE_BOUNCE
@@ -483,7 +533,7 @@ fn texture_bounce(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame, to_light: ve
             let n_s = true_normal_at(s, level, core_s);
             let cos_l = dot(n_s, to_light);
             if dot(n_s, -d) > 0.0 && cos_l > 0.0 && dot(core_s.n, to_light) > 0.0 {
-                irradiance += cos_l * band * texel_light_visibility(q, level, core_s, to_light);
+                irradiance += cos_l * band * texel_light_visibility(q, level, core_s, light_in_uv(core_s, to_light));
             }
             covered += band;
             seen = sine;
@@ -637,7 +687,11 @@ fn height(@builtin(global_invocation_id) id: vec3<u32>) {
         let core = CoreFrame(n, pu, pv, nu, nv, material.scale);
         // Texels of level 0 per pixel along the footprint's longer axis.
         let texels_per_pixel = sqrt(rho2);
-        let terms = footprint_terms(uv, duv1, duv2, texels_per_pixel, core, has_light, to_light);
+        var light = no_light();
+        if has_light {
+            light = light_in_uv(core, to_light);
+        }
+        let terms = footprint_terms(uv, duv1, duv2, texels_per_pixel, core, light);
         texture_occlusion = terms.x;
         texture_visibility = select(-1.0, terms.y, has_light);
 #ifdef TEXTURE_SPACE_BOUNCE
@@ -650,7 +704,7 @@ fn height(@builtin(global_invocation_id) id: vec3<u32>) {
             let level = horizon_level();
             var occlusion_here = texture_occlusion;
             if texels_per_pixel * f32(level.x) / size0.x > 0.75 {
-                occlusion_here = magnified_texel_terms(uv, level, core, false, to_light).x;
+                occlusion_here = magnified_occlusion(uv, level, core);
             }
             texture_bounce_value = texture_bounce(uv, level, core, to_light, occlusion_here);
         }
