@@ -306,8 +306,9 @@ struct Args {
     /// Keep these scales (comma-separated).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     scales: Option<Vec<f32>>,
-    /// Render nothing: merge earlier runs' CSVs into one CSV and chart.
-    #[arg(long)]
+    /// Render nothing: merge earlier runs' CSVs into one CSV and chart (repeated or
+    /// comma-separated).
+    #[arg(long, value_delimiter = ',')]
     from: Vec<PathBuf>,
     /// Which scenes: the synthetic top-down plane suite, or photo-derived maps on curved cores
     /// in game-like views (`unseen`).
@@ -619,18 +620,17 @@ fn main() {
 fn read_rows(files: &[PathBuf], size: &mut u32) -> Vec<Row> {
     let mut rows = vec![];
     for file in files {
-        let text = std::fs::read_to_string(file)
-            .unwrap_or_else(|e| panic!("cannot read {}: {e}", file.display()));
+        let text = std::fs::read_to_string(file).unwrap_or_else(|e| {
+            common::fail(format!("--from {}: cannot read it: {e}", file.display()))
+        });
         for line in text.lines().skip(1).filter(|l| !l.is_empty()) {
             let f: Vec<&str> = line.split(',').collect();
-            assert_eq!(
-                f.len(),
-                11,
-                "{}: not an accuracy row: {line}",
-                file.display()
-            );
+            let width = f.get(3).and_then(|w| w.parse().ok());
+            let (11, Some(width)) = (f.len(), width) else {
+                common::fail(format!("--from {}: not an accuracy row: {line}", file.display()))
+            };
             let num = |i: usize| -> f32 { f[i].parse().unwrap_or(f32::NAN) };
-            *size = f[3].parse().expect("a width");
+            *size = width;
             rows.push(Row {
                 scene: f[0].into(),
                 method: f[1].into(),
@@ -794,8 +794,7 @@ fn run_unseen(args: &Args) {
         scenes.retain(|s| keep.split(',').any(|k| s.name.contains(k)));
     }
     if scenes.is_empty() {
-        eprintln!("accuracy: no scene matches --scenes {}", args.scenes.as_deref().unwrap_or(""));
-        std::process::exit(2);
+        common::fail(format!("no scene matches --scenes {}", args.scenes.as_deref().unwrap_or("")));
     }
     let unit = unseen::radiance_unit(common::headless_plugins(), size);
     println!("radiance unit ρE0/π = {unit:.5}");
@@ -810,8 +809,7 @@ fn run_unseen(args: &Args) {
         println!("accuracy: {}", scene.name);
         for variant in &args.variants {
         let Some(settings) = variant_settings(variant) else {
-            eprintln!("accuracy: unknown variant {variant:?}");
-            std::process::exit(2);
+            common::fail(format!("unknown --variants entry {variant:?}"));
         };
         let Some(r) = unseen::run_scene(
             common::headless_plugins,

@@ -161,12 +161,6 @@ fn parse_unit(s: &str) -> Result<f32, String> {
     }
 }
 
-/// Exits with one line and code 2, as clap does for a bad argument.
-fn fail(message: impl std::fmt::Display) -> ! {
-    eprintln!("error: {message}");
-    std::process::exit(2);
-}
-
 fn mesh(name: &str, torus_radii: Vec2) -> Mesh {
     match name {
         "plane" => Plane3d::default().mesh().size(2.0, 2.0).build(),
@@ -183,7 +177,7 @@ fn mesh(name: &str, torus_radii: Vec2) -> Mesh {
         path => {
             let path = std::path::Path::new(path);
             if !path.is_file() {
-                fail(format!(
+                common::fail(format!(
                     "--mesh {}: not plane, sphere, torus, teapot, bunny or an OBJ file",
                     path.display()
                 ));
@@ -198,7 +192,7 @@ fn height_map(name: &str) -> Image {
         return map.to_image();
     }
     let dynamic = image::open(name).unwrap_or_else(|e| {
-        fail(format!(
+        common::fail(format!(
             "--height-map {name}: not a built-in map ({}) nor a readable image: {e}",
             HeightMap::NAMES.join(", ")
         ))
@@ -212,17 +206,17 @@ fn main() {
     let args = Args::parse();
     let float = args.out.extension().is_some_and(|e| e == "exr");
     if !float && args.out.extension().is_none_or(|e| e != "png") {
-        fail(format!("--out {}: expected a .png or .exr file", args.out.display()));
+        common::fail(format!("--out {}: expected a .png or .exr file", args.out.display()));
     }
     if (args.target - args.eye).length() < 1e-6 {
-        fail("--eye and --target are the same point");
+        common::fail("--eye and --target are the same point");
     }
     if args.light_dir.length() < 1e-6 {
-        fail("--light-dir is zero");
+        common::fail("--light-dir is zero");
     }
     if let Some(dir) = args.out.parent() {
         std::fs::create_dir_all(dir)
-            .unwrap_or_else(|e| fail(format!("cannot create {}: {e}", dir.display())));
+            .unwrap_or_else(|e| common::fail(format!("cannot create {}: {e}", dir.display())));
     }
     let core = mesh(&args.mesh, args.torus_radii);
     let height = height_map(&args.height_map);
@@ -338,7 +332,7 @@ fn main() {
         return;
     }
     let Some(frame) = frame else {
-        fail("no mesostructure surface on screen: nothing to write");
+        common::fail("no mesostructure surface on screen: nothing to write");
     };
     let uv = traced.map(|mesh| {
         (0..frame.height)

@@ -9,7 +9,7 @@
 //!
 //! ```text
 //! cargo run --example volumetric_bench -- [--size WxH] [--frames N] [--g G]
-//!     [--out docs/volumetric.csv]
+//!     [--out docs/volumetric.csv] [--only equal_angle:16,bevy_fog:64] [--scene shadowed]
 //! ```
 //!
 //! CSV header: `scene,method,setting,width,height,gpu_ms,rel_l1,rmse,tip_rel_l1,adapter`
@@ -67,6 +67,12 @@ struct Cli {
     /// The chart to draw (GPU time against relative L1, per scene)
     #[arg(long, default_value = "docs/images/volumetric_chart.png")]
     chart: PathBuf,
+    /// Only these runs, as METHOD:SETTING (e.g. `equal_angle:16,bevy_fog:64`); all when absent
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// Only this scene (`unshadowed` or `shadowed`); both when absent
+    #[arg(long, value_parser = ["unshadowed", "shadowed"])]
+    scene: Option<String>,
 }
 
 /// One measured run.
@@ -98,7 +104,8 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
                 .label_style(("sans-serif", 14))
                 .draw()
                 .expect("draw");
-            for (i, method) in ["equal_angle", "equal_angle (reduced)", "planes", "bevy_fog"]
+            for (i, method) in
+                ["equal_angle", "equal_angle (reduced)", "equal_angle (fragment)", "planes", "bevy_fog"]
                 .into_iter()
                 .enumerate()
             {
@@ -108,7 +115,7 @@ fn draw_chart(rows: &[Row], path: &PathBuf) {
                     .map(|r| (r.gpu_ms.max(0.0), r.rel_l1.max(1e-4)))
                     .collect();
                 points.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let color = [RED, MAGENTA, GREEN, BLUE][i].to_rgba();
+                let color = [RED, MAGENTA, CYAN, GREEN, BLUE][i].to_rgba();
                 common::chart::line_with_points(&mut chart, method, &points, color);
             }
             common::chart::legend(&mut chart);
@@ -123,6 +130,9 @@ enum Method {
     EqualAngle(u32),
     /// 16 samples at a reduced resolution.
     EqualAngleReduced(VolumetricResolution),
+    /// This many samples in the fullscreen fragment pass (the fallback where the camera's
+    /// main images take no storage writes) instead of the compute pass.
+    EqualAngleRaster(u32),
     /// Seed 004's slicing planes, this many per spot.
     Planes(u32),
     BevyFog(u32),
@@ -162,7 +172,7 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
     // VOLUMETRIC flag needs them); the unshadowed scene has nothing to cast a shadow.
     let mut spot = world.spawn((spot_scene::bevy_spot(true), spot_scene::spot_transform()));
     match method {
-        Method::EqualAngle(samples) | Method::Planes(samples) => {
+        Method::EqualAngle(samples) | Method::Planes(samples) | Method::EqualAngleRaster(samples) => {
             spot.insert(VolumetricSpot {
                 samples,
                 ..default()
@@ -179,7 +189,7 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
     let mut image = Image::new_target_texture(size.x, size.y, TextureFormat::Rgba16Float, None);
     image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
     let target = world.resource_mut::<Assets<Image>>().add(image);
-    let mut camera = world.spawn((
+    let mut camera_entity = world.spawn((
         Camera3d::default(),
         RenderTarget::Image(target.clone().into()),
         Hdr,
@@ -190,8 +200,11 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
         Transform::from_translation(EYE).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y),
     ));
     match method {
-        Method::EqualAngle(_) | Method::EqualAngleReduced(_) | Method::Planes(_) => {
-            camera.insert(VolumetricMedium {
+        Method::EqualAngle(_)
+        | Method::EqualAngleReduced(_)
+        | Method::Planes(_)
+        | Method::EqualAngleRaster(_) => {
+            camera_entity.insert(VolumetricMedium {
                 scattering: SCATTERING,
                 absorption: ABSORPTION,
                 asymmetry: g,
@@ -206,7 +219,7 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
             });
         }
         Method::BevyFog(steps) => {
-            camera.insert(VolumetricFog {
+            camera_entity.insert(VolumetricFog {
                 ambient_intensity: 0.0,
                 jitter: 0.0,
                 step_count: steps,
@@ -215,6 +228,7 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
         }
         Method::Off => {}
     }
+    let camera = camera_entity.id();
     if let Method::BevyFog(_) = method {
         world.spawn((
             FogVolume {
@@ -229,7 +243,14 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
     }
     app.finish();
     app.cleanup();
-    for _ in 0..5 {
+    app.update();
+    if let Method::EqualAngleRaster(_) = method {
+        // The camera's own usages, without the storage writes the plugin asked for.
+        app.world_mut()
+            .entity_mut(camera)
+            .insert(bevy::camera::CameraMainTextureUsages::default());
+    }
+    for _ in 0..4 {
         app.update();
     }
     app.world()
@@ -279,29 +300,61 @@ fn run(size: UVec2, frames: u32, g: f32, shadowed: bool, method: Method) -> (Vec
 
 /// Per pixel, the exact fog-only radiance (exposure applied) and whether the ray passes within
 /// 15° of the light; the medium ends at the fog volume's box, as Bevy's fog does.
-fn truth(size: UVec2, g: f32, shadowed: bool) -> (Vec<f64>, Vec<bool>) {
+fn truth(size: UVec2, g: f32, shadowed: bool) -> spot_scene::Truth {
     let transform = Transform::from_translation(EYE).looking_at(Vec3::new(0.0, 1.5, 0.0), Vec3::Y);
     let projection = PerspectiveProjection {
         aspect_ratio: size.x as f32 / size.y as f32,
         ..default()
     };
-    let world_from_clip = transform.to_matrix() * projection.get_clip_from_view().inverse();
     let volume = Occluder {
         min: DVec3::new(-10.0, 0.0, -10.0),
         max: DVec3::new(10.0, 10.0, 10.0),
     };
     let cube = [spot_scene::cube()];
     let occluders: &[Occluder] = if shadowed { &cube } else { &[] };
-    let t = spot_scene::truth(
-        EYE,
-        world_from_clip,
+    spot_scene::truth(
+        transform.to_matrix(),
+        projection.get_clip_from_view(),
         size,
         g,
         occluders,
         Some(&volume),
         None,
-    );
-    (t.exact, t.tip)
+    )
+}
+
+/// Where the error lies: of the scored pixels (truth above 1 % of its largest), the share of
+/// Σ|v − t| and the signed Σ(v − t)/Σt in bands of angle between the ray and the light.
+fn error_by_angle(values: &[f32], truth: &spot_scene::Truth) -> String {
+    let max = truth.exact.iter().cloned().fold(0.0, f64::max);
+    let bands = [0.0, 0.5, 2.0, 15.0, 180.0];
+    let mut abs = [0.0; 4];
+    let mut signed = [0.0; 4];
+    let mut sum = [0.0; 4];
+    let mut count = [0u32; 4];
+    for ((&v, &t), &a) in values.iter().zip(&truth.exact).zip(&truth.angle_to_light) {
+        if t > 0.01 * max {
+            let band = bands.windows(2).position(|w| a >= w[0] && a < w[1]).unwrap_or(3);
+            abs[band] += (v as f64 - t).abs();
+            signed[band] += v as f64 - t;
+            sum[band] += t;
+            count[band] += 1;
+        }
+    }
+    let total: f64 = abs.iter().sum::<f64>().max(1e-30);
+    (0..4)
+        .map(|i| {
+            format!(
+                "{}–{}°: {} px, {:.0} % of the error, bias {:+.4}",
+                bands[i],
+                bands[i + 1],
+                count[i],
+                100.0 * abs[i] / total,
+                signed[i] / sum[i].max(1e-30)
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// Relative L1, RMSE (relative to the mean) and relative L1 over `mask`, on the pixels where
@@ -329,12 +382,16 @@ fn main() {
     let mut rows = vec!["scene,method,setting,width,height,gpu_ms,rel_l1,rmse,tip_rel_l1,adapter".to_string()];
     let mut measured = vec![];
     for (scene, shadowed) in [("unshadowed", false), ("shadowed", true)] {
-        let (truth, tip) = truth(cli.size, cli.g, shadowed);
+        if cli.scene.as_deref().is_some_and(|s| s != scene) {
+            continue;
+        }
+        let truth = truth(cli.size, cli.g, shadowed);
         let (_, off_ms, _) = run(cli.size, cli.frames, cli.g, shadowed, Method::Off);
         let methods = [4, 8, 16, 32]
             .map(|n| ("equal_angle", Method::EqualAngle(n), n.to_string()))
             .into_iter()
             .chain([
+                ("equal_angle", Method::EqualAngleRaster(16), "16@raster".to_string()),
                 (
                     "equal_angle",
                     Method::EqualAngleReduced(VolumetricResolution::Half),
@@ -349,10 +406,17 @@ fn main() {
             .chain([4, 8, 16, 32].map(|n| ("planes", Method::Planes(n), n.to_string())))
             .chain([16, 32, 64, 128].map(|n| ("bevy_fog", Method::BevyFog(n), n.to_string())));
         for (name, method, setting) in methods {
+            if !cli.only.is_empty() && !cli.only.contains(&format!("{name}:{setting}")) {
+                continue;
+            }
             let (values, ms, adapter) = run(cli.size, cli.frames, cli.g, shadowed, method);
-            let (rel_l1, rmse, tip_l1) = scores(&values, &truth, &tip);
-            let ratio = values.iter().map(|&v| v as f64).sum::<f64>() / truth.iter().sum::<f64>();
-            eprintln!("{scene} {name} {setting}: mean radiance {ratio:.3} × the reference");
+            let (rel_l1, rmse, tip_l1) = scores(&values, &truth.exact, &truth.tip);
+            let ratio =
+                values.iter().map(|&v| v as f64).sum::<f64>() / truth.exact.iter().sum::<f64>();
+            eprintln!(
+                "{scene} {name} {setting}: mean radiance {ratio:.3} × the reference; {}",
+                error_by_angle(&values, &truth)
+            );
             let row = format!(
                 "{scene},{name},{setting},{},{},{:.4},{rel_l1:.4},{rmse:.4},{tip_l1:.4},\"{adapter}\"",
                 cli.size.x,
@@ -363,7 +427,13 @@ fn main() {
             rows.push(row);
             measured.push(Row {
                 scene,
-                method: if setting.contains('@') { "equal_angle (reduced)" } else { name },
+                method: if setting.ends_with("@raster") {
+                    "equal_angle (fragment)"
+                } else if setting.contains('@') {
+                    "equal_angle (reduced)"
+                } else {
+                    name
+                },
                 gpu_ms: ms - off_ms,
                 rel_l1,
             });

@@ -152,7 +152,7 @@ impl Plugin for MesostructurePlugin {
                         material::adapt_standard_materials,
                     )
                         .chain(),
-                    render::bleeding::request_storage_main_textures,
+                    render::request_storage_main_textures::<Mesostructure>,
                 ),
             );
         render::build(app);

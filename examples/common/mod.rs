@@ -48,6 +48,13 @@ pub struct CommonArgs {
     pub headless: bool,
 }
 
+/// Exits with one line and code 2, as clap does for a bad argument (no panic, no backtrace).
+#[allow(dead_code)]
+pub fn fail(message: impl std::fmt::Display) -> ! {
+    eprintln!("error: {message}");
+    std::process::exit(2);
+}
+
 /// `N` or `WxH`, each at least 1.
 pub fn parse_size(s: &str) -> Result<UVec2, String> {
     let (w, h) = s.split_once('x').unwrap_or((s, s));

@@ -84,7 +84,7 @@ pub fn pass_time(store: &DiagnosticsStore, pass: &str) -> Option<f64> {
     span_time(store, &format!("mesostructure/{pass}"))
 }
 
-/// The same for any span (`volumetric/spots`).
+/// The same for any span (`volumetric/spots_compute`).
 pub fn span_time(store: &DiagnosticsStore, span: &str) -> Option<f64> {
     let path = |kind| DiagnosticPath::new(format!("render/{span}/elapsed_{kind}"));
     store
@@ -121,8 +121,13 @@ fn panel(world: &mut World) {
                 }
             }
             ui.label(format!("  all passes: {total:.3} ms"));
-            if let Some(ms) = span_time(store, "volumetric/spots") {
-                ui.label(format!("  volumetric spots: {ms:.3} ms"));
+            for (span, name) in [
+                ("volumetric/spots_compute", "volumetric spots (compute)"),
+                ("volumetric/spots", "volumetric spots (fragment)"),
+            ] {
+                if let Some(ms) = span_time(store, span) {
+                    ui.label(format!("  {name}: {ms:.3} ms"));
+                }
             }
             for span in ["translucency/iteration", "translucency/gather"] {
                 if let Some(ms) = span_time(store, span) {
@@ -282,7 +287,12 @@ pub fn print_timings(world: &World) {
         .iter()
         .filter_map(|p| pass_time(store, p).map(|ms| format!("{p} {ms:.2} ms")))
         .chain(
-            ["volumetric/spots", "translucency/iteration", "translucency/gather"]
+            [
+                "volumetric/spots_compute",
+                "volumetric/spots",
+                "translucency/iteration",
+                "translucency/gather",
+            ]
                 .into_iter()
                 .filter_map(|span| span_time(store, span).map(|ms| format!("{span} {ms:.2} ms"))),
         )

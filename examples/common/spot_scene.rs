@@ -5,7 +5,7 @@
 
 use bevy::{
     camera::Exposure,
-    math::DVec3,
+    math::{DVec2, DVec3, DVec4},
     prelude::*,
 };
 use bevy_mesostructure::volumetric::reference::{self, Medium, Occluder, Sampling};
@@ -78,14 +78,16 @@ fn slabs(o: DVec3, d: DVec3, b: &Occluder) -> (f64, f64) {
     (near, far)
 }
 
-/// Per pixel of a `size` view from `eye` (`world_from_clip` its inverse view-projection): the
-/// exact fog-only radiance (exposure applied) in a medium of asymmetry `g`, where asked the
-/// `n`-sample estimate with `sampling` (the CPU mirror of a pass; empty otherwise), and
-/// whether the ray passes within 15° of the light.
+/// Per pixel of a `size` view (`world_from_view` the camera's transform, `clip_from_view` its
+/// projection): the exact fog-only radiance (exposure applied) in a medium of asymmetry `g`,
+/// where asked the `n`-sample estimate with `sampling` (the CPU mirror of a pass; empty
+/// otherwise), and whether the ray passes within 15° of the light.
 pub struct Truth {
     pub exact: Vec<f64>,
     pub estimate: Vec<f64>,
     pub tip: Vec<bool>,
+    /// Per pixel, the angle between its ray and the direction to the light, degrees.
+    pub angle_to_light: Vec<f32>,
 }
 
 /// The set-up's spot as the reference lights with it ([`bevy_spot`]'s light).
@@ -101,8 +103,8 @@ pub fn reference_light() -> reference::SpotLight {
 }
 
 pub fn truth(
-    eye: Vec3,
-    world_from_clip: Mat4,
+    world_from_view: Mat4,
+    clip_from_view: Mat4,
     size: UVec2,
     g: f32,
     occluders: &[Occluder],
@@ -116,23 +118,29 @@ pub fn truth(
         asymmetry: g as f64,
     };
     let exposure = Exposure { ev100: EV100 }.exposure() as f64;
-    let o = eye.as_dvec3();
-    let to_light = (SPOT_POSITION - eye).normalize();
+    // In f64 from the view's own frame: a direction taken as (near-plane point − eye) in f32
+    // world space loses ~1e-5 rad to cancellation (the near plane is 0.1 m from an eye metres
+    // from the origin), which near the light, where the in-scatter goes as 1/h, is a visible
+    // error at 1080p.
+    let world_from_view = world_from_view.as_dmat4();
+    let view_from_clip = clip_from_view.as_dmat4().inverse();
+    let o = world_from_view.w_axis.truncate();
+    let to_light = (SPOT_POSITION.as_dvec3() - o).normalize();
     let mut t = Truth {
         exact: vec![],
         estimate: vec![],
         tip: vec![],
+        angle_to_light: vec![],
     };
     for y in 0..size.y {
         for x in 0..size.x {
-            let ndc = Vec2::new(
-                (x as f32 + 0.5) / size.x as f32 * 2.0 - 1.0,
-                1.0 - (y as f32 + 0.5) / size.y as f32 * 2.0,
+            let ndc = DVec2::new(
+                (x as f64 + 0.5) / size.x as f64 * 2.0 - 1.0,
+                1.0 - (y as f64 + 0.5) / size.y as f64 * 2.0,
             );
             // Through the pixel's centre, from the camera (the medium starts there).
-            let p = world_from_clip * Vec4::new(ndc.x, ndc.y, 1.0, 1.0);
-            let dir = (p.truncate() / p.w - eye).normalize();
-            let d = dir.as_dvec3();
+            let near = view_from_clip * DVec4::new(ndc.x, ndc.y, 1.0, 1.0);
+            let d = world_from_view.transform_vector3(near.truncate() / near.w).normalize();
             let ray = reference::Ray {
                 origin: o,
                 direction: d,
@@ -146,7 +154,9 @@ pub fn truth(
                     reference::estimate(&ray, &spot, &medium, occluders, sampling, n) * exposure,
                 );
             }
-            t.tip.push(dir.dot(to_light).acos().to_degrees() < 15.0);
+            let angle = d.dot(to_light).clamp(-1.0, 1.0).acos().to_degrees() as f32;
+            t.tip.push(angle < 15.0);
+            t.angle_to_light.push(angle);
         }
     }
     t

@@ -176,6 +176,40 @@ pub fn view_has_mesostructure(
         .is_some_and(|phase| !phase.items.is_empty())
 }
 
+/// The format of a view's main image that compute passes write themselves (Bevy's HDR format).
+pub(crate) const VIEW_TARGET_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
+
+/// Whether compute passes can write the view's main images themselves (through Bevy's
+/// post-process ping-pong) rather than a fullscreen draw blending into them: where the main
+/// images are HDR and allow storage writes (the plugins ask for that on their cameras:
+/// [`request_storage_main_textures`]). The bleeding gather and the volumetric spots use it.
+pub(crate) fn composites_in_compute(target: &bevy::render::view::ViewTarget) -> bool {
+    target.main_texture_format() == VIEW_TARGET_FORMAT
+        && target.main_texture().usage().contains(TextureUsages::STORAGE_BINDING)
+        && target.main_texture_other().usage().contains(TextureUsages::STORAGE_BINDING)
+}
+
+/// Main world, for each HDR camera with the component `C` (`Mesostructure`,
+/// `VolumetricMedium`): lets its main images be written by compute passes. Once, when the
+/// component or `Hdr` is added: a camera whose usages are set afterwards without
+/// `STORAGE_BINDING` keeps the fullscreen (raster) passes. Only HDR cameras: an LDR camera's
+/// main images take the output's format, often sRGB, which storage writes do not allow (wgpu
+/// would reject the textures).
+pub(crate) fn request_storage_main_textures<C: Component>(
+    mut cameras: Query<
+        &mut bevy::camera::CameraMainTextureUsages,
+        (
+            Or<(Added<C>, Added<bevy::camera::Hdr>)>,
+            With<C>,
+            With<bevy::camera::Hdr>,
+        ),
+    >,
+) {
+    for mut usages in &mut cameras {
+        usages.0 |= TextureUsages::STORAGE_BINDING;
+    }
+}
+
 /// Records one per-pixel compute pass over a view (8×8 workgroups), labelled with a debug
 /// group and timed with a GPU span named `label`; `before` records commands ahead of it.
 pub(crate) fn dispatch_per_pixel(
@@ -184,6 +218,19 @@ pub(crate) fn dispatch_per_pixel(
     pipeline: &ComputePipeline,
     bind_group: &BindGroup,
     dynamic_offsets: &[u32],
+    size: UVec2,
+    before: impl FnOnce(&mut CommandEncoder),
+) {
+    dispatch_per_pixel_with(ctx, label, pipeline, &[(bind_group, dynamic_offsets)], size, before);
+}
+
+/// [`dispatch_per_pixel`] with several bind groups (group i: `bind_groups[i]` and its dynamic
+/// offsets).
+pub(crate) fn dispatch_per_pixel_with(
+    ctx: &mut bevy::render::renderer::RenderContext,
+    label: &'static str,
+    pipeline: &ComputePipeline,
+    bind_groups: &[(&BindGroup, &[u32])],
     size: UVec2,
     before: impl FnOnce(&mut CommandEncoder),
 ) {
@@ -200,7 +247,9 @@ pub(crate) fn dispatch_per_pixel(
             timestamp_writes: None,
         });
         pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, bind_group, dynamic_offsets);
+        for (i, (group, offsets)) in bind_groups.iter().enumerate() {
+            pass.set_bind_group(i as u32, *group, offsets);
+        }
         pass.dispatch_workgroups(size.x.div_ceil(8), size.y.div_ceil(8), 1);
     }
     encoder.pop_debug_group();
@@ -213,6 +262,13 @@ pub enum MesostructureSystems {
     /// The lighting pass (in `Core3dSystems::MainPass`, before Bevy's deferred lighting), which
     /// lights the mesostructure pixels in place of Bevy's deferred lighting.
     Lighting,
+    /// The colour bleeding's gather and composite (after the opaque pass), which add the
+    /// bounced light to the view's surfaces, through Bevy's post-process ping-pong where the
+    /// view allows it.
+    Bleeding,
+    /// The translucency plugin's gather (after the opaque pass and the bleeding), which adds
+    /// the patches' light to the view's surfaces.
+    TranslucencyGather,
 }
 
 /// The settings of all views, one dynamic uniform buffer.
@@ -342,6 +398,7 @@ pub(crate) fn build(app: &mut App) {
             )
                 .chain()
                 .in_set(Core3dSystems::MainPass)
+                .in_set(MesostructureSystems::Bleeding)
                 .after(main_opaque_pass_3d)
                 .before(main_transparent_pass_3d),
         )

@@ -103,8 +103,12 @@ impl Plugin for TranslucencyPlugin {
                     gather::translucency_iteration_pass
                         .in_set(Core3dSystems::MainPass)
                         .before(main_opaque_pass_3d),
+                    // After the bleeding, which may flip the view's main images (its compute
+                    // form writes the other one): the gather must draw into the current one.
                     gather::translucency_gather_pass
                         .in_set(Core3dSystems::MainPass)
+                        .in_set(crate::MesostructureSystems::TranslucencyGather)
+                        .after(crate::MesostructureSystems::Bleeding)
                         .after(main_opaque_pass_3d)
                         .before(main_transparent_pass_3d),
                 ),

@@ -19,16 +19,21 @@
 //! Bevy's angular fall-off and range window, the spot's own shadow map (where it has one) at
 //! every point, and a Henyey–Greenstein phase function; added to
 //! the view between the opaque and transparent passes, whose surfaces it dims by the medium's
-//! transmittance in front of them (a fullscreen fragment pass, timed as `volumetric/spots`; the
-//! sky is left undimmed). The pass is Bevy's deferred lighting pipeline of the view with this
-//! shader: the same mesh view bindings (lights, shadow maps, prepass depth). A spot whose cone
-//! is outside a camera's frustum is skipped for it, and pixels outside its projected bounding
-//! rectangle skip it; with no cone in view the pass only dims the surfaces (none at all in a
-//! transparent medium).
+//! transmittance in front of them (the sky is left undimmed). At full resolution it is a
+//! compute pass (timed as `volumetric/spots_compute`) writing the view's other main image
+//! through Bevy's post-process ping-pong; the plugin asks for storage writes on the main images
+//! of `Hdr` cameras with a [`VolumetricMedium`], and where they have none (a camera's own
+//! `CameraMainTextureUsages`, an LDR camera) a fullscreen fragment pass does the same work
+//! (timed as `volumetric/spots`). Both read Bevy's own lights and spot shadow maps (the compute
+//! pass binds the part of Bevy's mesh view bindings it needs, at Bevy's binding numbers, so
+//! Bevy's shadow lookup and filtering run unchanged). Culling: a spot whose cone is outside a
+//! camera's frustum is skipped for it; the compute pass keeps, per 8 × 8 tile, the spots whose
+//! projected bounding rectangle overlaps the tile and whose bounding sphere begins in front of
+//! the tile's farthest surface; with no cone in view the pass only dims the surfaces (none at
+//! all in a transparent medium).
 //! Half and quarter resolutions ([`VolumetricResolution`]) upsample by depth; the seed's own
-//! rasterised sampling planes are [`VolumetricMethod::SlicingPlanes`], for comparison.
-//! **Not yet**: per-tile light culling and a compute version. Use an `Hdr` camera: the
-//! in-scatter is added in linear light.
+//! rasterised sampling planes are [`VolumetricMethod::SlicingPlanes`], for comparison (both
+//! fragment passes). Use an `Hdr` camera: the in-scatter is added in linear light.
 //! [`reference`](mod@reference) is the exact CPU ground truth.
 
 pub mod reference;
@@ -168,7 +173,11 @@ impl Plugin for VolumetricSpotsPlugin {
             .register_type::<VolumetricResolution>()
             .register_type::<VolumetricMethod>()
             .register_type::<VolumetricSpot>()
-            .add_plugins(SyncComponentPlugin::<VolumetricMedium>::default());
+            .add_plugins(SyncComponentPlugin::<VolumetricMedium>::default())
+            .add_systems(
+                PostUpdate,
+                crate::render::request_storage_main_textures::<VolumetricMedium>,
+            );
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
             return;
         };
@@ -189,8 +198,13 @@ impl Plugin for VolumetricSpotsPlugin {
             )
             .add_systems(
                 Core3d,
+                // After every pass that adds light to the surfaces (the medium dims what they
+                // send), and ordered against them because the compute form flips the view's
+                // main images: unordered, two flips could reach the GPU in the other order.
                 volumetric_spots_pass
                     .in_set(Core3dSystems::MainPass)
+                    .after(crate::MesostructureSystems::Bleeding)
+                    .after(crate::MesostructureSystems::TranslucencyGather)
                     .after(main_opaque_pass_3d)
                     .before(main_transparent_pass_3d),
             );

@@ -3,6 +3,7 @@
 
 use bevy::{
     camera::Camera3d,
+    shader::ShaderDefVal,
     pbr::{
         GlobalClusterableObjectMeta, MeshViewBindGroup, ViewKeyCache,
         deferred::DeferredLightingLayout,
@@ -373,6 +374,20 @@ pub struct VolumetricSpotsPipeline {
     pipelines: HashMap<(bevy::pbr::MeshPipelineKey, VolumetricPass), CachedRenderPipelineId>,
     /// Bound as the low-resolution in-scatter where a pass does not read it.
     no_in_scatter: TextureView,
+    /// The compute form's group 0: the part of Bevy's mesh view bindings that its spot-shadow
+    /// lookup reads (view, lights, the spot shadow maps and their comparison sampler, the
+    /// clustered lights, globals), at Bevy's binding numbers and visible to compute (Bevy's own
+    /// layout is fragment-only).
+    light_layout: BindGroupLayoutDescriptor,
+    /// The compute form's group 1: empty (the raster form's binding arrays).
+    empty_layout: BindGroupLayoutDescriptor,
+    /// The compute form's group 2: the volumetric uniform, the depth buffer, the lit image and
+    /// the image it writes.
+    compute_layout: BindGroupLayoutDescriptor,
+    compute_pipelines: HashMap<bevy::pbr::MeshPipelineKey, CachedComputePipelineId>,
+    /// Whether the device gives Bevy's clustered lights a storage buffer (the compute form's
+    /// layout assumes it; otherwise the raster form runs).
+    compute_supported: bool,
 }
 
 /// Which of the shader's passes a pipeline runs.
@@ -416,11 +431,49 @@ pub fn init_volumetric_pipeline(
         TextureUsages::TEXTURE_BINDING,
         &[0u8; 8],
     );
+    let light_layout = BindGroupLayoutDescriptor::new(
+        "volumetric_spots_light_layout",
+        &BindGroupLayoutEntries::with_indices(
+            ShaderStages::COMPUTE,
+            (
+                (0, uniform_buffer::<bevy::render::view::ViewUniform>(true)),
+                (1, uniform_buffer::<bevy::pbr::GpuLights>(true)),
+                (5, texture_2d_array(TextureSampleType::Depth)),
+                (6, sampler(SamplerBindingType::Comparison)),
+                (8, storage_buffer_read_only_sized(false, None)),
+                (11, uniform_buffer::<bevy::render::globals::GlobalsUniform>(false)),
+            ),
+        ),
+    );
+    let compute_layout = BindGroupLayoutDescriptor::new(
+        "volumetric_spots_compute_layout",
+        &BindGroupLayoutEntries::with_indices(
+            ShaderStages::COMPUTE,
+            (
+                (0, uniform_buffer::<VolumetricUniform>(true)),
+                (2, texture_depth_2d()),
+                (3, texture_2d(TextureSampleType::Float { filterable: false })),
+                (
+                    4,
+                    texture_storage_2d(TextureFormat::Rgba16Float, StorageTextureAccess::WriteOnly),
+                ),
+            ),
+        ),
+    );
+    let compute_supported = matches!(
+        device.get_supported_read_only_binding_type(3),
+        BufferBindingType::Storage { .. }
+    );
     commands.insert_resource(VolumetricSpotsPipeline {
         layout,
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "spots.wgsl"),
         pipelines: HashMap::default(),
         no_in_scatter,
+        light_layout,
+        empty_layout: BindGroupLayoutDescriptor::new("volumetric_spots_empty_layout", &[]),
+        compute_layout,
+        compute_pipelines: HashMap::default(),
+        compute_supported,
     });
 }
 
@@ -428,6 +481,9 @@ pub fn init_volumetric_pipeline(
 /// its upsample, or the slicing planes.
 #[derive(Component)]
 pub struct ViewVolumetricPipeline {
+    /// The full-resolution pass in compute, where the device allows it; it runs in place of
+    /// `blend` where the view's main images take storage writes.
+    pub compute: Option<CachedComputePipelineId>,
     /// Full resolution, the upsample, or the slicing planes.
     pub blend: CachedRenderPipelineId,
     /// Whether `blend` draws the slicing planes (instanced) rather than one triangle.
@@ -510,6 +566,46 @@ fn specialize(
     descriptor
 }
 
+/// The view's pipeline key with one hardware 2×2 PCF tap per shadow lookup, whatever the
+/// view's `ShadowFilteringMethod`: the in-scatter integrates visibility along the ray over
+/// `samples` points, which smooths a shaft's edge as the filter would, and Bevy's Gaussian
+/// filter costs nine taps per sample (measured on the shadowed bench scene at 16 samples:
+/// 0.0023 → 0.0025 against the exact shaft, 13.8 → 10.4 ms on llvmpipe).
+fn fog_shadow_filtering(key: bevy::pbr::MeshPipelineKey) -> bevy::pbr::MeshPipelineKey {
+    use bevy::pbr::MeshPipelineKey;
+    (key & !MeshPipelineKey::SHADOW_FILTER_METHOD_RESERVED_BITS)
+        | MeshPipelineKey::SHADOW_FILTER_METHOD_HARDWARE_2X2
+}
+
+/// The compute form of the full-resolution pass for views of `key`: Bevy's shader defs for the
+/// view (its shadow filtering, light limits), as the raster form gets them from Bevy's deferred
+/// lighting pipeline, less the PCSS samplers its layout does not bind.
+fn specialize_compute(
+    deferred: &DeferredLightingLayout,
+    volumetric: &VolumetricSpotsPipeline,
+    key: bevy::pbr::MeshPipelineKey,
+) -> ComputePipelineDescriptor {
+    let mut shader_defs = deferred
+        .specialize(key)
+        .fragment
+        .map(|f| f.shader_defs)
+        .unwrap_or_default();
+    shader_defs.retain(|d| !matches!(d, ShaderDefVal::Bool(name, _) if name == "PCSS_SAMPLERS_AVAILABLE"));
+    shader_defs.push("COMPUTE_PASS".into());
+    ComputePipelineDescriptor {
+        label: Some("volumetric_spots_compute_pipeline".into()),
+        layout: vec![
+            volumetric.light_layout.clone(),
+            volumetric.empty_layout.clone(),
+            volumetric.compute_layout.clone(),
+        ],
+        shader: volumetric.shader.clone(),
+        shader_defs,
+        entry_point: Some("compute_spots".into()),
+        ..default()
+    }
+}
+
 pub fn prepare_volumetric_pipelines(
     mut commands: Commands,
     pipeline_cache: Res<PipelineCache>,
@@ -533,6 +629,7 @@ pub fn prepare_volumetric_pipelines(
         let Some(&key) = view_key_cache.get(&view.retained_view_entity) else {
             continue;
         };
+        let key = fog_shadow_filtering(key);
         let mut pipeline = |pass| {
             if let Some(&id) = volumetric.pipelines.get(&(key, pass)) {
                 return id;
@@ -554,9 +651,19 @@ pub fn prepare_volumetric_pipelines(
             } else {
                 VolumetricPass::Full
             });
+            let compute = (!slicing_planes && volumetric.compute_supported).then(|| {
+                if let Some(&id) = volumetric.compute_pipelines.get(&key) {
+                    return id;
+                }
+                let id = pipeline_cache
+                    .queue_compute_pipeline(specialize_compute(&deferred, volumetric, key));
+                volumetric.compute_pipelines.insert(key, id);
+                id
+            });
             commands
                 .entity(entity)
                 .insert(ViewVolumetricPipeline {
+                    compute,
                     blend,
                     slicing_planes,
                     low_resolution: None,
@@ -586,6 +693,7 @@ pub fn prepare_volumetric_pipelines(
         );
         commands.entity(entity).insert((
             ViewVolumetricPipeline {
+                compute: None,
                 blend,
                 slicing_planes: false,
                 low_resolution,
@@ -596,7 +704,10 @@ pub fn prepare_volumetric_pipelines(
 }
 
 /// Core3d system between the opaque and transparent passes: adds the in-scattered light of
-/// every volumetric spot to the view, timed as `volumetric/spots`; nothing without spots.
+/// every volumetric spot to the view; nothing without spots. At full resolution with equal
+/// angles, a compute pass where the view's main images take storage writes (timed as
+/// `volumetric/spots_compute`); otherwise, and for the reduced resolutions and the slicing
+/// planes, fullscreen fragment passes (timed as `volumetric/spots`).
 pub fn volumetric_spots_pass(
     view: ViewQuery<(
         &ViewTarget,
@@ -605,16 +716,48 @@ pub fn volumetric_spots_pass(
         &ViewVolumetricUniformOffset,
         &bevy::render::camera::ExtractedCamera,
         Option<&ViewInScatterTexture>,
+        ComputeViewBindings,
     )>,
     spots: Res<ExtractedVolumetricSpots>,
     pipeline: Res<VolumetricSpotsPipeline>,
     pipeline_cache: Res<PipelineCache>,
     uniforms: Res<VolumetricUniforms>,
+    lights: LightResources,
     mut ctx: RenderContext,
 ) {
-    let (target, mesh_view, pipelines, offset, camera, in_scatter) = view.into_inner();
+    let (target, mesh_view, pipelines, offset, camera, in_scatter, compute_view) =
+        view.into_inner();
     // Nothing to add or dim: no cone in view and a transparent medium.
     if (spots.0.is_empty() || offset.spots == 0) && !offset.dims {
+        return;
+    }
+    if let Some(id) = pipelines.compute.filter(|_| crate::render::composites_in_compute(target))
+        && let Some(compute) = pipeline_cache.get_compute_pipeline(id)
+        && let Some(groups) = compute_bind_groups(
+            &ctx.render_device().clone(),
+            &pipeline_cache,
+            &pipeline,
+            &uniforms,
+            &lights,
+            compute_view.2,
+            compute_view.3,
+            target,
+        )
+    {
+        let (view_offset, lights_offset, _, _) = compute_view;
+        let size = target.main_texture().size();
+        crate::render::dispatch_per_pixel_with(
+            &mut ctx,
+            "volumetric/spots_compute",
+            compute,
+            &[
+                (&groups.0, &[view_offset.offset, lights_offset.offset]),
+                (&groups.1, &[]),
+                (&groups.2, &[offset.offset]),
+            ],
+            UVec2::new(size.width, size.height),
+            |_| {},
+        );
         return;
     }
     let (Some(blend_pipeline), Some(volumetric)) = (
@@ -699,6 +842,79 @@ pub fn volumetric_spots_pass(
     }
     span.end(ctx.command_encoder());
     ctx.command_encoder().pop_debug_group();
+}
+
+/// What the compute form reads of a view beyond the raster form's: its view and lights
+/// offsets, its shadow maps and its depth.
+type ComputeViewBindings = (
+    &'static bevy::render::view::ViewUniformOffset,
+    &'static bevy::pbr::ViewLightsUniformOffset,
+    &'static bevy::pbr::ViewShadowBindings,
+    &'static bevy::core_pipeline::prepass::ViewPrepassTextures,
+);
+
+/// Bevy's light and view resources that the compute form binds itself.
+#[derive(bevy::ecs::system::SystemParam)]
+pub struct LightResources<'w> {
+    view_uniforms: Res<'w, bevy::render::view::ViewUniforms>,
+    light_meta: Res<'w, bevy::pbr::LightMeta>,
+    clusterables: Option<Res<'w, GlobalClusterableObjectMeta>>,
+    shadow_samplers: Res<'w, bevy::pbr::ShadowSamplers>,
+    globals: Res<'w, bevy::render::globals::GlobalsBuffer>,
+}
+
+/// The compute form's three bind groups for a view (writing the other main image through
+/// Bevy's post-process ping-pong, which this call flips); `None` (nothing flipped) where a
+/// resource is not ready.
+fn compute_bind_groups(
+    device: &RenderDevice,
+    pipeline_cache: &PipelineCache,
+    pipeline: &VolumetricSpotsPipeline,
+    uniforms: &VolumetricUniforms,
+    lights: &LightResources,
+    shadows: &bevy::pbr::ViewShadowBindings,
+    prepass: &bevy::core_pipeline::prepass::ViewPrepassTextures,
+    target: &ViewTarget,
+) -> Option<(BindGroup, BindGroup, BindGroup)> {
+    let (Some(view), Some(lights_binding), Some(clustered), Some(globals), Some(volumetric), Some(depth)) = (
+        lights.view_uniforms.uniforms.binding(),
+        lights.light_meta.view_gpu_lights.binding(),
+        lights.clusterables.as_ref().and_then(|c| c.gpu_clustered_lights.binding()),
+        lights.globals.buffer.binding(),
+        uniforms.0.binding(),
+        prepass.depth_view(),
+    ) else {
+        return None;
+    };
+    let light_group = device.create_bind_group(
+        "volumetric_spots_light_bind_group",
+        &pipeline_cache.get_bind_group_layout(&pipeline.light_layout),
+        &BindGroupEntries::with_indices((
+            (0, view),
+            (1, lights_binding),
+            (5, &shadows.directional_light_depth_texture_view),
+            (6, &lights.shadow_samplers.directional_light_comparison_sampler),
+            (8, clustered),
+            (11, globals),
+        )),
+    );
+    let empty = device.create_bind_group(
+        "volumetric_spots_empty_bind_group",
+        &pipeline_cache.get_bind_group_layout(&pipeline.empty_layout),
+        &[],
+    );
+    let post = target.post_process_write();
+    let compute_group = device.create_bind_group(
+        "volumetric_spots_compute_bind_group",
+        &pipeline_cache.get_bind_group_layout(&pipeline.compute_layout),
+        &BindGroupEntries::with_indices((
+            (0, volumetric),
+            (2, depth),
+            (3, post.source),
+            (4, post.destination),
+        )),
+    );
+    Some((light_group, empty, compute_group))
 }
 
 #[cfg(test)]

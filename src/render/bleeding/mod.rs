@@ -121,7 +121,7 @@ pub fn init_bleeding_pipeline(
             {
                 let (a, b, c, d, e, f, g, h, i, j, k, l, m) = entries;
                 let view_out =
-                    texture_storage_2d(VIEW_TARGET_FORMAT, StorageTextureAccess::WriteOnly);
+                    texture_storage_2d(super::VIEW_TARGET_FORMAT, StorageTextureAccess::WriteOnly);
                 (a, b, c, d, e, f, g, h, i, j, k, l, m, view_out)
             },
         ),
@@ -236,7 +236,7 @@ pub fn bleeding_pass(
     {
         return;
     }
-    let to_view = composites_in_compute(target);
+    let to_view = super::composites_in_compute(target);
     let gather_id = if to_view {
         pipeline.gather_to_view
     } else {
@@ -310,33 +310,6 @@ pub fn bleeding_pass(
     }
 }
 
-/// The format of the view's main image that the gather can write itself (Bevy's HDR format).
-const VIEW_TARGET_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
-
-/// Whether the gather writes the view's main image itself (compute) rather than a fullscreen
-/// draw adding the bleeding to it: where the main images are HDR and allow storage writes
-/// (the plugin asks for that on its cameras: [`request_storage_main_textures`]).
-fn composites_in_compute(target: &ViewTarget) -> bool {
-    target.main_texture_format() == VIEW_TARGET_FORMAT
-        && target.main_texture().usage().contains(TextureUsages::STORAGE_BINDING)
-        && target.main_texture_other().usage().contains(TextureUsages::STORAGE_BINDING)
-}
-
-/// Main world, for each camera given [`Mesostructure`](crate::Mesostructure): lets its main
-/// images be written by compute passes, so that the bleeding gather composites itself. Once,
-/// when the component is added: a camera whose usages are set afterwards without
-/// `STORAGE_BINDING` keeps the fullscreen composite.
-pub fn request_storage_main_textures(
-    mut cameras: Query<
-        &mut bevy::camera::CameraMainTextureUsages,
-        Added<crate::Mesostructure>,
-    >,
-) {
-    for mut usages in &mut cameras {
-        usages.0 |= TextureUsages::STORAGE_BINDING;
-    }
-}
-
 /// Core3d system after the gather: adds the bleeding to the view's lit colour, timed as
 /// `mesostructure/bleeding_composite`. (Its own system, so its own command encoder: lavapipe
 /// crashes on debug groups around a compute and a render pass in one encoder.)
@@ -359,7 +332,7 @@ pub fn bleeding_composite_pass(
     // where the gather wrote the view's image itself.
     if !view_has_mesostructure(&phases, extracted_view)
         || !sector_records_stored(&pipeline_cache, occlusion)
-        || composites_in_compute(target)
+        || super::composites_in_compute(target)
     {
         return;
     }
