@@ -263,10 +263,11 @@ fn bleeding_holds_its_measured_error_against_the_one_bounce_ground_truth() {
     let k = 0.1;
     let mut unit = None;
     // Measured (MAE, mean bounce / mean truth) on the software driver, docs/accuracy.md; held
-    // to ±0.005 and ±0.05.
+    // to ±0.005 and ±0.05 (0.0118 / 1.010 and 0.0083 / 0.963 before the horizons were
+    // searched 4× as far).
     for (name, map, elevation, measured_mae, measured_ratio) in [
-        ("bricks", HeightMap::bricks(256, 4, 0.12), 45.0f32, 0.0118, 1.010),
-        ("stone", HeightMap::noise(256, 16, 3, 7), 45.0, 0.0083, 0.963),
+        ("bricks", HeightMap::bricks(256, 4, 0.12), 45.0f32, 0.0129, 1.032),
+        ("stone", HeightMap::noise(256, 16, 3, 7), 45.0, 0.0084, 0.971),
     ] {
         let (_, _, _, frame) = bricks_scene(&map, k, elevation, None, Mesostructure::default());
         assert!(!frame.bleeding.is_empty(), "{name}: bleeding captured");

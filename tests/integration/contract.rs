@@ -558,13 +558,14 @@ fn occlusion_holds_its_measured_error_against_the_ground_truth() {
     if !gpu_or_skip() {
         return;
     }
-    // Measured AO MAE on the software driver (docs/accuracy.md), held to ±0.005.
+    // Measured AO MAE on the software driver (docs/accuracy.md), held to ±0.005 (0.0105 and
+    // 0.0099 before the horizons were searched 4× as far).
     for (name, map, measured) in [
         // Bricks: 4 courses over the plane, so that the mortar is ~4 px wide at 128².
-        ("bricks", HeightMap::bricks(256, 4, 0.12), 0.0105),
+        ("bricks", HeightMap::bricks(256, 4, 0.12), 0.0062),
         // Stone: fractal noise from 16 cells across the plane, 3 octaves: the finest features
         // (64 cells) are ~2.4 px wide at 128².
-        ("stone", HeightMap::noise(256, 16, 3, 7), 0.0099),
+        ("stone", HeightMap::noise(256, 16, 3, 7), 0.0094),
     ] {
         let k = 0.1;
         let mut app = app();

@@ -381,10 +381,11 @@ fn low_light_micro_shadows_agree_with_the_ground_truth() {
     // Light travelling towards +x, 20° above the horizon.
     let elevation = 20f32.to_radians();
     let direction = Vec3::new(elevation.cos(), -elevation.sin(), 0.0);
-    // Measured agreement on the software driver (docs/accuracy.md), held to ±0.01.
+    // Measured agreement on the software driver (docs/accuracy.md), held to ±0.01 (stone
+    // 0.981 before the horizons were searched 4× as far).
     for (name, map, measured) in [
         ("bricks", HeightMap::bricks(256, 4, 0.15), 1.000),
-        ("stone", HeightMap::noise(256, 16, 3, 7), 0.981),
+        ("stone", HeightMap::noise(256, 16, 3, 7), 0.982),
     ] {
         let (on, off, _) = micro_shadow_pair(direction, &map);
         let field = HeightField::new(256, 256, &map.values, 2.0, 0.1);

@@ -100,34 +100,36 @@ fn unseen_content_scores_hold_their_measured_values() {
 /// docs/accuracy.md). The shadows' figures are with the light's visibility at each pixel's own
 /// point (before it, the texels' 0s and 1s interpolated: recall 0.932 / 0.632 / 0.714,
 /// precision 0.793 / 0.774 / 0.625); the bounce's with the first directional light's bounce
-/// from texture space (before it: 0.358 / 0.684 / 0.313 and ratio 0.955 / 0.756 / 0.824).
+/// from texture space (before it: 0.358 / 0.684 / 0.313 and ratio 0.955 / 0.756 / 0.824); all
+/// re-measured after the horizons were searched 4× as far (AO MAE was 0.0338 / 0.0776 /
+/// 0.0506, bias +0.0123 / −0.0016 / +0.0401).
 const EXPECTED: &[Expected] = &[
     Expected {
         scene: "plane/pebbles/top-down/light35",
-        ao_mae: 0.0338,
-        ao_bias: 0.0123,
+        ao_mae: 0.0326,
+        ao_bias: 0.0079,
         shadow_recall: 1.000,
         shadow_precision: 0.961,
-        bounce_rel_mae: 0.244,
-        bounce_ratio: 0.894,
+        bounce_rel_mae: 0.250,
+        bounce_ratio: 0.890,
     },
     Expected {
         scene: "sphere/cracked/oblique/light35",
-        ao_mae: 0.0776,
-        ao_bias: -0.0016,
+        ao_mae: 0.0770,
+        ao_bias: 0.0006,
         shadow_recall: 1.000,
         shadow_precision: 0.905,
-        bounce_rel_mae: 0.294,
-        bounce_ratio: 1.019,
+        bounce_rel_mae: 0.289,
+        bounce_ratio: 0.990,
     },
     Expected {
         scene: "torus/pebbles/top-down/light60",
-        ao_mae: 0.0506,
-        ao_bias: 0.0401,
+        ao_mae: 0.0509,
+        ao_bias: 0.0409,
         shadow_recall: 0.714,
         shadow_precision: 0.556,
-        bounce_rel_mae: 0.265,
-        bounce_ratio: 0.818,
+        bounce_rel_mae: 0.278,
+        bounce_ratio: 0.798,
     },
 ];
 
