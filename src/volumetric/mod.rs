@@ -36,6 +36,7 @@
 //! fragment passes). Use an `Hdr` camera: the in-scatter is added in linear light.
 //! [`reference`](mod@reference) is the exact CPU ground truth.
 
+mod compute;
 pub mod reference;
 mod render;
 

@@ -3,7 +3,6 @@
 
 use bevy::{
     camera::Camera3d,
-    shader::ShaderDefVal,
     pbr::{
         GlobalClusterableObjectMeta, MeshViewBindGroup, ViewKeyCache,
         deferred::DeferredLightingLayout,
@@ -374,20 +373,8 @@ pub struct VolumetricSpotsPipeline {
     pipelines: HashMap<(bevy::pbr::MeshPipelineKey, VolumetricPass), CachedRenderPipelineId>,
     /// Bound as the low-resolution in-scatter where a pass does not read it.
     no_in_scatter: TextureView,
-    /// The compute form's group 0: the part of Bevy's mesh view bindings that its spot-shadow
-    /// lookup reads (view, lights, the spot shadow maps and their comparison sampler, the
-    /// clustered lights, globals), at Bevy's binding numbers and visible to compute (Bevy's own
-    /// layout is fragment-only).
-    light_layout: BindGroupLayoutDescriptor,
-    /// The compute form's group 1: empty (the raster form's binding arrays).
-    empty_layout: BindGroupLayoutDescriptor,
-    /// The compute form's group 2: the volumetric uniform, the depth buffer, the lit image and
-    /// the image it writes.
-    compute_layout: BindGroupLayoutDescriptor,
-    compute_pipelines: HashMap<bevy::pbr::MeshPipelineKey, CachedComputePipelineId>,
-    /// Whether the device gives Bevy's clustered lights a storage buffer (the compute form's
-    /// layout assumes it; otherwise the raster form runs).
-    compute_supported: bool,
+    /// The compute form's layouts and pipelines.
+    compute: super::compute::ComputeForm,
 }
 
 /// Which of the shader's passes a pipeline runs.
@@ -431,49 +418,12 @@ pub fn init_volumetric_pipeline(
         TextureUsages::TEXTURE_BINDING,
         &[0u8; 8],
     );
-    let light_layout = BindGroupLayoutDescriptor::new(
-        "volumetric_spots_light_layout",
-        &BindGroupLayoutEntries::with_indices(
-            ShaderStages::COMPUTE,
-            (
-                (0, uniform_buffer::<bevy::render::view::ViewUniform>(true)),
-                (1, uniform_buffer::<bevy::pbr::GpuLights>(true)),
-                (5, texture_2d_array(TextureSampleType::Depth)),
-                (6, sampler(SamplerBindingType::Comparison)),
-                (8, storage_buffer_read_only_sized(false, None)),
-                (11, uniform_buffer::<bevy::render::globals::GlobalsUniform>(false)),
-            ),
-        ),
-    );
-    let compute_layout = BindGroupLayoutDescriptor::new(
-        "volumetric_spots_compute_layout",
-        &BindGroupLayoutEntries::with_indices(
-            ShaderStages::COMPUTE,
-            (
-                (0, uniform_buffer::<VolumetricUniform>(true)),
-                (2, texture_depth_2d()),
-                (3, texture_2d(TextureSampleType::Float { filterable: false })),
-                (
-                    4,
-                    texture_storage_2d(TextureFormat::Rgba16Float, StorageTextureAccess::WriteOnly),
-                ),
-            ),
-        ),
-    );
-    let compute_supported = matches!(
-        device.get_supported_read_only_binding_type(3),
-        BufferBindingType::Storage { .. }
-    );
     commands.insert_resource(VolumetricSpotsPipeline {
         layout,
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "spots.wgsl"),
         pipelines: HashMap::default(),
         no_in_scatter,
-        light_layout,
-        empty_layout: BindGroupLayoutDescriptor::new("volumetric_spots_empty_layout", &[]),
-        compute_layout,
-        compute_pipelines: HashMap::default(),
-        compute_supported,
+        compute: super::compute::ComputeForm::new(&device),
     });
 }
 
@@ -577,35 +527,6 @@ fn fog_shadow_filtering(key: bevy::pbr::MeshPipelineKey) -> bevy::pbr::MeshPipel
         | MeshPipelineKey::SHADOW_FILTER_METHOD_HARDWARE_2X2
 }
 
-/// The compute form of the full-resolution pass for views of `key`: Bevy's shader defs for the
-/// view (its shadow filtering, light limits), as the raster form gets them from Bevy's deferred
-/// lighting pipeline, less the PCSS samplers its layout does not bind.
-fn specialize_compute(
-    deferred: &DeferredLightingLayout,
-    volumetric: &VolumetricSpotsPipeline,
-    key: bevy::pbr::MeshPipelineKey,
-) -> ComputePipelineDescriptor {
-    let mut shader_defs = deferred
-        .specialize(key)
-        .fragment
-        .map(|f| f.shader_defs)
-        .unwrap_or_default();
-    shader_defs.retain(|d| !matches!(d, ShaderDefVal::Bool(name, _) if name == "PCSS_SAMPLERS_AVAILABLE"));
-    shader_defs.push("COMPUTE_PASS".into());
-    ComputePipelineDescriptor {
-        label: Some("volumetric_spots_compute_pipeline".into()),
-        layout: vec![
-            volumetric.light_layout.clone(),
-            volumetric.empty_layout.clone(),
-            volumetric.compute_layout.clone(),
-        ],
-        shader: volumetric.shader.clone(),
-        shader_defs,
-        entry_point: Some("compute_spots".into()),
-        ..default()
-    }
-}
-
 pub fn prepare_volumetric_pipelines(
     mut commands: Commands,
     pipeline_cache: Res<PipelineCache>,
@@ -651,15 +572,10 @@ pub fn prepare_volumetric_pipelines(
             } else {
                 VolumetricPass::Full
             });
-            let compute = (!slicing_planes && volumetric.compute_supported).then(|| {
-                if let Some(&id) = volumetric.compute_pipelines.get(&key) {
-                    return id;
-                }
-                let id = pipeline_cache
-                    .queue_compute_pipeline(specialize_compute(&deferred, volumetric, key));
-                volumetric.compute_pipelines.insert(key, id);
-                id
-            });
+            let shader = volumetric.shader.clone();
+            let compute = (!slicing_planes)
+                .then(|| volumetric.compute.pipeline(&pipeline_cache, &deferred, shader, key))
+                .flatten();
             commands
                 .entity(entity)
                 .insert(ViewVolumetricPipeline {
@@ -716,13 +632,13 @@ pub fn volumetric_spots_pass(
         &ViewVolumetricUniformOffset,
         &bevy::render::camera::ExtractedCamera,
         Option<&ViewInScatterTexture>,
-        ComputeViewBindings,
+        super::compute::ComputeViewBindings,
     )>,
     spots: Res<ExtractedVolumetricSpots>,
     pipeline: Res<VolumetricSpotsPipeline>,
     pipeline_cache: Res<PipelineCache>,
     uniforms: Res<VolumetricUniforms>,
-    lights: LightResources,
+    lights: super::compute::LightResources,
     mut ctx: RenderContext,
 ) {
     let (target, mesh_view, pipelines, offset, camera, in_scatter, compute_view) =
@@ -731,33 +647,19 @@ pub fn volumetric_spots_pass(
     if (spots.0.is_empty() || offset.spots == 0) && !offset.dims {
         return;
     }
-    if let Some(id) = pipelines.compute.filter(|_| crate::render::composites_in_compute(target))
-        && let Some(compute) = pipeline_cache.get_compute_pipeline(id)
-        && let Some(groups) = compute_bind_groups(
-            &ctx.render_device().clone(),
+    // The compute form where it can run this frame; otherwise the fragment passes below.
+    if let Some(id) = pipelines.compute
+        && pipeline.compute.record(
+            &mut ctx,
             &pipeline_cache,
-            &pipeline,
+            id,
             &uniforms,
             &lights,
-            compute_view.2,
-            compute_view.3,
+            compute_view,
+            offset.offset,
             target,
         )
     {
-        let (view_offset, lights_offset, _, _) = compute_view;
-        let size = target.main_texture().size();
-        crate::render::dispatch_per_pixel_with(
-            &mut ctx,
-            "volumetric/spots_compute",
-            compute,
-            &[
-                (&groups.0, &[view_offset.offset, lights_offset.offset]),
-                (&groups.1, &[]),
-                (&groups.2, &[offset.offset]),
-            ],
-            UVec2::new(size.width, size.height),
-            |_| {},
-        );
         return;
     }
     let (Some(blend_pipeline), Some(volumetric)) = (
@@ -842,79 +744,6 @@ pub fn volumetric_spots_pass(
     }
     span.end(ctx.command_encoder());
     ctx.command_encoder().pop_debug_group();
-}
-
-/// What the compute form reads of a view beyond the raster form's: its view and lights
-/// offsets, its shadow maps and its depth.
-type ComputeViewBindings = (
-    &'static bevy::render::view::ViewUniformOffset,
-    &'static bevy::pbr::ViewLightsUniformOffset,
-    &'static bevy::pbr::ViewShadowBindings,
-    &'static bevy::core_pipeline::prepass::ViewPrepassTextures,
-);
-
-/// Bevy's light and view resources that the compute form binds itself.
-#[derive(bevy::ecs::system::SystemParam)]
-pub struct LightResources<'w> {
-    view_uniforms: Res<'w, bevy::render::view::ViewUniforms>,
-    light_meta: Res<'w, bevy::pbr::LightMeta>,
-    clusterables: Option<Res<'w, GlobalClusterableObjectMeta>>,
-    shadow_samplers: Res<'w, bevy::pbr::ShadowSamplers>,
-    globals: Res<'w, bevy::render::globals::GlobalsBuffer>,
-}
-
-/// The compute form's three bind groups for a view (writing the other main image through
-/// Bevy's post-process ping-pong, which this call flips); `None` (nothing flipped) where a
-/// resource is not ready.
-fn compute_bind_groups(
-    device: &RenderDevice,
-    pipeline_cache: &PipelineCache,
-    pipeline: &VolumetricSpotsPipeline,
-    uniforms: &VolumetricUniforms,
-    lights: &LightResources,
-    shadows: &bevy::pbr::ViewShadowBindings,
-    prepass: &bevy::core_pipeline::prepass::ViewPrepassTextures,
-    target: &ViewTarget,
-) -> Option<(BindGroup, BindGroup, BindGroup)> {
-    let (Some(view), Some(lights_binding), Some(clustered), Some(globals), Some(volumetric), Some(depth)) = (
-        lights.view_uniforms.uniforms.binding(),
-        lights.light_meta.view_gpu_lights.binding(),
-        lights.clusterables.as_ref().and_then(|c| c.gpu_clustered_lights.binding()),
-        lights.globals.buffer.binding(),
-        uniforms.0.binding(),
-        prepass.depth_view(),
-    ) else {
-        return None;
-    };
-    let light_group = device.create_bind_group(
-        "volumetric_spots_light_bind_group",
-        &pipeline_cache.get_bind_group_layout(&pipeline.light_layout),
-        &BindGroupEntries::with_indices((
-            (0, view),
-            (1, lights_binding),
-            (5, &shadows.directional_light_depth_texture_view),
-            (6, &lights.shadow_samplers.directional_light_comparison_sampler),
-            (8, clustered),
-            (11, globals),
-        )),
-    );
-    let empty = device.create_bind_group(
-        "volumetric_spots_empty_bind_group",
-        &pipeline_cache.get_bind_group_layout(&pipeline.empty_layout),
-        &[],
-    );
-    let post = target.post_process_write();
-    let compute_group = device.create_bind_group(
-        "volumetric_spots_compute_bind_group",
-        &pipeline_cache.get_bind_group_layout(&pipeline.compute_layout),
-        &BindGroupEntries::with_indices((
-            (0, volumetric),
-            (2, depth),
-            (3, post.source),
-            (4, post.destination),
-        )),
-    );
-    Some((light_group, empty, compute_group))
 }
 
 #[cfg(test)]
