@@ -254,19 +254,25 @@ pub fn point_light_visibility(map: &HorizonMap, uv: Vec2, core: &CoreFrame, to_l
     let p = uv.fract_gl() * Vec2::new(w as f32, h as f32) - 0.5;
     let base = p.floor();
     let f = p - base;
-    let (mut corners, mut steps) = ([0.0f32; 4], 0);
-    for (corner, (dx, dy)) in corners.iter_mut().zip([(0, 0), (1, 0), (0, 1), (1, 1)]) {
+    let texels = [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(dx, dy)| {
         let x = (base.x as i64 + dx).rem_euclid(w) as u32;
         let y = (base.y as i64 + dy).rem_euclid(h) as u32;
-        *corner = light.reaches_texel(map, x, y, core.k) as u32 as f32;
-        steps = steps.max(light.occluder_steps(map, (y * map.width + x) as usize));
-    }
+        (x, y)
+    });
+    let corners = texels.map(|(x, y)| light.reaches_texel(map, x, y, core.k) as u32 as f32);
     let mix = |a: f32, b: f32, t: f32| a + (b - a) * t;
     let soft = mix(mix(corners[0], corners[1], f.x), mix(corners[2], corners[3], f.x), f.y);
     let lit: f32 = corners.iter().sum();
     if lit == 0.0 || lit == 4.0 {
-        soft
-    } else if light.march(map, p, core.k, 0.5, 2 * (steps + 1)) {
+        return soft;
+    }
+    // Only at an edge: how far the march goes, the corners' farthest occluder.
+    let steps = texels
+        .iter()
+        .map(|&(x, y)| light.occluder_steps(map, (y * map.width + x) as usize))
+        .max()
+        .unwrap_or(0);
+    if light.march(map, p, core.k, 0.5, 2 * (steps + 1)) {
         soft.max(0.5)
     } else {
         soft.min(EDGE_SHADOWED_PERCENT as f32 / 100.0)

@@ -374,16 +374,20 @@ fn point_light_visibility(uv: vec2<f32>, level: vec2<i32>, core: CoreFrame, ligh
     let base = vec2<i32>(floor(p));
     let f = p - floor(p);
     var corners: array<f32, 4>;
-    var steps = 0u;
     for (var corner = 0; corner < 4; corner++) {
         let texel = horizon_texel(base, vec2<i32>(corner & 1, corner >> 1u), level);
         corners[corner] = texel_light_visibility(texel, level, core, light);
-        steps = max(steps, light_occluder_steps(texel, level, light));
     }
     let soft = mix(mix(corners[0], corners[1], f.x), mix(corners[2], corners[3], f.x), f.y);
     let lit = corners[0] + corners[1] + corners[2] + corners[3];
     if lit == 0.0 || lit == 4.0 {
         return soft;
+    }
+    // Only at an edge (few pixels): how far the march goes, the corners' farthest occluder.
+    var steps = 0u;
+    for (var corner = 0; corner < 4; corner++) {
+        let texel = horizon_texel(base, vec2<i32>(corner & 1, corner >> 1u), level);
+        steps = max(steps, light_occluder_steps(texel, level, light));
     }
     if light_march(p, level, core, light, 0.5, 2u * (steps + 1u)) > 0.5 {
         return max(soft, 0.5);
