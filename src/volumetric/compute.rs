@@ -17,7 +17,7 @@ use bevy::{
     shader::ShaderDefVal,
 };
 
-use super::render::{VolumetricUniform, VolumetricUniforms};
+use super::extract::{VolumetricUniform, VolumetricUniforms};
 
 /// The compute form's layouts and its pipelines by view key.
 pub struct ComputeForm {

@@ -37,6 +37,7 @@
 //! [`reference`](mod@reference) is the exact CPU ground truth.
 
 mod compute;
+mod extract;
 pub mod reference;
 mod render;
 
@@ -54,6 +55,7 @@ use bevy::{
     },
 };
 
+use extract::*;
 use render::*;
 
 /// The most spots with [`VolumetricSpot`] drawn per frame (more are skipped, with a warning).

@@ -395,7 +395,7 @@ impl SlicingPlanes {
     /// The planes' span for `light` (its cone's bounding sphere, as the render world bounds
     /// it) seen from `eye` along `forward`, the camera's near plane at `camera_near`.
     pub fn for_light(eye: DVec3, forward: DVec3, light: &SpotLight, camera_near: f64) -> Self {
-        let bounds = super::render::cone_bounds(
+        let bounds = super::extract::cone_bounds(
             light.position.as_vec3(),
             light.direction.as_vec3(),
             light.outer_angle as f32,
