@@ -94,27 +94,6 @@ pub fn sample_directions(n: u32) -> Vec<[f32; 2]> {
         .collect()
 }
 
-/// Quantizes a gradient to the index of the 8-neighbour nearest its direction (22.5° sectors),
-/// or `None` for a zero gradient. Mirrors `quantize_direction` in `apex.wgsl`.
-pub fn quantize_direction(g: [f32; 2]) -> Option<usize> {
-    const TAN_22_5: f32 = 0.414_213_57;
-    let (ax, ay) = (g[0].abs(), g[1].abs());
-    if ax == 0.0 && ay == 0.0 {
-        return None;
-    }
-    let sx = if ax > TAN_22_5 * ay {
-        g[0].signum() as i32
-    } else {
-        0
-    };
-    let sy = if ay > TAN_22_5 * ax {
-        g[1].signum() as i32
-    } else {
-        0
-    };
-    NEIGHBOURS.iter().position(|&o| o == (sx, sy))
-}
-
 /// Follows the gradient upward from `(x, y)` one pixel a step: to the neighbour the quantized
 /// gradient points at while it is connected and higher; else to the highest connected higher
 /// neighbour (ridges, where the quantized direction misses); stops at a local maximum, where the
@@ -144,7 +123,7 @@ pub fn ascend(
             mhm.heights[mhm.index((x + ox) as u32, (y + oy) as u32)]
         };
         let mut next = None;
-        if let Some(dir) = quantize_direction(mhgm.gradients[i]) {
+        if let Some(dir) = mhgm.ascent_direction(i) {
             if !mhgm.connected(i, dir) {
                 return (
                     Apex {

@@ -52,20 +52,36 @@ impl Default for DepthContinuity {
     }
 }
 
-/// The gradient map of a [`ScreenHeightMap`].
+/// Shift of the ascent direction in a pixel's packed flags word (`gradient.wgsl`): bits 0–15
+/// are the `FLAG_*` bits and the connectivity mask, bits 16–19 the gradient's direction
+/// quantised to an index into [`NEIGHBOURS`] ([`NO_ASCENT`]: a zero gradient).
+pub const ASCENT_SHIFT: u32 = 16;
+/// The ascent direction of a pixel whose gradient is zero.
+pub const NO_ASCENT: u8 = 8;
+
+/// The gradient map of a [`ScreenHeightMap`], in the form the apex search reads it: the
+/// gradient only ever chooses the gradient ascent's next neighbour (§2.2), so each pixel keeps
+/// its direction quantised to one of the 8 neighbours ([`quantize_direction`]) rather than the
+/// gradient itself (the GPU packs height, flags and direction in 8 bytes a pixel).
 #[derive(Clone, Debug, PartialEq)]
 pub struct GradientMap {
     /// Width in pixels.
     pub width: u32,
     /// Height in pixels.
     pub height: u32,
-    /// Gradient of height in world units per pixel, `(∂h/∂x, ∂h/∂y)`, y down.
-    pub gradients: Vec<[f32; 2]>,
+    /// The height gradient's direction, an index into [`NEIGHBOURS`], or [`NO_ASCENT`].
+    pub ascent: Vec<u8>,
     /// `FLAG_*` bits and the connectivity mask.
     pub flags: Vec<u32>,
 }
 
 impl GradientMap {
+    /// The neighbour the height gradient of pixel `i` points at, if it is not zero.
+    #[inline]
+    pub fn ascent_direction(&self, i: usize) -> Option<usize> {
+        (self.ascent[i] < NO_ASCENT).then_some(self.ascent[i] as usize)
+    }
+
     /// Whether pixel `i` is connected to its neighbour `dir` (an index into [`NEIGHBOURS`]).
     #[inline]
     pub fn connected(&self, i: usize, dir: usize) -> bool {
@@ -80,30 +96,54 @@ impl GradientMap {
 }
 
 /// Computes the MHGM: per valid pixel, the 8-neighbour connectivity (same object, on screen, no
-/// depth discontinuity), the boundary flags, and the gradient by central differences where both
-/// neighbours on an axis are connected, one-sided differences where one is, and 0 where none is.
+/// depth discontinuity), the boundary flags, and the direction of the gradient
+/// ([`gradient_at`]).
 pub fn gradient_map(mhm: &ScreenHeightMap, continuity: DepthContinuity) -> GradientMap {
     let n = (mhm.width * mhm.height) as usize;
-    let mut gradients = vec![[0.0; 2]; n];
+    let mut ascent = vec![NO_ASCENT; n];
     let mut flags = vec![0u32; n];
     for y in 0..mhm.height as i32 {
         for x in 0..mhm.width as i32 {
             let i = mhm.index(x as u32, y as u32);
             let (g, f) = gradient_at(mhm, continuity, x, y);
-            gradients[i] = g;
+            ascent[i] = quantize_direction(g).map_or(NO_ASCENT, |d| d as u8);
             flags[i] = f;
         }
     }
     GradientMap {
         width: mhm.width,
         height: mhm.height,
-        gradients,
+        ascent,
         flags,
     }
 }
 
-/// One pixel of [`gradient_map`]; mirrors `gradient.wgsl`.
-fn gradient_at(mhm: &ScreenHeightMap, c: DepthContinuity, x: i32, y: i32) -> ([f32; 2], u32) {
+/// Quantizes a gradient to the index of the 8-neighbour nearest its direction (22.5° sectors),
+/// or `None` for a zero gradient. Mirrors `quantize_direction` in `gradient.wgsl`.
+pub fn quantize_direction(g: [f32; 2]) -> Option<usize> {
+    const TAN_22_5: f32 = 0.414_213_57;
+    let (ax, ay) = (g[0].abs(), g[1].abs());
+    if ax == 0.0 && ay == 0.0 {
+        return None;
+    }
+    let sx = if ax > TAN_22_5 * ay {
+        g[0].signum() as i32
+    } else {
+        0
+    };
+    let sy = if ay > TAN_22_5 * ax {
+        g[1].signum() as i32
+    } else {
+        0
+    };
+    NEIGHBOURS.iter().position(|&o| o == (sx, sy))
+}
+
+/// One pixel of [`gradient_map`]: the gradient of height in world units per pixel,
+/// `(∂h/∂x, ∂h/∂y)` with y down — by central differences where both neighbours on an axis are
+/// connected, one-sided differences where one is, and 0 where none is — and the pixel's flags.
+/// Mirrors `gradient.wgsl`.
+pub fn gradient_at(mhm: &ScreenHeightMap, c: DepthContinuity, x: i32, y: i32) -> ([f32; 2], u32) {
     let i = mhm.index(x as u32, y as u32);
     let object = mhm.objects[i];
     if object == 0 {

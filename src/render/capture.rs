@@ -26,7 +26,7 @@ use super::{
     occlusion::{OCCLUSION_FORMAT, ViewOcclusionTextures},
 };
 use crate::reference::{
-    ApexSet, FLAG_VALID, GradientMap, ScreenHeightMap, ViewGeometry, unpack_apex_set,
+    ASCENT_SHIFT, ApexSet, FLAG_VALID, GradientMap, ScreenHeightMap, ViewGeometry, unpack_apex_set,
 };
 
 /// Put on a camera with [`Mesostructure`](crate::Mesostructure) to read its working images back
@@ -45,8 +45,8 @@ pub struct CapturedFrame {
     pub mhm: Vec<[f32; 4]>,
     /// Core normal n0 (world space) and the height pass's parameter set of the pixel.
     pub core_normal: Vec<[f32; 4]>,
-    /// MHGM: (∂h/∂x, ∂h/∂y, h, flags).
-    pub mhgm: Vec<[f32; 4]>,
+    /// MHGM: (height as f32 bits, flags | ascent direction << [`crate::reference::ASCENT_SHIFT`]).
+    pub mhgm: Vec<[u32; 2]>,
     /// Apex sets, `apex_stride` words per `apex_block`² block of pixels.
     pub apex_sets: Vec<u32>,
     /// Words per apex set in `apex_sets`.
@@ -106,8 +106,8 @@ impl CapturedFrame {
         GradientMap {
             width: self.width,
             height: self.height,
-            gradients: self.mhgm.iter().map(|t| [t[0], t[1]]).collect(),
-            flags: self.mhgm.iter().map(|t| t[3] as u32).collect(),
+            ascent: self.mhgm.iter().map(|t| (t[1] >> ASCENT_SHIFT) as u8).collect(),
+            flags: self.mhgm.iter().map(|t| t[1] & 0xffff).collect(),
         }
     }
 
@@ -115,7 +115,7 @@ impl CapturedFrame {
     /// searched from the block's first mesostructure pixel).
     pub fn apex_set(&self, x: u32, y: u32) -> ApexSet {
         let i = (y * self.width + x) as usize;
-        if self.mhgm[i][3] as u32 & FLAG_VALID == 0 {
+        if self.mhgm[i][1] & FLAG_VALID == 0 {
             return ApexSet::default();
         }
         let (s, b) = (self.apex_stride as usize, self.apex_block.max(1));
@@ -437,7 +437,7 @@ pub fn map_captures(
             height: size.y,
             mhm: floats(read(&device, &readbacks[0], size.y)),
             core_normal: floats(read(&device, &readbacks[1], size.y)),
-            mhgm: floats(read(&device, &readbacks[2], size.y)),
+            mhgm: bytemuck::cast_slice(&read(&device, &readbacks[2], size.y)).to_vec(),
             apex_sets: bytemuck::cast_slice(&read(&device, &readbacks[3], 1)).to_vec(),
             apex_stride,
             apex_block,

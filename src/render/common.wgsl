@@ -44,6 +44,24 @@ const FLAG_DEPTH_EDGE: u32 = 8u;
 const FLAG_BOUNDARY: u32 = 14u;
 const CONNECTIVITY_SHIFT: u32 = 8u;
 
+// The MHGM texel (`Rg32Uint`): x the height's f32 bits; y the flags above (bits 0–15) and the
+// gradient's direction quantised to a neighbour index (bits 16–19; 8: zero gradient), which is
+// all the apex search takes from the gradient. Mirrors `reference::gradient`.
+const ASCENT_SHIFT: u32 = 16u;
+const NO_ASCENT: u32 = 8u;
+
+fn mhgm_height(texel: vec4<u32>) -> f32 {
+    return bitcast<f32>(texel.x);
+}
+
+fn mhgm_flags(texel: vec4<u32>) -> u32 {
+    return texel.y & 0xffffu;
+}
+
+fn mhgm_ascent(texel: vec4<u32>) -> u32 {
+    return texel.y >> ASCENT_SHIFT;
+}
+
 const APEX_COUNT_MASK: u32 = 0x3fu;
 const APEX_DIRECT_PRESENT: u32 = 64u;
 const APEX_TRUNCATED: u32 = 128u;

@@ -4,7 +4,7 @@
 // view are parameters, so each pass binds them where its layout has them.
 #define_import_path bevy_mesostructure::surface
 
-#import bevy_mesostructure::common::{is_connected, core_point}
+#import bevy_mesostructure::common::{is_connected, core_point, mhgm_flags}
 
 // Azimuth sectors of the horizons (`reference::OCCLUSION_SECTORS`).
 const SECTORS: u32 = 8u;
@@ -56,14 +56,14 @@ fn surface_derivative(
 fn mesostructure_normal(
     mhm: texture_2d<f32>,
     core_normal: texture_2d<f32>,
-    mhgm: texture_2d<f32>,
+    mhgm: texture_2d<u32>,
     world_from_clip: mat4x4<f32>,
     viewport: vec4<f32>,
     p: vec2<i32>,
     sp: vec3<f32>,
     n0: vec3<f32>,
 ) -> vec3<f32> {
-    let flags = u32(textureLoad(mhgm, p, 0).w);
+    let flags = mhgm_flags(textureLoad(mhgm, p, 0));
     let dx = surface_derivative(mhm, core_normal, world_from_clip, viewport, p, sp, flags, 0u, 4u, vec2(1, 0));
     let dy = surface_derivative(mhm, core_normal, world_from_clip, viewport, p, sp, flags, 2u, 6u, vec2(0, 1));
     if dx.w == 0.0 || dy.w == 0.0 {

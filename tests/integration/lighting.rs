@@ -254,6 +254,66 @@ fn occlusion_leaves_direct_light_alone() {
     assert!(with.iter().any(|p| p[0] > 20), "the plane is lit");
 }
 
+/// λs of eq. (2) scales each light's micro-shadowed direct light (applied inside Bevy's light
+/// loop by the lighting shader's overrides), and nothing else reaches a surface without
+/// ambient light and bleeding: halving λs halves every mesostructure pixel.
+#[test]
+fn the_direct_weight_scales_the_micro_shadowed_direct_light() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = app();
+    let target = target(&mut app, SIZE, SIZE);
+    let settings = Mesostructure {
+        bleeding: false,
+        ..default()
+    };
+    let camera = camera(&mut app, &target, top_down(), settings);
+    let bricks = image(&mut app, HeightMap::bricks(256, 4, 0.15).to_image());
+    app.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    // Low enough for the bricks to shadow the mortar.
+    app.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 3000.0,
+            ..default()
+        },
+        Transform::from_xyz(2.0, 0.8, 0.6).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    let grey = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(Color::srgb(0.6, 0.6, 0.6));
+    mesostructure_plane(&mut app, MeshMaterial3d(grey), bricks, 0.1);
+    let frame = capture(&mut app, camera, 5);
+    let shadowed = frame.micro_shadow.iter().filter(|&&v| v < 0.5).count();
+    assert!(shadowed > 50, "the bricks cast micro-shadows ({shadowed} px)");
+    let (full, half) = before_and_after(&mut app, camera, &target, |m| m.direct_weight = 0.5);
+    let encode = |v: f32| {
+        let c = if v <= 0.0031308 {
+            v * 12.92
+        } else {
+            1.055 * v.powf(1.0 / 2.4) - 0.055
+        };
+        (c * 255.0).round() as i32
+    };
+    let (mut n, mut worst) = (0, 0);
+    for i in 0..(SIZE * SIZE) as usize {
+        if frame.mhm[i][2] == 0.0 {
+            continue;
+        }
+        n += 1;
+        let expected = encode(0.5 * linear(full[i][0]));
+        worst = worst.max((expected - half[i][0] as i32).abs());
+    }
+    assert!(n > 1000, "the plane fills the view ({n} px)");
+    // One 8-bit step: the rounding of the two pictures.
+    assert!(worst <= 1, "λs = 0.5 is not half the light: off by {worst}/255");
+    assert!(full.iter().any(|p| p[0] > 60), "the plane is lit");
+}
+
 #[test]
 fn shared_materials_are_copied_not_changed() {
     if !gpu_or_skip() {

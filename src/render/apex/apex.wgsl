@@ -10,11 +10,11 @@
 #import bevy_mesostructure::common::{
     MesostructureUniform, FLAG_VALID, APEX_DIRECT_PRESENT, APEX_TRUNCATED, APEX_BOUNDARY_SHIFT,
     APEX_MIN_RISE, APEX_ORIGIN_SHIFT, neighbour_offset, neighbour_index, on_screen, is_connected, pack_offset,
-    sample_direction, apex_base,
+    sample_direction, apex_base, mhgm_height, mhgm_flags, mhgm_ascent,
 }
 
 @group(0) @binding(0) var mhm: texture_2d<f32>;
-@group(0) @binding(1) var mhgm: texture_2d<f32>;
+@group(0) @binding(1) var mhgm: texture_2d<u32>;
 @group(0) @binding(2) var<storage, read_write> apex_sets: array<u32>;
 // [mesostructure pixels, pixels whose search hit the step bound, ascent steps, unused]
 @group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>, 4>;
@@ -25,39 +25,33 @@ const KIND_LOCAL: u32 = 0u;
 const KIND_BOUNDARY: u32 = 1u;
 const KIND_TRUNCATED: u32 = 2u;
 
+fn height_at(p: vec2<i32>) -> f32 {
+    return mhgm_height(textureLoad(mhgm, p, 0));
+}
+
+fn flags_at(p: vec2<i32>) -> u32 {
+    return mhgm_flags(textureLoad(mhgm, p, 0));
+}
+
 struct Ascent {
     apex: vec2<i32>,
     kind: u32,
     steps: u32,
 }
 
-// Index of the 8-neighbour nearest the gradient direction (22.5° sectors); 8 for g = 0.
-fn quantize_direction(g: vec2<f32>) -> u32 {
-    let TAN_22_5 = 0.41421357;
-    let a = abs(g);
-    if a.x == 0.0 && a.y == 0.0 {
-        return 8u;
-    }
-    let s = vec2<i32>(
-        select(0, i32(sign(g.x)), a.x > TAN_22_5 * a.y),
-        select(0, i32(sign(g.y)), a.y > TAN_22_5 * a.x),
-    );
-    return neighbour_index(s);
-}
-
 fn ascend(start: vec2<i32>) -> Ascent {
     var cur = start;
     for (var steps = 0u; steps < settings.max_ascent_steps; steps++) {
         let t = textureLoad(mhgm, cur, 0);
-        let flags = u32(t.w);
-        let h = t.z;
+        let flags = mhgm_flags(t);
+        let h = mhgm_height(t);
         var next = 8u;
-        let dir = quantize_direction(t.xy);
+        let dir = mhgm_ascent(t);
         if dir < 8u {
             if !is_connected(flags, dir) {
                 return Ascent(cur, KIND_BOUNDARY, steps);
             }
-            if textureLoad(mhgm, cur + neighbour_offset(dir), 0).z > h {
+            if height_at(cur + neighbour_offset(dir)) > h {
                 next = dir;
             }
         }
@@ -66,7 +60,7 @@ fn ascend(start: vec2<i32>) -> Ascent {
             var best = h;
             for (var d = 0u; d < 8u; d++) {
                 if is_connected(flags, d) {
-                    let hd = textureLoad(mhgm, cur + neighbour_offset(d), 0).z;
+                    let hd = height_at(cur + neighbour_offset(d));
                     if hd > best {
                         best = hd;
                         next = d;
@@ -92,17 +86,17 @@ fn line_point(p: vec2<i32>, d: vec2<f32>, t: u32) -> vec2<i32> {
 // See `reference::valley_walk`.
 fn valley_walk(p: vec2<i32>, d: vec2<f32>) -> vec3<i32> {
     var prev = p;
-    var previous = textureLoad(mhgm, p, 0).z;
+    var previous = height_at(p);
     for (var t = 1u; t <= settings.max_walk; t++) {
         let q = line_point(p, d, t);
         if all(q == prev) {
             continue;
         }
         let dir = neighbour_index(q - prev);
-        if dir == 8u || !is_connected(u32(textureLoad(mhgm, prev, 0).w), dir) {
+        if dir == 8u || !is_connected(flags_at(prev), dir) {
             return vec3(0);
         }
-        let h = textureLoad(mhgm, q, 0).z;
+        let h = height_at(q);
         if h > previous {
             return vec3(q, i32(t));
         }
@@ -117,7 +111,7 @@ fn valley_walk(p: vec2<i32>, d: vec2<f32>) -> vec3<i32> {
 fn line_climb(p: vec2<i32>, h0: f32, d: vec2<f32>, start: vec3<i32>) -> Ascent {
     var cur = start.xy;
     let t0 = u32(start.z);
-    var previous = textureLoad(mhgm, cur, 0).z;
+    var previous = height_at(cur);
     var best = cur;
     var best_rise = (previous - h0) / f32(t0);
     var kind = KIND_LOCAL;
@@ -130,13 +124,13 @@ fn line_climb(p: vec2<i32>, h0: f32, d: vec2<f32>, start: vec3<i32>) -> Ascent {
         if dir == 8u {
             break;
         }
-        if !is_connected(u32(textureLoad(mhgm, cur, 0).w), dir) {
+        if !is_connected(flags_at(cur), dir) {
             if all(best == cur) {
                 kind = KIND_BOUNDARY;
             }
             break;
         }
-        let h = textureLoad(mhgm, q, 0).z;
+        let h = height_at(q);
         if h <= previous + CLIMB_FLATNESS * abs(previous) {
             break;
         }
@@ -164,7 +158,7 @@ fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
     var p = vec2(-1);
     for (var i = 0u; i < b * b; i++) {
         let q = corner + vec2<i32>(vec2(i % b, i / b));
-        if on_screen(q, size) && (u32(textureLoad(mhgm, q, 0).w) & FLAG_VALID) != 0u {
+        if on_screen(q, size) && (flags_at(q) & FLAG_VALID) != 0u {
             p = q;
             break;
         }
@@ -173,8 +167,7 @@ fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
         apex_sets[base] = 0u;
         return;
     }
-    let c = textureLoad(mhgm, p, 0);
-    let h0 = c.z;
+    let h0 = height_at(p);
     let inside = vec2<u32>(p - corner);
     var header = (inside.x << APEX_ORIGIN_SHIFT) | (inside.y << (APEX_ORIGIN_SHIFT + 2u));
     var count = 0u;
@@ -183,7 +176,7 @@ fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
     let direct = ascend(p);
     var steps = direct.steps;
     truncated = direct.kind == KIND_TRUNCATED;
-    if textureLoad(mhgm, direct.apex, 0).z > h0 + APEX_MIN_RISE {
+    if height_at(direct.apex) > h0 + APEX_MIN_RISE {
         apex_sets[base + 1u] = pack_offset(direct.apex - p);
         header |= APEX_DIRECT_PRESENT;
         if direct.kind == KIND_BOUNDARY {
@@ -200,7 +193,7 @@ fn apex(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         let a = line_climb(p, h0, d, s);
         steps += a.steps;
-        if !(textureLoad(mhgm, a.apex, 0).z > h0 + APEX_MIN_RISE) {
+        if !(height_at(a.apex) > h0 + APEX_MIN_RISE) {
             continue;
         }
         let packed = pack_offset(a.apex - p);

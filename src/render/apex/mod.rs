@@ -155,7 +155,7 @@ pub fn init_apex_pipeline(
             ShaderStages::COMPUTE,
             (
                 texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_2d(TextureSampleType::Uint),
                 storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
                 uniform_buffer::<MesostructureUniform>(true),

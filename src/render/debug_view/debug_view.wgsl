@@ -5,11 +5,11 @@
 #import bevy_mesostructure::common::{
     MesostructureUniform, FLAG_VALID, FLAG_SCREEN_EDGE, FLAG_OBJECT_EDGE, FLAG_DEPTH_EDGE,
     FLAG_BOUNDARY, APEX_COUNT_MASK, APEX_DIRECT_PRESENT, APEX_TRUNCATED, unpack_offset, apex_base,
-    apex_set_of,
+    apex_set_of, mhgm_flags, mhgm_ascent, neighbour_offset, NO_ASCENT,
 }
 
 @group(0) @binding(0) var mhm: texture_2d<f32>;
-@group(0) @binding(1) var mhgm: texture_2d<f32>;
+@group(0) @binding(1) var mhgm: texture_2d<u32>;
 @group(0) @binding(2) var<storage, read> apex_sets: array<u32>;
 @group(0) @binding(3) var<uniform> settings: MesostructureUniform;
 @group(0) @binding(4) var occlusion: texture_2d<f32>;
@@ -40,7 +40,7 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         discard;
     }
     let g = textureLoad(mhgm, p, 0);
-    let flags = u32(g.w);
+    let flags = mhgm_flags(g);
     if (flags & FLAG_VALID) == 0u {
         discard;
     }
@@ -53,8 +53,10 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
             color = vec3(textureLoad(mhm, p, 0).w);
         }
         case VIEW_GRADIENT: {
-            let len = length(g.xy);
-            color = select(vec3(0.5 + 0.5 * g.xy / len, 0.25), vec3(0.5), len == 0.0);
+            // The gradient's direction as the MHGM keeps it (the ascent's next neighbour).
+            let ascent = mhgm_ascent(g);
+            let d = normalize(vec2<f32>(neighbour_offset(ascent)));
+            color = select(vec3(0.5 + 0.5 * d, 0.25), vec3(0.5), ascent >= NO_ASCENT);
         }
         case VIEW_APEX_DISTANCE: {
             if (header & APEX_DIRECT_PRESENT) != 0u && apexes.count > 0u {

@@ -90,7 +90,7 @@ pub fn init_debug_view_pipeline(
             ShaderStages::FRAGMENT,
             (
                 texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_2d(TextureSampleType::Uint),
                 storage_buffer_read_only_sized(false, None),
                 uniform_buffer::<MesostructureUniform>(true),
                 texture_2d(TextureSampleType::Float { filterable: false }),

@@ -18,8 +18,9 @@ use super::{
 };
 use crate::render::view_settings::MesostructureUniform;
 
-/// MHGM: (∂h/∂x, ∂h/∂y, h, flags).
-pub const MHGM_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
+/// MHGM: (height as f32 bits, flags | the gradient's direction as a neighbour index << 16) —
+/// what the apex search reads of a pixel, in 8 bytes (`common.wgsl`, `reference::gradient`).
+pub const MHGM_FORMAT: TextureFormat = TextureFormat::Rg32Uint;
 
 /// The gradient map of one view.
 #[derive(Component)]

@@ -2,21 +2,18 @@
 // BRDF, shadow maps, clustered lights, environment light) with paper eq. (2)'s terms:
 // the mesostructure ambient occlusion on ambient and environment light only (diffuse and
 // specular occlusion, never direct light), multiplied with Bevy's SSAO when the camera has
-// it, weighted by λa; the micro-shadows of every directional, point and spot light, taken
-// off that light's own contribution; direct light weighted by λs. Draws a fullscreen
+// it, weighted by λa; each directional, point and spot light's direct light weighted by λs
+// and its micro-shadow visibility, inside Bevy's one light loop. Draws a fullscreen
 // triangle at the depth of our deferred lighting pass id, so only pixels of mesostructure
 // materials are touched. Writes each pixel's micro-shadow visibility for the debug view.
 
 #import bevy_pbr::{
     prepass_utils,
-    pbr_types::{PbrInput, STANDARD_MATERIAL_FLAGS_UNLIT_BIT},
+    pbr_types::STANDARD_MATERIAL_FLAGS_UNLIT_BIT,
     pbr_functions,
-    clustered_forward as clustering,
     pbr_deferred_functions::pbr_input_from_deferred_gbuffer,
     lighting,
     mesh_view_bindings::{deferred_prepass_texture, lights, clustered_lights, view},
-    mesh_view_types::{DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT, POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT},
-    mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
     shadows,
     ssao_utils::ssao_multibounce,
 }
@@ -97,130 +94,100 @@ fn micro_shadow(h: Horizons, to_light: vec3<f32>) -> f32 {
     return smoothstep(-w, w, sin_l - horizon);
 }
 
-// Bevy's lighting input for one pixel, as `apply_pbr_lighting` builds it (base layer).
-fn lighting_input(in: PbrInput) -> lighting::LightingInput {
-    var input: lighting::LightingInput;
-    let roughness = lighting::perceptualRoughnessToRoughness(in.material.perceptual_roughness);
-    input.layers[lighting::LAYER_BASE].NdotV = max(dot(in.N, in.V), 0.0001);
-    input.layers[lighting::LAYER_BASE].N = in.N;
-    input.layers[lighting::LAYER_BASE].R = reflect(-in.V, in.N);
-    input.layers[lighting::LAYER_BASE].perceptual_roughness = in.material.perceptual_roughness;
-    input.layers[lighting::LAYER_BASE].roughness = roughness;
-    input.P = in.world_position.xyz;
-    input.V = in.V;
-    input.diffuse_color = pbr_functions::calculate_diffuse_color(
-        in.material.base_color.rgb, in.material.metallic,
-        in.material.specular_transmission, in.material.diffuse_transmission);
-    input.metallic = in.material.metallic;
-    input.F0_dielectric = pbr_functions::calculate_F0_dielectric(in.material.reflectance);
-    input.F0_metallic = in.material.base_color.rgb;
-    input.F_ab = lighting::F_AB(in.material.perceptual_roughness, input.layers[lighting::LAYER_BASE].NdotV);
-    return input;
+// Eq. (2) inside Bevy's own light loop: `apply_pbr_lighting` evaluates each light once, and
+// the overrides below (naga_oil `override fn`, this shader only) weight each light's direct
+// light by λs and its micro-shadow visibility V. The shadow lookups only note the shadow map's
+// value of the light being evaluated (Bevy fetches it just before the light's BRDF), for the
+// lowest visibility the debug view shows and the first directional light's shadow the bleeding
+// pass needs. State of the pixel being lit, set before `apply_pbr_lighting`:
+var<private> pixel_horizons: Horizons;
+// The surface point the light directions are taken from (P, or the core point's surface point).
+var<private> light_origin: vec3<f32>;
+// The height pass's texture-space visibility of the first directional light (−1: none).
+var<private> texture_visible: f32;
+// The shadow map's value for the light Bevy evaluates next (1 where it has none).
+var<private> pending_shadow: f32 = 1.0;
+// Lowest micro-shadow visibility over the lights that reach P (the debug view's V).
+var<private> lowest_visibility: f32 = 1.0;
+// The first directional light's shadow-map visibility at P (1 where it casts no shadow, P
+// receives none, or there is no such light): the bleeding pass's bounce of that light reaches
+// P only where the light does, and must not count the light twice in the gathered colours.
+var<private> sun_shadow: f32 = 1.0;
+
+// λs·V of one light, V from the light's direction; notes V for the debug view.
+fn direct_weight(to_light: vec3<f32>, texture_space_visibility: f32) -> f32 {
+    var visible = 1.0;
+    if settings.micro_shadows != 0u {
+        visible = micro_shadow(pixel_horizons, to_light);
+        if texture_space_visibility >= 0.0 {
+            visible = texture_space_visibility;
+        }
+    }
+    if pending_shadow > 0.0 {
+        lowest_visibility = min(lowest_visibility, visible);
+    }
+    pending_shadow = 1.0;
+    return settings.weights.y * visible;
 }
 
-// The direct light of a pixel as eq. (2) splits it: `all`, Bevy's direct light of every light
-// (BRDF × shadow map), only summed when λs ≠ 1; `shadowed`, the part of it the micro-shadows
-// take away; `visibility`, the lowest micro-shadow visibility over the lights that reach P.
-struct DirectTerms {
-    all: vec3<f32>,
-    shadowed: vec3<f32>,
-    visibility: f32,
-    // The first directional light's shadow-map visibility at P (1 where it casts no shadow, P
-    // receives none, or there is no such light), fetched where the texture-space bounce needs
-    // it: the bleeding pass's bounce of that light reaches P only where the light does, and
-    // must not count the light twice in the gathered colours.
-    sun_shadow: f32,
+// Point lights, and spot lights (Bevy's `spot_light` is `point_light` times the cone).
+override fn lighting::point_light(
+    light_id: u32,
+    input: ptr<function, lighting::LightingInput>,
+    enable_diffuse: bool,
+    enable_texture: bool,
+) -> vec3<f32> {
+    let to_light = normalize(clustered_lights.data[light_id].position_radius.xyz - light_origin);
+    let weight = direct_weight(to_light, -1.0);
+    return lighting::point_light(light_id, input, enable_diffuse, enable_texture) * weight;
 }
 
-fn add_light(terms: ptr<function, DirectTerms>, contribution: vec3<f32>, shadow: f32, visible: f32) {
-    (*terms).all += contribution * shadow;
-    (*terms).shadowed += (1.0 - visible) * shadow * contribution;
-    if shadow > 0.0 {
-        (*terms).visibility = min((*terms).visibility, visible);
+override fn lighting::directional_light(
+    light_id: u32,
+    input: ptr<function, lighting::LightingInput>,
+    enable_diffuse: bool,
+) -> vec3<f32> {
+    if light_id == 0u {
+        sun_shadow = pending_shadow;
     }
+    var texture_space_visibility = -1.0;
+    if light_id == 0u && settings.texture_space_horizons != 0u {
+        texture_space_visibility = texture_visible;
+    }
+    let weight = direct_weight(lights.directional_lights[light_id].direction_to_light, texture_space_visibility);
+    return lighting::directional_light(light_id, input, enable_diffuse) * weight;
 }
 
-// The same lights, shadow maps and BRDF as Bevy's light loop (`apply_pbr_lighting`), evaluated
-// again only for the lights a micro-shadow dims (or all of them when λs ≠ 1), so that the rest
-// of Bevy's loop stays untouched.
-fn direct_terms(in: PbrInput, p: vec2<i32>) -> DirectTerms {
-    var terms: DirectTerms;
-    terms.visibility = 1.0;
-    terms.sun_shadow = 1.0;
-    let micro = settings.micro_shadows != 0u;
-    let every_light = settings.weights.y != 1.0;
-    let sun_shadow = settings.texture_space_bounce != 0u;
-    if !micro && !every_light && !sun_shadow {
-        return terms;
-    }
-    var input = lighting_input(in);
-    let receiver = (in.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) != 0u;
-    let view_z = dot(vec4<f32>(
-        view.view_from_world[0].z, view.view_from_world[1].z,
-        view.view_from_world[2].z, view.view_from_world[3].z), in.world_position);
-    // The horizons do not depend on the light: found once, tested against each light.
-    var h: Horizons;
-    if micro {
-        h = horizons(p);
-    }
-    let sp = select(in.world_position.xyz, h.sp, h.valid);
+override fn shadows::fetch_point_shadow(
+    light_id: u32,
+    frag_position: vec4<f32>,
+    surface_normal: vec3<f32>,
+    frag_coord_xy: vec2<f32>,
+) -> f32 {
+    pending_shadow = shadows::fetch_point_shadow(light_id, frag_position, surface_normal, frag_coord_xy);
+    return pending_shadow;
+}
 
-    let cluster = clustering::view_fragment_cluster_index(in.frag_coord.xy, view_z, in.is_orthographic);
-    let ranges = clustering::unpack_clusterable_object_index_ranges(cluster);
-    for (var i = ranges.first_point_light_index_offset; i < ranges.first_spot_light_index_offset; i++) {
-        let id = clustering::get_clusterable_object_id(i);
-        let light = &clustered_lights.data[id];
-        let visible = micro_shadow(h, normalize((*light).position_radius.xyz - sp));
-        if visible >= 1.0 && !every_light {
-            continue;
-        }
-        var shadow = 1.0;
-        if receiver && ((*light).flags & POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = shadows::fetch_point_shadow(id, in.world_position, in.world_normal, in.frag_coord.xy);
-        }
-        add_light(&terms, lighting::point_light(id, &input, true, true), shadow, visible);
-    }
-    for (var i = ranges.first_spot_light_index_offset; i < ranges.first_reflection_probe_index_offset; i++) {
-        let id = clustering::get_clusterable_object_id(i);
-        let light = &clustered_lights.data[id];
-        let visible = micro_shadow(h, normalize((*light).position_radius.xyz - sp));
-        if visible >= 1.0 && !every_light {
-            continue;
-        }
-        var shadow = 1.0;
-        if receiver && ((*light).flags & POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = shadows::fetch_spot_shadow(
-                id, in.world_position, in.world_normal, (*light).shadow_map_near_z, in.frag_coord.xy);
-        }
-        add_light(&terms, lighting::spot_light(id, &input, true), shadow, visible);
-    }
-    // The height pass's texture-space visibility of the first directional light (−1: none).
-    let visibility_size = vec2<i32>(textureDimensions(texture_visibility));
-    let texture_visible = textureLoad(texture_visibility, min(p, visibility_size - 1), 0).r;
-    for (var i = 0u; i < lights.n_directional_lights; i++) {
-        var visible = micro_shadow(h, lights.directional_lights[i].direction_to_light);
-        if micro && i == 0u && settings.texture_space_horizons != 0u && texture_visible >= 0.0 {
-            visible = texture_visible;
-        }
-        let skip = visible >= 1.0 && !every_light;
-        if skip && !(sun_shadow && i == 0u) {
-            continue;
-        }
-        var shadow = 1.0;
-        if receiver && (lights.directional_lights[i].flags & DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = shadows::fetch_directional_shadow(i, in.world_position, in.world_normal, view_z, in.frag_coord.xy);
-        }
-        if i == 0u {
-            terms.sun_shadow = shadow;
-        }
-        if skip {
-            continue;
-        }
-        add_light(&terms, lighting::directional_light(i, &input, true), shadow, visible);
-    }
-    terms.all *= view.exposure;
-    terms.shadowed *= view.exposure;
-    return terms;
+override fn shadows::fetch_spot_shadow(
+    light_id: u32,
+    frag_position: vec4<f32>,
+    surface_normal: vec3<f32>,
+    near_z: f32,
+    frag_coord_xy: vec2<f32>,
+) -> f32 {
+    pending_shadow = shadows::fetch_spot_shadow(light_id, frag_position, surface_normal, near_z, frag_coord_xy);
+    return pending_shadow;
+}
+
+override fn shadows::fetch_directional_shadow(
+    light_id: u32,
+    frag_position: vec4<f32>,
+    surface_normal: vec3<f32>,
+    view_z: f32,
+    frag_coord_xy: vec2<f32>,
+) -> f32 {
+    pending_shadow = shadows::fetch_directional_shadow(light_id, frag_position, surface_normal, view_z, frag_coord_xy);
+    return pending_shadow;
 }
 
 struct FullscreenVertexOutput {
@@ -285,15 +252,16 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
             pbr_input.specular_occlusion,
             saturate(pow(NdotV + ambient_visibility, exp2(-16.0 * roughness - 1.0)) - 1.0 + ambient_visibility),
         ) * ambient_weight;
+        // Eq. (2): (λa La + λs Ls) V — λs and the micro-shadows (V) on each light's direct
+        // light, by the overrides above. The horizons do not depend on the light: found once.
+        if settings.micro_shadows != 0u {
+            pixel_horizons = horizons(pixel);
+        }
+        light_origin = select(pbr_input.world_position.xyz, pixel_horizons.sp, pixel_horizons.valid);
+        let visibility_size = vec2<i32>(textureDimensions(texture_visibility));
+        texture_visible = textureLoad(texture_visibility, min(pixel, visibility_size - 1), 0).r;
         output_color = pbr_functions::apply_pbr_lighting(pbr_input);
-        // Eq. (2): (λa La + λs Ls) V — the micro-shadows (V) and λs on direct light.
-        let direct = direct_terms(pbr_input, pixel);
-        let direct_weight = settings.weights.y;
-        output_color = vec4(
-            max(output_color.rgb + (direct_weight - 1.0) * direct.all - direct_weight * direct.shadowed, vec3(0.0)),
-            output_color.a,
-        );
-        textureStore(micro_shadow_out, pixel, vec4(direct.visibility, direct.sun_shadow, 0.0, 0.0));
+        textureStore(micro_shadow_out, pixel, vec4(lowest_visibility, sun_shadow, 0.0, 0.0));
     } else {
         textureStore(micro_shadow_out, pixel, vec4(1.0));
         output_color = pbr_input.material.base_color;

@@ -209,7 +209,7 @@ pub fn init_occlusion_pipeline(mut commands: Commands, asset_server: Res<AssetSe
                 texture_storage_2d(OCCLUSION_FORMAT, StorageTextureAccess::WriteOnly),
                 uniform_buffer::<MesostructureUniform>(true),
                 uniform_buffer::<ViewUniform>(true),
-                texture_2d(TextureSampleType::Float { filterable: false }),
+                texture_2d(TextureSampleType::Uint),
                 texture_depth_2d(),
                 texture_2d(TextureSampleType::Float { filterable: false }),
                 texture_storage_2d(SECTOR_HORIZONS_FORMAT, StorageTextureAccess::WriteOnly),

@@ -21,7 +21,7 @@
 @group(0) @binding(3) var occlusion_out: texture_storage_2d<r32float, write>;
 @group(0) @binding(4) var<uniform> settings: MesostructureUniform;
 @group(0) @binding(5) var<uniform> view: View;
-@group(0) @binding(6) var mhgm: texture_2d<f32>;
+@group(0) @binding(6) var mhgm: texture_2d<u32>;
 @group(0) @binding(7) var depth: texture_depth_2d;
 // w: the height pass's texture-space occlusion (−1 where it has none).
 @group(0) @binding(8) var bump_normal: texture_2d<f32>;
