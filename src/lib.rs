@@ -105,11 +105,9 @@ use bevy::{
 };
 
 pub use material::MesostructureMaterial;
-pub use render::{
-    MesostructureSystems,
-    capture::{CapturedFrame, MesostructureCapture, MesostructureCaptures},
-    lighting::MESOSTRUCTURE_LIGHTING_PASS_ID,
-};
+pub use render::{MesostructureSystems, lighting::MESOSTRUCTURE_LIGHTING_PASS_ID};
+#[cfg(feature = "oracle")]
+pub use render::capture::{CapturedFrame, MesostructureCapture, MesostructureCaptures};
 pub use settings::{
     HorizonSearchBaseline, Mesostructure, MesostructureCost, MesostructureDebugView,
     MesostructureQuality, WorkingResolution,

@@ -1,9 +1,9 @@
 //! Local apex sets f(P) (paper §2.2): gradient ascent over the MHGM.
 
-use super::{GradientMap, NEIGHBOURS, ScreenHeightMap};
-
-/// The most indirect sample directions a pixel may use (the GPU uniform holds this many).
-pub const MAX_APEX_DIRECTIONS: u32 = 16;
+use super::{
+    ApexSearch, GradientMap, MAX_APEX_DIRECTIONS, NEIGHBOURS, ScreenHeightMap, packed,
+    sample_directions,
+};
 
 /// An apex must rise above P by more than this (world units) to occlude anything; it keeps
 /// flat maps free of apexes.
@@ -11,27 +11,6 @@ pub const APEX_MIN_RISE: f32 = 1.0e-6;
 
 /// Relative height change under which a line climb counts the surface as flat and stops.
 pub const CLIMB_FLATNESS: f32 = 1.0e-4;
-
-/// Bounds and sampling of the apex search.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ApexSearch {
-    /// Indirect sample directions around P (0..=[`MAX_APEX_DIRECTIONS`]).
-    pub directions: u32,
-    /// Ascent steps (one pixel each) before an ascent gives up; bounds the work per pixel.
-    pub max_steps: u32,
-    /// Longest walk, in pixels, from P towards each direction's valley.
-    pub max_walk: u32,
-}
-
-impl Default for ApexSearch {
-    fn default() -> Self {
-        Self {
-            directions: 8,
-            max_steps: 64,
-            max_walk: 32,
-        }
-    }
-}
 
 /// How an ascent ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -81,17 +60,6 @@ impl ApexSet {
     pub fn iter(&self) -> impl Iterator<Item = &Apex> {
         self.direct.iter().chain(self.indirect.iter())
     }
-}
-
-/// The unit direction `(cos θ_i, sin θ_i)` of each indirect sample, `θ_i = 2π i / n`, as `f32`.
-/// The GPU receives this table, so both sides round the sample points identically.
-pub fn sample_directions(n: u32) -> Vec<[f32; 2]> {
-    (0..n)
-        .map(|i| {
-            let theta = std::f64::consts::TAU * i as f64 / n as f64;
-            [theta.cos() as f32, theta.sin() as f32]
-        })
-        .collect()
 }
 
 /// Follows the gradient upward from `(x, y)` one pixel a step: to the neighbour the quantized
@@ -310,35 +278,6 @@ pub fn apex_sets(mhm: &ScreenHeightMap, mhgm: &GradientMap, search: &ApexSearch)
         }
     }
     sets
-}
-
-/// GPU layout of one pixel's apex set in the apex buffer: a header word, then one word per apex
-/// (direct first), each `(dx: i16, dy: i16)` relative to P. See [`unpack_apex_set`].
-pub mod packed {
-    /// Bits 0..5 of the header: number of apexes.
-    pub const COUNT_MASK: u32 = 0x3f;
-    /// The first apex is the direct apex.
-    pub const DIRECT_PRESENT: u32 = 1 << 6;
-    /// An ascent of this pixel hit the step bound.
-    pub const TRUNCATED: u32 = 1 << 7;
-    /// Bit `BOUNDARY_SHIFT + slot` marks a boundary point.
-    pub const BOUNDARY_SHIFT: u32 = 8;
-    /// Bits `ORIGIN_SHIFT..+2` and `ORIGIN_SHIFT + 2..+4`: x and y of the searched pixel inside
-    /// its block, at a reduced working resolution (offsets are relative to it).
-    pub const ORIGIN_SHIFT: u32 = 25;
-
-    /// The pixel a set was searched from, from its header and its block's top-left pixel.
-    pub const fn origin(header: u32, (x, y): (i32, i32)) -> (i32, i32) {
-        (
-            x + ((header >> ORIGIN_SHIFT) & 3) as i32,
-            y + ((header >> (ORIGIN_SHIFT + 2)) & 3) as i32,
-        )
-    }
-
-    /// Words per pixel for `directions` indirect samples: header, direct apex, indirect apexes.
-    pub const fn stride(directions: u32) -> u32 {
-        2 + directions
-    }
 }
 
 /// Decodes one pixel's apex set from the GPU apex buffer (`words` is its stride-long slice).

@@ -1,6 +1,6 @@
 //! The gradient map (MHGM, paper §2.1) with one-sided differences and boundary flags.
 
-use super::ScreenHeightMap;
+use super::{DepthContinuity, ScreenHeightMap};
 
 /// Pixel offsets of the 8 neighbours, in the order of the connectivity bits.
 /// `y` grows downwards (texture rows). The GPU shaders use the same table.
@@ -27,30 +27,6 @@ pub const FLAG_DEPTH_EDGE: u32 = 1 << 3;
 pub const FLAG_BOUNDARY: u32 = FLAG_SCREEN_EDGE | FLAG_OBJECT_EDGE | FLAG_DEPTH_EDGE;
 /// Shift of the 8-bit neighbour connectivity mask (bit `i` = [`NEIGHBOURS`]`[i]` is connected).
 pub const CONNECTIVITY_SHIFT: u32 = 8;
-
-/// How neighbouring depths are judged continuous.
-///
-/// Neighbour `q` of `p` is across a depth discontinuity when
-/// `|d(q) − d(p)| > max(relative · d(p), slope_factor · |d(p) − d(p − (q − p))|)`:
-/// a jump larger than a small fraction of the depth and larger than the slope seen on the
-/// opposite side. Reverse-Z NDC depth is affine in screen space on a plane, so planes at grazing
-/// angles stay connected through the second term.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DepthContinuity {
-    /// Relative depth jump always accepted (fraction of the pixel's NDC depth).
-    pub relative: f32,
-    /// How much steeper than the opposite side a continuous neighbour may be.
-    pub slope_factor: f32,
-}
-
-impl Default for DepthContinuity {
-    fn default() -> Self {
-        Self {
-            relative: 0.02,
-            slope_factor: 3.0,
-        }
-    }
-}
 
 /// Shift of the ascent direction in a pixel's packed flags word (`gradient.wgsl`): bits 0–15
 /// are the `FLAG_*` bits and the connectivity mask, bits 16–19 the gradient's direction

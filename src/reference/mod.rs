@@ -1,32 +1,47 @@
 //! Plain-Rust implementation of the method on images: the test oracle for the GPU passes, and a
-//! tool for experiments (paper §2).
+//! tool for experiments (paper §2). Behind the `oracle` feature, except for the parameters and
+//! GPU layouts the passes share with it (always compiled); a game needs none of the rest.
 //!
 //! The GPU passes (`src/render/`) implement exactly these steps, with the same constants and
 //! the same tie-breaking, so the GPU contract tests can feed the screen-space height map read
-//! back from the GPU into [`gradient_map`] and [`apex_sets`] and compare.
+//! back from the GPU into `gradient_map` and `apex_sets` and compare.
 //!
-//! - [`ScreenHeightMap`]: the MHM, per pixel the height `dis·k` in world units, an object id
+//! - `ScreenHeightMap`: the MHM, per pixel the height `dis·k` in world units, an object id
 //!   (0 = no mesostructure surface) and the reverse-Z NDC depth.
-//! - [`gradient_map`]: the MHGM, per pixel the gradient of height, the 8-neighbour connectivity
-//!   and the boundary flags.
-//! - [`apex_sets`]: the local apex set f(P) of every pixel: the direct apex by gradient ascent,
+//! - `gradient_map`: the MHGM, per pixel the 8-neighbour connectivity, the boundary flags and
+//!   the gradient's direction.
+//! - `apex_sets`: the local apex set f(P) of every pixel: the direct apex by gradient ascent,
 //!   indirect apexes from sampled directions, and boundary points.
-//! - [`occlusion`], [`micro_shadow`], [`bleeding_irradiance`]: the lighting terms of paper §3
-//!   from the apex sets; [`ground_truth`] computes them from the height field itself.
+//! - `occlusion`, `micro_shadow`, `bleeding_irradiance`: the lighting terms of paper §3 from the
+//!   apex sets; `ground_truth` computes them from the height field itself.
 
+mod parameters;
+pub use parameters::*;
+
+#[cfg(feature = "oracle")]
 mod apex;
+#[cfg(feature = "oracle")]
 mod gradient;
+#[cfg(feature = "oracle")]
 pub mod ground_truth;
+#[cfg(feature = "oracle")]
 mod lighting;
+#[cfg(feature = "oracle")]
 mod occlusion;
+#[cfg(feature = "oracle")]
 pub mod texture_space;
 
+#[cfg(feature = "oracle")]
 pub use apex::*;
+#[cfg(feature = "oracle")]
 pub use gradient::*;
+#[cfg(feature = "oracle")]
 pub use lighting::*;
+#[cfg(feature = "oracle")]
 pub use occlusion::*;
 
 /// The screen-space height map (MHM, paper §2.1) of one view.
+#[cfg(feature = "oracle")]
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScreenHeightMap {
     /// Width in pixels.
@@ -41,6 +56,7 @@ pub struct ScreenHeightMap {
     pub depths: Vec<f32>,
 }
 
+#[cfg(feature = "oracle")]
 impl ScreenHeightMap {
     /// A screen-space height map of one object (id 1) covering the whole image at constant depth,
     /// from a height image in world units.
@@ -80,5 +96,5 @@ impl ScreenHeightMap {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "oracle"))]
 mod tests;

@@ -1,47 +1,12 @@
 //! Mesostructure ambient occlusion from the apex sets (paper §3.1, eqs. 3–6).
 
-use bevy::{
-    math::{Mat4, Vec2, Vec3, Vec4},
-    reflect::std_traits::ReflectDefault,
-};
+use bevy::math::{Mat4, Vec2, Vec3, Vec4};
 
-use super::{ApexSet, GradientMap, ScreenHeightMap};
+use super::{ApexSet, GradientMap, OcclusionForm, ScreenHeightMap};
 
 /// Azimuth sectors of the occlusion integral: each apex occludes the sector its screen-space
 /// direction falls in, with its elevation; sectors without an apex are open.
 pub const OCCLUSION_SECTORS: usize = 8;
-
-/// Which integral turns horizon angles into occlusion.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, bevy::reflect::Reflect)]
-#[reflect(Default, Clone, Debug, PartialEq, Hash)]
-pub enum OcclusionForm {
-    /// `1/(2π) ∫ cos² h(θ) dθ`, elevations from the tangent plane of the mesostructure surface
-    /// (its normal N' from the surface points of the neighbours): the cosine-weighted
-    /// visibility of a Lambertian surface, what a path tracer computes under a white sky.
-    #[default]
-    CosineWeighted,
-    /// `1/(2π) ∫ (1 − sin h(θ)) dθ`, elevations from the core tangent plane (normal n0): the
-    /// paper's eq. (6) as it stands.
-    Paper,
-}
-
-impl OcclusionForm {
-    /// Shader-side code.
-    pub fn code(self) -> u32 {
-        match self {
-            Self::CosineWeighted => 0,
-            Self::Paper => 1,
-        }
-    }
-
-    /// Visibility of one sector whose horizon elevation is `h` (radians).
-    pub fn sector_visibility(self, sin_h: f32) -> f32 {
-        match self {
-            Self::CosineWeighted => 1.0 - sin_h * sin_h,
-            Self::Paper => 1.0 - sin_h,
-        }
-    }
-}
 
 /// How pixels map back to the world: the view's inverse view-projection and viewport.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,5 +1,6 @@
-//! Reading the working images back to the CPU: for tests, tools and the accuracy measurements.
-//! A capture stalls the frame while it waits for the GPU; leave it off in a game.
+//! Reading the working images back to the CPU: for tests, tools and the accuracy measurements
+//! (the `oracle` feature). A capture stalls the frame while it waits for the GPU; leave it off
+//! in a game.
 
 use std::sync::{Arc, Mutex};
 
@@ -28,6 +29,45 @@ use super::{
 use crate::reference::{
     ASCENT_SHIFT, ApexSet, FLAG_VALID, GradientMap, ScreenHeightMap, ViewGeometry, unpack_apex_set,
 };
+
+/// Registers the captures' resources and systems: the copies after the passes whose images
+/// they read, the mapping after the frame is submitted.
+pub(super) fn build(app: &mut App) {
+    use bevy::{
+        core_pipeline::{
+            Core3d,
+            core_3d::main_opaque_pass_3d,
+        },
+        render::{Render, RenderApp, RenderSystems},
+    };
+    let captures = MesostructureCaptures::default();
+    app.insert_resource(captures.clone());
+    let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+        return;
+    };
+    render_app
+        .insert_resource(captures)
+        .init_resource::<PendingCaptures>()
+        .add_systems(ExtractSchedule, extract_capture_requests)
+        .add_systems(
+            Render,
+            map_captures
+                .after(RenderSystems::Render)
+                .before(RenderSystems::Cleanup),
+        )
+        .add_systems(
+            Core3d,
+            copy_capture
+                .after(super::occlusion::occlusion_pass)
+                .before(main_opaque_pass_3d),
+        )
+        .add_systems(
+            Core3d,
+            copy_lighting_capture
+                .after(main_opaque_pass_3d)
+                .before(super::bleeding::bleeding_pass),
+        );
+}
 
 /// Put on a camera with [`Mesostructure`](crate::Mesostructure) to read its working images back
 /// every frame into [`MesostructureCaptures`].
@@ -350,16 +390,25 @@ pub fn copy_lighting_capture(
     }
 }
 
-/// After the bleeding gather: copies the bleeding of a captured view.
+/// The bleeding pass's captures: the captured views and the copies pending this frame.
+pub(crate) type BleedingCaptures<'w, 's> =
+    (Query<'w, 's, &'static ExtractedCapture>, ResMut<'w, PendingCaptures>);
+
+/// After the bleeding gather (called by the bleeding pass, the only place that knows the
+/// gather ran this frame): copies the bleeding of a captured view.
 pub(crate) fn copy_bleeding(
     ctx: &mut RenderContext,
-    device: &RenderDevice,
-    pending: &mut PendingCaptures,
-    capture: &ExtractedCapture,
+    captures: &mut BleedingCaptures,
+    view: Entity,
     bleeding: &bevy::render::texture::CachedTexture,
 ) {
+    let (captured, pending) = captures;
+    let Ok(capture) = captured.get(view) else {
+        return;
+    };
     if let Some(entry) = pending.0.iter_mut().rev().find(|p| p.camera == capture.0) {
-        entry.bleeding = Some(copy_texture(ctx, device, &bleeding.texture, BLEEDING_FORMAT));
+        let device = ctx.render_device().clone();
+        entry.bleeding = Some(copy_texture(ctx, &device, &bleeding.texture, BLEEDING_FORMAT));
     }
 }
 

@@ -15,7 +15,14 @@
 
 pub mod apex;
 pub mod bleeding;
+#[cfg(feature = "oracle")]
 pub mod capture;
+
+/// The render-world components a capture adds to a view (none without the `oracle` feature).
+#[cfg(feature = "oracle")]
+pub(crate) type CaptureComponents = capture::ExtractedCapture;
+#[cfg(not(feature = "oracle"))]
+pub(crate) type CaptureComponents = ();
 pub mod debug_view;
 pub mod gradient;
 pub mod height;
@@ -293,14 +300,12 @@ pub(crate) fn build(app: &mut App) {
         height::HeightPhaseItem,
         height::HeightPassPipeline,
     >::new(RenderDebugFlags::default()));
-    let captures = capture::MesostructureCaptures::default();
-    app.insert_resource(captures.clone());
+    #[cfg(feature = "oracle")]
+    capture::build(app);
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
     render_app
-        .insert_resource(captures)
-        .init_resource::<capture::PendingCaptures>()
         .init_resource::<MesostructureUniforms>()
         .init_resource::<height::HeightMaterialBindGroups>()
         .init_resource::<SpecializedMeshPipelines<height::HeightPassPipeline>>()
@@ -328,7 +333,6 @@ pub(crate) fn build(app: &mut App) {
             (
                 extract_mesostructure_cameras,
                 extract_height_phases,
-                capture::extract_capture_requests,
             ),
         )
         .add_systems(
@@ -361,9 +365,6 @@ pub(crate) fn build(app: &mut App) {
                     height::prepare_height_bind_group,
                 )
                     .in_set(RenderSystems::PrepareBindGroups),
-                capture::map_captures
-                    .after(RenderSystems::Render)
-                    .before(RenderSystems::Cleanup),
             ),
         )
         .add_systems(
@@ -374,7 +375,6 @@ pub(crate) fn build(app: &mut App) {
                 gradient::gradient_pass,
                 apex::apex_pass,
                 occlusion::occlusion_pass,
-                capture::copy_capture,
             )
                 .chain()
                 .after(Core3dSystems::Prepass)
@@ -391,11 +391,7 @@ pub(crate) fn build(app: &mut App) {
         )
         .add_systems(
             Core3d,
-            (
-                capture::copy_lighting_capture,
-                bleeding::bleeding_pass,
-                bleeding::bleeding_composite_pass,
-            )
+            (bleeding::bleeding_pass, bleeding::bleeding_composite_pass)
                 .chain()
                 .in_set(Core3dSystems::MainPass)
                 .in_set(MesostructureSystems::Bleeding)

@@ -266,7 +266,7 @@ impl bevy::render::sync_component::SyncComponent for Mesostructure {
     type Target = (
         ExtractedMesostructure,
         crate::render::ViewMesostructureUniformOffset,
-        crate::render::capture::ExtractedCapture,
+        crate::render::CaptureComponents,
         crate::render::lighting::ViewLightingPipeline,
         // Each pass's images and bind groups.
         crate::render::height::ViewHeightTextures,

@@ -192,14 +192,18 @@ pub fn apex_pass(
         &ViewApexBindGroup,
         &ViewMesostructureUniformOffset,
         &ExtractedMesostructure,
-        Has<super::capture::ExtractedCapture>,
     )>,
+    #[cfg(feature = "oracle")] captured_views: Query<(), With<super::capture::ExtractedCapture>>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
     pipeline: Res<ApexPipeline>,
     pipeline_cache: Res<PipelineCache>,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, height, apex, bind_group, offset, settings, captured) = view.into_inner();
+    #[cfg(feature = "oracle")]
+    let captured = captured_views.contains(view.entity());
+    #[cfg(not(feature = "oracle"))]
+    let captured = false;
+    let (extracted_view, height, apex, bind_group, offset, settings) = view.into_inner();
     if !settings.0.needs_apex_sets() || !view_has_mesostructure(&phases, extracted_view) {
         return;
     }

@@ -215,7 +215,6 @@ pub fn bleeding_pass(
         &ViewMesostructureUniformOffset,
         (&ViewUniformOffset, &ViewLightsUniformOffset),
         &ViewBleedingPipeline,
-        Option<&super::capture::ExtractedCapture>,
         Option<(&ViewOcclusionPipeline, &ViewOcclusionBindGroup)>,
     )>,
     phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
@@ -224,10 +223,12 @@ pub fn bleeding_pass(
     uniforms: Res<MesostructureUniforms>,
     view_uniforms: Res<ViewUniforms>,
     light_meta: Res<LightMeta>,
-    mut pending: ResMut<super::capture::PendingCaptures>,
+    #[cfg(feature = "oracle")] mut captures: super::capture::BleedingCaptures,
     mut ctx: RenderContext,
 ) {
-    let (extracted_view, target, prepass, images, offset, offsets, composite, capture, occlusion) =
+    #[cfg(feature = "oracle")]
+    let view_entity = view.entity();
+    let (extracted_view, target, prepass, images, offset, offsets, composite, occlusion) =
         view.into_inner();
     let (view_offset, lights_offset) = offsets;
     let (height, apex, occlusion_outputs, bleeding, light_visibility) = images;
@@ -305,9 +306,8 @@ pub fn bleeding_pass(
         height.size,
         |_| {},
     );
-    if let Some(capture) = capture {
-        super::capture::copy_bleeding(&mut ctx, &device, &mut pending, capture, &bleeding.0);
-    }
+    #[cfg(feature = "oracle")]
+    super::capture::copy_bleeding(&mut ctx, &mut captures, view_entity, &bleeding.0);
 }
 
 /// Core3d system after the gather: adds the bleeding to the view's lit colour, timed as
