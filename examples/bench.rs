@@ -224,9 +224,8 @@ fn measure(config: Config, run: Run, frames: usize, warm_up: usize) -> (Vec<(Str
             uv_transform: bevy::math::Affine2::from_scale(Vec2::new(6.0, 3.0)),
         });
     }
-    for _ in 0..warm_up + frames {
-        app.update();
-    }
+    // (The diagnostics keep the last frames: none of them while a height map is being built.)
+    common::update_when_ready(&mut app, warm_up + frames);
     let adapter = app
         .world()
         .get_resource::<RenderAdapterInfo>()

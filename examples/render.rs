@@ -309,9 +309,7 @@ fn main() {
             uv_transform: Affine2::from_scale(args.tiles),
         },
     ));
-    for _ in 0..8 {
-        app.update();
-    }
+    common::update_when_ready(&mut app, 8);
     let captures = app.world().resource::<MesostructureCaptures>().clone();
     let mut frame = None;
     for _ in 0..20 {

@@ -104,7 +104,7 @@ use bevy::{
     render::{extract_component::ExtractComponentPlugin, sync_component::SyncComponentPlugin},
 };
 
-pub use material::MesostructureMaterial;
+pub use material::{MesostructureMaterial, MesostructureStatus};
 pub use render::{MesostructureSystems, lighting::MESOSTRUCTURE_LIGHTING_PASS_ID};
 #[cfg(feature = "oracle")]
 pub use render::capture::{CapturedFrame, MesostructureCapture, MesostructureCaptures};
@@ -117,7 +117,8 @@ pub use settings::{
 pub mod prelude {
     pub use crate::{
         Mesostructure, MesostructureCost, MesostructureDebugView, MesostructureMaterial,
-        MesostructurePlugin, MesostructureQuality, WorkingResolution, height_maps::HeightMap,
+        MesostructurePlugin, MesostructureQuality, MesostructureStatus, WorkingResolution,
+        height_maps::HeightMap,
     };
 }
 
@@ -137,6 +138,7 @@ impl Plugin for MesostructurePlugin {
             .register_type::<HorizonSearchBaseline>()
             .register_type::<MesostructureMaterial>()
             .init_resource::<material::HeightMapMips>()
+            .init_resource::<MesostructureStatus>()
             .init_resource::<material::AdaptedMaterials>()
             .add_plugins((
                 SyncComponentPlugin::<Mesostructure>::default(),

@@ -7,6 +7,7 @@ use bevy::{
     platform::collections::HashMap,
     prelude::*,
     render::extract_component::ExtractComponent,
+    tasks::{AsyncComputeTaskPool, Task, block_on, poll_once},
 };
 
 use crate::{
@@ -68,7 +69,33 @@ pub(crate) struct PreparedMesostructure {
 
 /// Converted height maps, by source image.
 #[derive(Resource, Default)]
-pub struct HeightMapMips(HashMap<AssetId<Image>, Option<DerivedHeightMap>>);
+pub struct HeightMapMips(HashMap<AssetId<Image>, Derivation>);
+
+/// A height map's derived images: built on a background task (a 512² horizon map takes
+/// seconds in an unoptimised build — never on the main thread), then kept.
+enum Derivation {
+    /// Being built; its meshes are drawn without mesostructure until it is done.
+    Building(Task<DerivedImages>),
+    /// Built (`None`: the height map cannot be used).
+    Done(Option<DerivedHeightMap>),
+}
+
+/// What the background task makes of a height map's values.
+struct DerivedImages {
+    mips: Image,
+    horizons: Image,
+    horizon_distances: Image,
+}
+
+/// How far the plugin is with the height maps in use, for loading screens and tests.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MesostructureStatus {
+    /// Height maps whose mip chain and texture-space horizon map are being built in the
+    /// background (their meshes are drawn without mesostructure until then).
+    pub height_maps_building: usize,
+    /// Height maps ready for use.
+    pub height_maps_ready: usize,
+}
 
 /// What the plugin derives from a height map once: its mip chain and its horizon map.
 #[derive(Clone, Debug)]
@@ -94,6 +121,7 @@ pub(crate) fn prepare_mesostructure_materials(
     mut images: ResMut<Assets<Image>>,
     asset_server: Res<AssetServer>,
     mut mips: ResMut<HeightMapMips>,
+    mut status: ResMut<MesostructureStatus>,
     mut warned: ResMut<WarnedOnce>,
 ) {
     for entity in removed.read() {
@@ -103,7 +131,8 @@ pub(crate) fn prepare_mesostructure_materials(
     }
     for event in image_events.read() {
         if let AssetEvent::Modified { id } | AssetEvent::Removed { id } = event {
-            if let Some(Some(derived)) = mips.0.remove(id) {
+            // (A task still building is dropped, which cancels it.)
+            if let Some(Derivation::Done(Some(derived))) = mips.0.remove(id) {
                 images.remove(&derived.mips);
                 images.remove(&derived.horizons);
                 images.remove(&derived.horizon_distances);
@@ -137,6 +166,20 @@ pub(crate) fn prepare_mesostructure_materials(
             (None, None) => {}
         }
     }
+    let building = mips
+        .0
+        .values()
+        .filter(|d| matches!(d, Derivation::Building(_)))
+        .count();
+    let ready = mips
+        .0
+        .values()
+        .filter(|d| matches!(d, Derivation::Done(Some(_))))
+        .count();
+    status.set_if_neq(MesostructureStatus {
+        height_maps_building: building,
+        height_maps_ready: ready,
+    });
 }
 
 fn prepare_one(
@@ -205,12 +248,14 @@ fn prepare_one(
                     });
                 }
                 let (w, h) = (source.width(), source.height());
-                let horizons = HorizonMap::new(&values, w, h);
-                Some(DerivedHeightMap {
-                    mips: images.add(mip_chain(values, w, h)),
-                    horizons: images.add(horizons.to_image()),
-                    horizon_distances: images.add(horizons.distance_image()),
-                })
+                Derivation::Building(AsyncComputeTaskPool::get().spawn(async move {
+                    let horizons = HorizonMap::new(&values, w, h);
+                    DerivedImages {
+                        horizons: horizons.to_image(),
+                        horizon_distances: horizons.distance_image(),
+                        mips: mip_chain(values, w, h),
+                    }
+                }))
             }
             Err(err) => {
                 warned.warn(format!("convert {id}"), || {
@@ -219,12 +264,23 @@ fn prepare_one(
                              the mesh is drawn without mesostructure"
                     )
                 });
-                None
+                Derivation::Done(None)
             }
         };
         mips.0.insert(id, derived);
     }
-    let derived = mips.0.get(&id)?.as_ref()?;
+    let derivation = mips.0.get_mut(&id)?;
+    if let Derivation::Building(task) = derivation {
+        let built = block_on(poll_once(task))?;
+        *derivation = Derivation::Done(Some(DerivedHeightMap {
+            mips: images.add(built.mips),
+            horizons: images.add(built.horizons),
+            horizon_distances: images.add(built.horizon_distances),
+        }));
+    }
+    let Derivation::Done(Some(derived)) = derivation else {
+        return None;
+    };
     Some(PreparedMesostructure {
         height_mips: derived.mips.id(),
         horizons: derived.horizons.id(),

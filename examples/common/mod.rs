@@ -264,6 +264,26 @@ pub fn app(args: &ExampleArgs, title: &str, shots: Vec<Shot>) -> App {
     app
 }
 
+/// Whether the plugin is still building a height map's mip chain and horizon map in the
+/// background (its meshes are drawn without mesostructure until then): frames that should show
+/// the effect — warm-up, measured, screenshot — wait for it.
+pub fn height_maps_building(world: &World) -> bool {
+    world
+        .get_resource::<MesostructureStatus>()
+        .is_some_and(|s| s.height_maps_building > 0)
+}
+
+/// Updates `app` `n` times, not counting the frames while height maps are still being built.
+pub fn update_when_ready(app: &mut App, n: usize) {
+    let mut done = 0;
+    while done < n {
+        app.update();
+        if !height_maps_building(app.world()) {
+            done += 1;
+        }
+    }
+}
+
 /// Runs the app: the window's event loop, or frame by frame until the script is done.
 pub fn run(mut app: App) {
     if app.world().resource::<Output>().0.is_some() {
@@ -295,6 +315,9 @@ fn advance_clock(mut clock: ResMut<Clock>) {
 }
 
 fn run_script(world: &mut World) {
+    if height_maps_building(world) {
+        return;
+    }
     let mut script = world.resource_mut::<Script>();
     script.frame += 1;
     if script.frame < script.warm_up || !script.exit_when_done {

@@ -617,7 +617,7 @@ pub fn render(
 pub const ADDED_PASSES: [&str; 6] =
     ["height", "gradient", "apex", "occlusion", "bleeding", "bleeding_composite"];
 
-/// Updates `app` until every pipeline has compiled, 12 frames at least (a pass whose pipeline is
+/// Updates `app` until every pipeline has compiled and every height map is built, 12 frames at least (a pass whose pipeline is
 /// not ready does not run, and its image is not this frame's; on a busy machine compiling can
 /// take more than a few frames). False if some are still compiling after 600 frames.
 pub fn wait_for_pipelines(app: &mut App) -> bool {
@@ -631,7 +631,12 @@ pub fn wait_for_pipelines(app: &mut App) -> bool {
         let pending = cache.pipelines().any(|p| {
             !matches!(p.state, CachedPipelineState::Ok(_) | CachedPipelineState::Err(_))
         });
-        if frame >= 12 && !pending {
+        // (Nor may a height map still be being built: its mesh is drawn without the effect.)
+        let building = app
+            .world()
+            .get_resource::<bevy_mesostructure::MesostructureStatus>()
+            .is_some_and(|s| s.height_maps_building > 0);
+        if frame >= 12 && !pending && !building {
             return true;
         }
     }

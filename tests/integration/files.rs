@@ -46,3 +46,42 @@ fn png_8_and_16_bit_and_exr_height_maps_load_like_the_map_in_memory() {
         assert!(worst <= tolerance, "{file}: {worst} > {tolerance}");
     }
 }
+
+/// A height map's mip chain and texture-space horizon map (seconds for a large map in an
+/// unoptimised build) are built on a background task: the frame that meets the map returns
+/// with the build under way and the mesh drawn without mesostructure; once built, the effect
+/// appears.
+#[test]
+fn height_maps_are_derived_in_the_background() {
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = app();
+    let target = target(&mut app, SIZE, SIZE);
+    let camera = camera(&mut app, &target, top_down(), Mesostructure::default());
+    let map = image(&mut app, HeightMap::noise(1024, 8, 4, 7).to_image());
+    let material = unlit(&mut app, Color::WHITE);
+    mesostructure_plane(&mut app, material, map, 0.1);
+    app.update();
+    assert_eq!(
+        *app.world().resource::<MesostructureStatus>(),
+        MesostructureStatus {
+            height_maps_building: 1,
+            height_maps_ready: 0
+        },
+        "the first frame returns while the map is built"
+    );
+    // (`run`, under `capture`, waits for the build.)
+    let frame = capture(&mut app, camera, 30);
+    assert_eq!(
+        *app.world().resource::<MesostructureStatus>(),
+        MesostructureStatus {
+            height_maps_building: 0,
+            height_maps_ready: 1
+        }
+    );
+    assert!(
+        frame.mesostructure_pixels() > (SIZE * SIZE / 2) as usize,
+        "the plane is a mesostructure surface once its map is built"
+    );
+}

@@ -133,11 +133,28 @@ pub fn camera(
 }
 
 /// Runs `n` frames, failing on any render error.
+///
+/// Frames while a height map's derived images are still being built in the background (its
+/// mesh drawn without mesostructure) are not counted; the build may take a few seconds.
 pub fn run(app: &mut App, n: usize) {
-    for _ in 0..n {
+    let start = std::time::Instant::now();
+    let mut done = 0;
+    while done < n {
         app.update();
         if let Some(exit) = app.should_exit() {
             panic!("the app exited: {exit:?} (a wgpu error?)");
+        }
+        let building = app
+            .world()
+            .get_resource::<MesostructureStatus>()
+            .is_some_and(|s| s.height_maps_building > 0);
+        if !building {
+            done += 1;
+        } else {
+            assert!(
+                start.elapsed().as_secs() < 120,
+                "height maps still being built after two minutes"
+            );
         }
     }
 }
