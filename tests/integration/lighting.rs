@@ -212,6 +212,28 @@ fn occlusion_darkens_ambient_light_in_the_grooves_only() {
     assert!(unchanged <= 1, "open pixels are unchanged: {unchanged}/255");
 }
 
+/// A plane of bricks (k 0.1, sRGB grey `grey`) lit by one directional light of `lux` from
+/// `light` (towards the origin) and no ambient light.
+fn bricks_in_direct_light(app: &mut App, lux: f32, light: Vec3, grey: f32) {
+    let bricks = image(app, HeightMap::bricks(256, 4, 0.15).to_image());
+    app.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    app.world_mut().spawn((
+        DirectionalLight {
+            illuminance: lux,
+            ..default()
+        },
+        Transform::from_translation(light).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    let grey = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(Color::srgb(grey, grey, grey));
+    mesostructure_plane(app, MeshMaterial3d(grey), bricks, 0.1);
+}
+
 #[test]
 fn occlusion_leaves_direct_light_alone() {
     if !gpu_or_skip() {
@@ -220,24 +242,7 @@ fn occlusion_leaves_direct_light_alone() {
     let mut app = app();
     let target = target(&mut app, SIZE, SIZE);
     let camera = camera(&mut app, &target, top_down(), Mesostructure::default());
-    let bricks = image(&mut app, HeightMap::bricks(256, 4, 0.15).to_image());
-    // Direct light only.
-    app.insert_resource(GlobalAmbientLight {
-        brightness: 0.0,
-        ..default()
-    });
-    app.world_mut().spawn((
-        DirectionalLight {
-            illuminance: 2000.0,
-            ..default()
-        },
-        Transform::from_xyz(0.5, 2.0, 0.3).looking_at(Vec3::ZERO, Vec3::Y),
-    ));
-    let grey = app
-        .world_mut()
-        .resource_mut::<Assets<StandardMaterial>>()
-        .add(Color::srgb(0.5, 0.5, 0.5));
-    mesostructure_plane(&mut app, MeshMaterial3d(grey), bricks, 0.1);
+    bricks_in_direct_light(&mut app, 2000.0, Vec3::new(0.5, 2.0, 0.3), 0.5);
     let frame = capture(&mut app, camera, 5);
     assert!(
         frame.occlusion.iter().any(|&a| a < 0.8),
@@ -269,24 +274,8 @@ fn the_direct_weight_scales_the_micro_shadowed_direct_light() {
         ..default()
     };
     let camera = camera(&mut app, &target, top_down(), settings);
-    let bricks = image(&mut app, HeightMap::bricks(256, 4, 0.15).to_image());
-    app.insert_resource(GlobalAmbientLight {
-        brightness: 0.0,
-        ..default()
-    });
     // Low enough for the bricks to shadow the mortar.
-    app.world_mut().spawn((
-        DirectionalLight {
-            illuminance: 3000.0,
-            ..default()
-        },
-        Transform::from_xyz(2.0, 0.8, 0.6).looking_at(Vec3::ZERO, Vec3::Y),
-    ));
-    let grey = app
-        .world_mut()
-        .resource_mut::<Assets<StandardMaterial>>()
-        .add(Color::srgb(0.6, 0.6, 0.6));
-    mesostructure_plane(&mut app, MeshMaterial3d(grey), bricks, 0.1);
+    bricks_in_direct_light(&mut app, 3000.0, Vec3::new(2.0, 0.8, 0.6), 0.6);
     let frame = capture(&mut app, camera, 5);
     let shadowed = frame.micro_shadow.iter().filter(|&&v| v < 0.5).count();
     assert!(shadowed > 50, "the bricks cast micro-shadows ({shadowed} px)");
