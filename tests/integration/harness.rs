@@ -184,13 +184,15 @@ pub fn screenshot(app: &mut App, target: &Handle<Image>) -> Image {
         .observe(move |ev: On<ScreenshotCaptured>| {
             *s.lock().unwrap() = Some(ev.image.clone());
         });
-    for _ in 0..10 {
+    // (Usually 2–3 frames; with every test rendering at once on two cores a screenshot has
+    // taken more than 10.)
+    for _ in 0..60 {
         run(app, 1);
         if let Some(image) = slot.lock().unwrap().take() {
             return image;
         }
     }
-    panic!("no screenshot after 10 frames");
+    panic!("no screenshot after 60 frames");
 }
 
 /// Keys of the one-time warnings given so far, main and render world together.
