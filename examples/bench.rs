@@ -252,7 +252,28 @@ fn measure(config: Config, run: Run, frames: usize, warm_up: usize) -> (Vec<(Str
         let path = DiagnosticPath::new(format!(
             "render/mesostructure/{pass}/fragment_shader_invocations"
         ));
-        if let Some(median) = store.get(&path).map(|d| percentile(&d.values().copied().collect::<Vec<_>>(), 0.5)) {
+        // Over the measured frames only (recorded with or after the first measured frame's
+        // time): a pass that changes form — the lighting pass becomes compute once its pipeline
+        // has compiled — has statistics from its first, raster frames alone.
+        let elapsed = DiagnosticPath::new(format!("render/mesostructure/{pass}/elapsed_gpu"));
+        let first_measured = store
+            .get(&elapsed)
+            .and_then(|d| {
+                let times: Vec<_> = d.measurements().map(|m| m.time).collect();
+                times.len().checked_sub(frames.max(1)).map(|i| times[i])
+            });
+        let measured = store
+            .get(&path)
+            .zip(first_measured)
+            .map(|(d, since)| {
+                d.measurements()
+                    .filter(|m| m.time >= since)
+                    .map(|m| m.value)
+                    .collect::<Vec<_>>()
+            })
+            .filter(|v| !v.is_empty());
+        if let Some(values) = measured {
+            let median = percentile(&values, 0.5);
             println!("  mesostructure/{pass}: {median:.0} fragment invocations a frame");
         }
     }

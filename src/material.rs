@@ -97,6 +97,16 @@ pub struct MesostructureStatus {
     pub height_maps_ready: usize,
 }
 
+impl MesostructureStatus {
+    /// Whether `world` (an app's main world) has a height map still being built: frames meant
+    /// to show the effect — a loading screen's last, a test's or a benchmark's — wait for it.
+    pub fn building(world: &World) -> bool {
+        world
+            .get_resource::<Self>()
+            .is_some_and(|s| s.height_maps_building > 0)
+    }
+}
+
 /// What the plugin derives from a height map once: its mip chain and its horizon map.
 #[derive(Clone, Debug)]
 pub struct DerivedHeightMap {

@@ -92,10 +92,11 @@ impl Plugin for FrameTimerPlugin {
                     deferred_lighting_begin
                         .in_set(Core3dSystems::MainPass)
                         .before(deferred_lighting)
-                        .after(bevy_mesostructure::MesostructureSystems::Lighting),
+                        .after(bevy_mesostructure::MesostructureSystems::RasterLighting),
                     deferred_lighting_end
                         .in_set(Core3dSystems::MainPass)
                         .after(deferred_lighting)
+                        .before(bevy_mesostructure::MesostructureSystems::ComputeLighting)
                         .before(main_opaque_pass_3d),
                 ),
             );

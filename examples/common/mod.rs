@@ -264,22 +264,16 @@ pub fn app(args: &ExampleArgs, title: &str, shots: Vec<Shot>) -> App {
     app
 }
 
-/// Whether the plugin is still building a height map's mip chain and horizon map in the
-/// background (its meshes are drawn without mesostructure until then): frames that should show
-/// the effect — warm-up, measured, screenshot — wait for it.
-pub fn height_maps_building(world: &World) -> bool {
-    world
-        .get_resource::<MesostructureStatus>()
-        .is_some_and(|s| s.height_maps_building > 0)
-}
-
-/// Updates `app` `n` times, not counting the frames while height maps are still being built.
+/// Updates `app` `n` times, not counting the frames while it is [`headless::settling`] (for at most 600
+/// frames: a pipeline whose shader never loads would wait forever).
 pub fn update_when_ready(app: &mut App, n: usize) {
-    let mut done = 0;
+    let (mut done, mut waited) = (0, 0);
     while done < n {
         app.update();
-        if !height_maps_building(app.world()) {
+        if !headless::settling(app) || waited >= 600 {
             done += 1;
+        } else {
+            waited += 1;
         }
     }
 }
@@ -315,7 +309,7 @@ fn advance_clock(mut clock: ResMut<Clock>) {
 }
 
 fn run_script(world: &mut World) {
-    if height_maps_building(world) {
+    if MesostructureStatus::building(world) {
         return;
     }
     let mut script = world.resource_mut::<Script>();

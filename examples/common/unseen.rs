@@ -35,7 +35,7 @@ use bevy::{
     prelude::*,
     render::{
         diagnostic::RenderDiagnosticsPlugin,
-        render_resource::{CachedPipelineState, PipelineCache, TextureFormat, TextureUsages},
+        render_resource::{TextureFormat, TextureUsages},
     },
 };
 use bevy_mesostructure::{
@@ -623,20 +623,7 @@ pub const ADDED_PASSES: [&str; 6] =
 pub fn wait_for_pipelines(app: &mut App) -> bool {
     for frame in 0..=600 {
         app.update();
-        let cache = app
-            .get_sub_app(bevy::render::RenderApp)
-            .expect("the render app")
-            .world()
-            .resource::<PipelineCache>();
-        let pending = cache.pipelines().any(|p| {
-            !matches!(p.state, CachedPipelineState::Ok(_) | CachedPipelineState::Err(_))
-        });
-        // (Nor may a height map still be being built: its mesh is drawn without the effect.)
-        let building = app
-            .world()
-            .get_resource::<bevy_mesostructure::MesostructureStatus>()
-            .is_some_and(|s| s.height_maps_building > 0);
-        if frame >= 12 && !pending && !building {
+        if frame >= 12 && !super::headless::settling(app) {
             return true;
         }
     }

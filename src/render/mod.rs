@@ -3,7 +3,8 @@
 //! Per camera with [`Mesostructure`], each frame, between Bevy's prepass and main pass:
 //! [`height`] (a raster half in a custom phase, then a compute half) → [`gradient`] (compute) →
 //! [`apex`] (compute) →
-//! [`occlusion`] (compute); in the main pass, [`lighting`] before Bevy's deferred lighting and
+//! [`occlusion`] (compute); in the main pass, [`lighting`] (compute after Bevy's deferred
+//! lighting where the view's main image takes storage writes, else raster before it) and
 //! [`bleeding`] (compute; it writes the view's next main image) between the opaque and
 //! transparent passes; the [`debug_view`] pass draws over
 //! the output after tonemapping when a debug view is chosen.
@@ -266,9 +267,18 @@ pub(crate) fn dispatch_per_pixel_with(
 /// The plugin's systems in the `Core3d` schedule that other code may order against.
 #[derive(bevy::ecs::schedule::SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum MesostructureSystems {
-    /// The lighting pass (in `Core3dSystems::MainPass`, before Bevy's deferred lighting), which
-    /// lights the mesostructure pixels in place of Bevy's deferred lighting.
+    /// The lighting pass, which lights the mesostructure pixels in place of Bevy's deferred
+    /// lighting (in `Core3dSystems::MainPass`): both of its forms, so a system after this set
+    /// sees those pixels lit. The set spans Bevy's `deferred_lighting`; to order against that,
+    /// use the two below.
     Lighting,
+    /// The lighting pass's raster form (a fullscreen fragment pass, before Bevy's
+    /// `deferred_lighting`), for views whose main images take no storage writes.
+    RasterLighting,
+    /// The lighting pass's compute form (after Bevy's `deferred_lighting`, before its
+    /// screen-space reflections and the opaque pass), for views whose main images take storage
+    /// writes.
+    ComputeLighting,
     /// The colour bleeding's gather and composite (after the opaque pass), which add the
     /// bounced light to the view's surfaces, through Bevy's post-process ping-pong where the
     /// view allows it.
@@ -363,6 +373,7 @@ pub(crate) fn build(app: &mut App) {
                     occlusion::prepare_occlusion_bind_group,
                     debug_view::prepare_debug_view_bind_group,
                     height::prepare_height_bind_group,
+                    lighting::compute::prepare_compute_lighting_bind_groups,
                 )
                     .in_set(RenderSystems::PrepareBindGroups),
             ),
@@ -386,7 +397,19 @@ pub(crate) fn build(app: &mut App) {
             lighting::lighting_pass
                 .in_set(Core3dSystems::MainPass)
                 .in_set(MesostructureSystems::Lighting)
+                .in_set(MesostructureSystems::RasterLighting)
                 .before(bevy::pbr::deferred::deferred_lighting)
+                .before(main_opaque_pass_3d),
+        )
+        .add_systems(
+            Core3d,
+            lighting::lighting_compute_pass
+                .in_set(Core3dSystems::MainPass)
+                .in_set(MesostructureSystems::Lighting)
+                .in_set(MesostructureSystems::ComputeLighting)
+                .after(bevy::pbr::deferred::deferred_lighting)
+                // Screen-space reflections reflect the lit image: ours included.
+                .before(bevy::pbr::screen_space_reflections)
                 .before(main_opaque_pass_3d),
         )
         .add_systems(

@@ -267,7 +267,10 @@ impl bevy::render::sync_component::SyncComponent for Mesostructure {
         ExtractedMesostructure,
         crate::render::ViewMesostructureUniformOffset,
         crate::render::CaptureComponents,
-        crate::render::lighting::ViewLightingPipeline,
+        (
+            crate::render::lighting::ViewLightingPipeline,
+            crate::render::lighting::compute::ViewComputeLighting,
+        ),
         // Each pass's images and bind groups.
         crate::render::height::ViewHeightTextures,
         (

@@ -144,11 +144,7 @@ pub fn run(app: &mut App, n: usize) {
         if let Some(exit) = app.should_exit() {
             panic!("the app exited: {exit:?} (a wgpu error?)");
         }
-        let building = app
-            .world()
-            .get_resource::<MesostructureStatus>()
-            .is_some_and(|s| s.height_maps_building > 0);
-        if !building {
+        if !MesostructureStatus::building(app.world()) {
             done += 1;
         } else {
             assert!(
@@ -249,6 +245,11 @@ pub fn top_down_uv(px: u32, py: u32, size: u32) -> Vec2 {
 /// Fails unless every pipeline of the plugin that was queued has compiled: a missing or broken
 /// shader otherwise only shows as a pass that silently never runs.
 pub fn assert_pipelines_ready(app: &App) {
+    assert_pipelines_ready_with_prefix(app, "mesostructure");
+}
+
+/// [`assert_pipelines_ready`] for the pipelines whose labels start with `prefix`.
+pub fn assert_pipelines_ready_with_prefix(app: &App, prefix: &str) {
     use bevy::render::render_resource::{CachedPipelineState, PipelineCache, PipelineDescriptor};
     let cache = app
         .get_sub_app(RenderApp)
@@ -261,7 +262,7 @@ pub fn assert_pipelines_ready(app: &App) {
             PipelineDescriptor::ComputePipelineDescriptor(d) => d.label.clone(),
         }
         .unwrap_or_default();
-        if !label.starts_with("mesostructure") {
+        if !label.starts_with(prefix) {
             continue;
         }
         match &pipeline.state {

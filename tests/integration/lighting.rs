@@ -539,3 +539,92 @@ fn bump_mapping_turns_the_slopes_towards_and_away_from_the_light() {
         "bump shading agrees with the true normals on {share}"
     );
 }
+
+/// Whether a view's lighting pass ran in its compute form in the last frame: the render
+/// world holds the compute form's bind groups (`ViewComputeLighting`) on exactly such views.
+fn lighting_runs_in_compute(app: &mut App) -> bool {
+    let world = app.sub_app_mut(bevy::render::RenderApp).world_mut();
+    let Some(id) = world
+        .components()
+        .iter_registered()
+        .find(|c| format!("{}", c.name()).ends_with("ViewComputeLighting"))
+        .map(|c| c.id())
+    else {
+        return false;
+    };
+    world
+        .query::<bevy::ecs::world::EntityRef>()
+        .iter(world)
+        .any(|e| e.contains_id(id))
+}
+
+/// The lighting pass runs as compute where the camera's main images take storage writes (the
+/// plugin asks for them), and as a fullscreen fragment pass where a camera's usages leave them
+/// out; both give the same picture — to one 8-bit step — with everything Bevy's lighting reads
+/// bound: a shadowed directional, point and spot light, micro-shadows, ambient light, SSAO and
+/// distance fog on the camera.
+#[test]
+fn the_compute_lighting_and_its_raster_fallback_give_the_same_picture() {
+    if !gpu_or_skip() {
+        return;
+    }
+    use bevy::{camera::CameraMainTextureUsages, pbr::DistanceFog};
+    let mut app = app();
+    let target = target(&mut app, SIZE, SIZE);
+    let settings = Mesostructure {
+        bleeding: false,
+        ..default()
+    };
+    let camera = camera(&mut app, &target, view(), settings);
+    app.world_mut().entity_mut(camera).insert((
+        bevy::pbr::ScreenSpaceAmbientOcclusion::default(),
+        DistanceFog {
+            color: Color::srgb(0.3, 0.3, 0.4),
+            falloff: bevy::pbr::FogFalloff::Linear {
+                start: 1.5,
+                end: 4.0,
+            },
+            ..default()
+        },
+    ));
+    let bricks = image(&mut app, HeightMap::bricks(256, 4, 0.15).to_image());
+    lit_scene(&mut app, Some(bricks));
+    app.world_mut().spawn((
+        PointLight {
+            intensity: 20_000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_xyz(-0.6, 0.5, 0.4),
+    ));
+    app.world_mut().spawn((
+        SpotLight {
+            intensity: 40_000.0,
+            shadow_maps_enabled: true,
+            outer_angle: 0.5,
+            ..default()
+        },
+        Transform::from_xyz(0.5, 0.9, -0.5).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    run(&mut app, 6);
+    assert_pipelines_ready(&app);
+    assert!(lighting_runs_in_compute(&mut app), "the lighting pass runs as compute");
+    let compute = pixels(&screenshot(&mut app, &target));
+    app.world_mut()
+        .entity_mut(camera)
+        .insert(CameraMainTextureUsages::default());
+    run(&mut app, 2);
+    assert!(!lighting_runs_in_compute(&mut app), "the raster form runs");
+    let raster = pixels(&screenshot(&mut app, &target));
+    let worst = compute
+        .iter()
+        .zip(&raster)
+        .map(|(a, b)| (0..3).map(|c| a[c].abs_diff(b[c])).max().unwrap())
+        .max()
+        .unwrap();
+    // (Fog alone gives every pixel R ≈ 60–80.)
+    let lit = compute.iter().filter(|p| p[0] > 120).count();
+    eprintln!("compute against raster lighting: largest difference {worst}/255, {lit} lit pixels");
+    assert!(lit > 2000, "the plane is lit ({lit} px)");
+    assert!(worst <= 1, "the two forms differ by {worst}/255");
+}

@@ -11,7 +11,10 @@ mod suite;
 
 use bevy_mesostructure::prelude::*;
 
-use crate::harness::{gpu_or_skip, headless::headless_plugins};
+use crate::harness::{
+    gpu_or_skip,
+    headless::{self, headless_plugins},
+};
 
 /// Picture side, pixel step between scored pixels and AO rays per axis: small enough for CI
 /// (the `accuracy` example runs the suite at 128², every 2nd pixel, 16 × 16 rays).

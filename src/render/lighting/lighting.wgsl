@@ -5,7 +5,8 @@
 // it, weighted by λa; each directional, point and spot light's direct light weighted by λs
 // and its micro-shadow visibility, inside Bevy's one light loop. Draws a fullscreen
 // triangle at the depth of our deferred lighting pass id, so only pixels of mesostructure
-// materials are touched. Writes each pixel's micro-shadow visibility for the debug view.
+// materials are touched; or, in its compute form, runs on the pixels of that id. Writes each
+// pixel's micro-shadow visibility for the debug view.
 
 #import bevy_pbr::{
     prepass_utils,
@@ -190,37 +191,14 @@ override fn shadows::fetch_directional_shadow(
     return pending_shadow;
 }
 
-struct FullscreenVertexOutput {
-    @builtin(position) position: vec4<f32>,
-    @location(0) uv: vec2<f32>,
-};
-
-@vertex
-fn vertex(@builtin(vertex_index) vertex_index: u32) -> FullscreenVertexOutput {
-    let uv = vec2<f32>(f32(vertex_index >> 1u), f32(vertex_index & 1u)) * 2.0;
-    // The id-depth texture stores the lighting pass id as unorm depth id / 255.
-    let clip_position = vec4<f32>(
-        uv * vec2<f32>(2.0, -2.0) + vec2<f32>(-1.0, 1.0),
-        f32(#{MESOSTRUCTURE_LIGHTING_PASS_ID}u) / 255.0,
-        1.0
-    );
-    return FullscreenVertexOutput(clip_position, uv);
-}
-
-// Early depth testing forced: the id-depth test (only this pass's pixels) must reject the
-// foreign pixels before the shader runs, which the storage write below would otherwise prevent
-// (the shader writes no depth, so the early test decides exactly as the late one would).
-// `micro_shadow_out` is therefore written on mesostructure pixels only.
-#ifdef EARLY_DEPTH_TEST
-@early_depth_test(force)
-#endif
-@fragment
-fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    var frag_coord = vec4(in.position.xy, 0.0, 0.0);
+// Lights one pixel of a mesostructure material at `position` (the pixel's centre, as
+// `@builtin(position)` gives it), and records its micro-shadow visibility; both entries below.
+fn light_pixel(position: vec2<f32>) -> vec4<f32> {
+    var frag_coord = vec4(position, 0.0, 0.0);
     let pixel = vec2<i32>(frag_coord.xy);
     let deferred_data = textureLoad(deferred_prepass_texture, pixel, 0);
 #ifdef DEPTH_PREPASS
-    frag_coord.z = prepass_utils::prepass_depth(in.position, 0u);
+    frag_coord.z = prepass_utils::prepass_depth(frag_coord, 0u);
 #endif
     var pbr_input = pbr_input_from_deferred_gbuffer(frag_coord, deferred_data);
     var output_color = vec4(0.0);
@@ -268,3 +246,53 @@ fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     }
     return pbr_functions::main_pass_post_lighting_processing(pbr_input, output_color);
 }
+
+#ifdef COMPUTE_LIGHTING
+// The compute form (where the view's main image takes storage writes): runs after Bevy's
+// deferred lighting, which leaves the pixels of this pass's id untouched, and writes exactly
+// those — the same pixels the raster form's id-depth test selects.
+@group(2) @binding(8) var lit_out: texture_storage_2d<rgba16float, write>;
+// Each pixel's deferred lighting pass id (Bevy's prepass).
+@group(2) @binding(9) var lighting_pass_ids: texture_2d<u32>;
+
+@compute @workgroup_size(8, 8, 1)
+fn light_compute(@builtin(global_invocation_id) id: vec3<u32>) {
+    if any(id.xy >= textureDimensions(lighting_pass_ids)) {
+        return;
+    }
+    let pixel = vec2<i32>(id.xy);
+    if textureLoad(lighting_pass_ids, pixel, 0).r != #{MESOSTRUCTURE_LIGHTING_PASS_ID}u {
+        return;
+    }
+    textureStore(lit_out, pixel, light_pixel(vec2<f32>(id.xy) + 0.5));
+}
+#else
+struct FullscreenVertexOutput {
+    @builtin(position) position: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+};
+
+@vertex
+fn vertex(@builtin(vertex_index) vertex_index: u32) -> FullscreenVertexOutput {
+    let uv = vec2<f32>(f32(vertex_index >> 1u), f32(vertex_index & 1u)) * 2.0;
+    // The id-depth texture stores the lighting pass id as unorm depth id / 255.
+    let clip_position = vec4<f32>(
+        uv * vec2<f32>(2.0, -2.0) + vec2<f32>(-1.0, 1.0),
+        f32(#{MESOSTRUCTURE_LIGHTING_PASS_ID}u) / 255.0,
+        1.0
+    );
+    return FullscreenVertexOutput(clip_position, uv);
+}
+
+// Early depth testing forced: the id-depth test (only this pass's pixels) must reject the
+// foreign pixels before the shader runs, which the storage write in `light_pixel` would
+// otherwise prevent (the shader writes no depth, so the early test decides exactly as the late
+// one would). `micro_shadow_out` is therefore written on mesostructure pixels only.
+#ifdef EARLY_DEPTH_TEST
+@early_depth_test(force)
+#endif
+@fragment
+fn fragment(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    return light_pixel(in.position.xy);
+}
+#endif

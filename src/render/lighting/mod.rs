@@ -6,10 +6,15 @@
 //! ([`MESOSTRUCTURE_LIGHTING_PASS_ID`], see [`crate::material`]), so Bevy's lighting pass skips
 //! their pixels and this one lights exactly those. The pipeline is Bevy's own deferred lighting
 //! pipeline for the view (same shader defs: shadows, SSAO, environment maps, tonemapping) with
-//! our shader and our group 2.
+//! our shader and our group 2. Where the view's main image takes storage writes it runs in its
+//! [`compute`] form instead, after Bevy's deferred lighting.
+
+pub mod compute;
 
 use bevy::{
-    core_pipeline::deferred::copy_lighting_id::DeferredLightingIdDepthTexture,
+    core_pipeline::{
+        deferred::copy_lighting_id::DeferredLightingIdDepthTexture, prepass::ViewPrepassTextures,
+    },
     pbr::{MeshViewBindGroup, ViewKeyCache, deferred::DeferredLightingLayout},
     platform::collections::HashMap,
     prelude::*,
@@ -86,7 +91,9 @@ pub struct LightingPipeline {
     open_horizons: TextureView,
     empty: TextureView,
     no_micro_shadow: TextureView,
-    pipelines: HashMap<bevy::pbr::MeshPipelineKey, CachedRenderPipelineId>,
+    /// The compute form's layouts and pipelines.
+    pub compute: compute::ComputeLighting,
+    pipelines: HashMap<bevy::pbr::MeshPipelineKey, ViewLightingPipeline>,
 }
 
 /// Creates the lighting pipeline resource (render startup).
@@ -96,22 +103,21 @@ pub fn init_lighting_pipeline(
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
 ) {
-    let layout = BindGroupLayoutDescriptor::new(
-        "mesostructure_lighting_layout",
-        &BindGroupLayoutEntries::sequential(
-            ShaderStages::FRAGMENT,
-            (
-                texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_2d(TextureSampleType::Uint),
-                uniform_buffer::<crate::render::view_settings::MesostructureUniform>(true),
-                texture_2d(TextureSampleType::Float { filterable: false }),
-                texture_storage_2d(MICRO_SHADOW_FORMAT, StorageTextureAccess::WriteOnly),
-                texture_2d(TextureSampleType::Float { filterable: false }),
-            ),
+    let entries = BindGroupLayoutEntries::sequential(
+        ShaderStages::FRAGMENT,
+        (
+            texture_2d(TextureSampleType::Float { filterable: false }),
+            texture_2d(TextureSampleType::Float { filterable: false }),
+            texture_2d(TextureSampleType::Float { filterable: false }),
+            texture_2d(TextureSampleType::Uint),
+            uniform_buffer::<crate::render::view_settings::MesostructureUniform>(true),
+            texture_2d(TextureSampleType::Float { filterable: false }),
+            texture_storage_2d(MICRO_SHADOW_FORMAT, StorageTextureAccess::WriteOnly),
+            texture_2d(TextureSampleType::Float { filterable: false }),
         ),
     );
+    let compute = compute::ComputeLighting::new(&device, &entries);
+    let layout = BindGroupLayoutDescriptor::new("mesostructure_lighting_layout", &entries);
     let texel = |label, format, usage, data: &[u8]| {
         super::one_texel(&device, &queue, label, format, usage, data)
     };
@@ -147,13 +153,18 @@ pub fn init_lighting_pipeline(
         open_horizons,
         empty,
         no_micro_shadow,
+        compute,
         pipelines: HashMap::default(),
     });
 }
 
-/// The lighting pipeline of a view.
-#[derive(Component)]
-pub struct ViewLightingPipeline(pub CachedRenderPipelineId);
+/// The lighting pipelines of a view: the raster form, and the compute form where the view's
+/// lighting allows it.
+#[derive(Component, Clone)]
+pub struct ViewLightingPipeline {
+    pub raster: CachedRenderPipelineId,
+    pub compute: Option<compute::ComputeLightingPipeline>,
+}
 
 /// Specializes Bevy's deferred lighting pipeline for each view and swaps in our shader and
 /// group 2.
@@ -173,23 +184,29 @@ pub fn prepare_lighting_pipelines(
     let early_depth_test = device
         .features()
         .contains(WgpuFeatures::SHADER_EARLY_DEPTH_TEST);
-    let lighting = lighting.as_mut();
+    let LightingPipeline {
+        layout,
+        shader,
+        compute,
+        pipelines,
+        ..
+    } = lighting.as_mut();
     for (entity, view) in &views {
         let Some(&key) = view_key_cache.get(&view.retained_view_entity) else {
             continue;
         };
-        let id = *lighting.pipelines.entry(key).or_insert_with(|| {
+        let view_pipelines = pipelines.entry(key).or_insert_with(|| {
             let mut descriptor = deferred.specialize(key);
             descriptor.label = Some("mesostructure_lighting_pipeline".into());
-            descriptor.layout[2] = lighting.layout.clone();
+            descriptor.layout[2] = layout.clone();
             let id_def = ShaderDefVal::UInt(
                 "MESOSTRUCTURE_LIGHTING_PASS_ID".into(),
                 MESOSTRUCTURE_LIGHTING_PASS_ID as u32,
             );
-            descriptor.vertex.shader = lighting.shader.clone();
+            descriptor.vertex.shader = shader.clone();
             descriptor.vertex.shader_defs.push(id_def.clone());
             if let Some(fragment) = descriptor.fragment.as_mut() {
-                fragment.shader = lighting.shader.clone();
+                fragment.shader = shader.clone();
                 fragment.shader_defs.push(id_def);
                 // The fragment stage stores the micro-shadow visibility, and a storage write
                 // turns implicit early depth testing off: without `@early_depth_test(force)`
@@ -199,71 +216,68 @@ pub fn prepare_lighting_pipelines(
                     fragment.shader_defs.push("EARLY_DEPTH_TEST".into());
                 }
             }
-            pipeline_cache.queue_render_pipeline(descriptor)
+            ViewLightingPipeline {
+                compute: compute.pipeline(&pipeline_cache, &descriptor),
+                raster: pipeline_cache.queue_render_pipeline(descriptor),
+            }
         });
-        commands.entity(entity).insert(ViewLightingPipeline(id));
+        commands.entity(entity).insert(view_pipelines.clone());
     }
 }
 
-/// Core3d system, before Bevy's deferred lighting (which discards the id-depth texture):
-/// lights the mesostructure pixels, timed as `mesostructure/lighting`.
-pub fn lighting_pass(
-    view: ViewQuery<(
-        &ExtractedView,
-        &ExtractedMesostructure,
-        &MeshViewBindGroup,
-        &ViewTarget,
-        &DeferredLightingIdDepthTexture,
-        &ViewLightingPipeline,
-        &super::ViewMesostructureUniformOffset,
-        Option<&ViewHeightTextures>,
-        Option<(&ViewOcclusionTextures, &ViewOcclusionBindGroup)>,
-        Option<&ViewMicroShadowTexture>,
-        Option<&super::occlusion::ViewOcclusionPipeline>,
-    )>,
-    phases: Res<ViewSortedRenderPhases<HeightPhaseItem>>,
-    lighting: Res<LightingPipeline>,
-    uniforms: Res<super::MesostructureUniforms>,
-    pipeline_cache: Res<PipelineCache>,
-    occlusion_inputs: (
-        Res<super::gradient::GradientPipeline>,
-        Res<super::apex::ApexPipeline>,
+/// What both forms of the pass read of a view: its settings, its passes' images and what says
+/// whether those passes ran this frame.
+type LightingViewInputs = (
+    &'static ExtractedView,
+    &'static ExtractedMesostructure,
+    &'static super::ViewMesostructureUniformOffset,
+    Option<&'static ViewHeightTextures>,
+    Option<(&'static ViewOcclusionTextures, &'static ViewOcclusionBindGroup)>,
+    Option<&'static ViewMicroShadowTexture>,
+    Option<&'static super::occlusion::ViewOcclusionPipeline>,
+);
+
+/// The render-world resources both forms of the pass read.
+#[derive(bevy::ecs::system::SystemParam)]
+pub struct LightingPassResources<'w> {
+    phases: Res<'w, ViewSortedRenderPhases<HeightPhaseItem>>,
+    lighting: Res<'w, LightingPipeline>,
+    uniforms: Res<'w, super::MesostructureUniforms>,
+    pipeline_cache: Res<'w, PipelineCache>,
+    gradient: Res<'w, super::gradient::GradientPipeline>,
+    apex: Res<'w, super::apex::ApexPipeline>,
+    height_compute: Res<'w, super::height::HeightComputePipeline>,
+}
+
+/// Group 2's first eight bindings for a view (both forms): this frame's images of the passes
+/// before, or the stand-ins where a pass did not run ("open", "no mesostructure here").
+fn group_2_inputs<'a>(
+    r: &'a LightingPassResources,
+    (extracted_view, settings, _, height, occlusion_outputs, micro_shadow, occlusion_pipeline): (
+        &'a ExtractedView,
+        &'a ExtractedMesostructure,
+        &'a super::ViewMesostructureUniformOffset,
+        Option<&'a ViewHeightTextures>,
+        Option<(&'a ViewOcclusionTextures, &'a ViewOcclusionBindGroup)>,
+        Option<&'a ViewMicroShadowTexture>,
+        Option<&'a super::occlusion::ViewOcclusionPipeline>,
     ),
-    height_compute: Res<super::height::HeightComputePipeline>,
-    mut ctx: RenderContext,
-) {
-    let (
-        extracted_view,
-        settings,
-        mesh_view,
-        target,
-        id_depth,
-        pipeline_id,
-        offset,
-        height,
-        occlusion_outputs,
-        micro_shadow,
-        occlusion_pipeline,
-    ) = view.into_inner();
-    let (Some(pipeline), Some(settings_binding)) = (
-        pipeline_cache.get_render_pipeline(pipeline_id.0),
-        uniforms.0.binding(),
-    ) else {
-        return;
-    };
+) -> Option<[BindingResource<'a>; 8]> {
+    let lighting = &r.lighting;
+    let settings_binding = r.uniforms.0.binding()?;
     // The images are only current when their passes ran this frame; otherwise "open" and
     // "no mesostructure here".
-    let height = height
-        .filter(|_| view_has_mesostructure(&phases, extracted_view) && settings.0.needs_height_map());
+    let height = height.filter(|_| {
+        view_has_mesostructure(&r.phases, extracted_view) && settings.0.needs_height_map()
+    });
     // The occlusion image is this frame's only once its pass and the passes it reads have
     // compiled (in the background, over the first frames); until then "open", never the
     // zero-initialised image (a dark flash at start-up).
-    let compiled = |id| pipeline_cache.get_compute_pipeline(id).is_some();
-    let (gradient, apex) = &occlusion_inputs;
+    let compiled = |id| r.pipeline_cache.get_compute_pipeline(id).is_some();
     // (A view without apex sets — too large for the GPU — has no occlusion bind group.)
     let occlusion_ran = occlusion_pipeline.is_some_and(|p| compiled(p.0))
-        && compiled(gradient.pipeline)
-        && (!settings.0.needs_apex_sets() || compiled(apex.pipeline));
+        && compiled(r.gradient.pipeline)
+        && (!settings.0.needs_apex_sets() || compiled(r.apex.pipeline));
     let outputs = occlusion_outputs
         .filter(|_| height.is_some() && occlusion_ran)
         .map(|(textures, _)| textures);
@@ -277,7 +291,7 @@ pub fn lighting_pass(
     };
     // The height pass's compute half (texture-space visibility) compiles in the background
     // too: until it has, "visible".
-    let height_computed = compiled(height_compute.for_settings(&settings.0));
+    let height_computed = compiled(r.height_compute.for_settings(&settings.0));
     let (mhm, core_normal, bump_normal, texture_visibility) = match height {
         Some(h) if height_computed => (
             &h.mhm.default_view,
@@ -288,19 +302,50 @@ pub fn lighting_pass(
         _ => (&lighting.empty, &lighting.empty, &lighting.empty, &lighting.open),
     };
     let micro_shadow = micro_shadow.map_or(&lighting.no_micro_shadow, |t| &t.0.default_view);
+    Some([
+        BindingResource::TextureView(occlusion),
+        BindingResource::TextureView(mhm),
+        BindingResource::TextureView(core_normal),
+        BindingResource::TextureView(sector_horizons),
+        settings_binding,
+        BindingResource::TextureView(bump_normal),
+        BindingResource::TextureView(micro_shadow),
+        BindingResource::TextureView(texture_visibility),
+    ])
+}
+
+/// Core3d system, before Bevy's deferred lighting (which discards the id-depth texture): the
+/// raster form, for views whose lighting does not run as compute this frame; lights the
+/// mesostructure pixels, timed as `mesostructure/lighting`.
+pub fn lighting_pass(
+    view: ViewQuery<
+        (
+            LightingViewInputs,
+            &MeshViewBindGroup,
+            &ViewTarget,
+            &DeferredLightingIdDepthTexture,
+            &ViewLightingPipeline,
+        ),
+        Without<compute::ViewComputeLighting>,
+    >,
+    resources: LightingPassResources,
+    mut ctx: RenderContext,
+) {
+    let (inputs, mesh_view, target, id_depth, pipelines) = view.into_inner();
+    let offset = inputs.2.0;
+    let (Some(pipeline), Some(group_2_entries)) = (
+        resources.pipeline_cache.get_render_pipeline(pipelines.raster),
+        group_2_inputs(&resources, inputs),
+    ) else {
+        return;
+    };
     let group_2 = ctx.render_device().create_bind_group(
         "mesostructure_lighting_bind_group",
-        &pipeline_cache.get_bind_group_layout(&lighting.layout),
-        &BindGroupEntries::sequential((
-            occlusion,
-            mhm,
-            core_normal,
-            sector_horizons,
-            settings_binding,
-            bump_normal,
-            micro_shadow,
-            texture_visibility,
-        )),
+        &resources.pipeline_cache.get_bind_group_layout(&resources.lighting.layout),
+        &BindGroupEntries::sequential({
+            let [a, b, c, d, e, f, g, h] = group_2_entries;
+            (a, b, c, d, e, f, g, h)
+        }),
     );
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
@@ -328,9 +373,72 @@ pub fn lighting_pass(
         pass.set_render_pipeline(pipeline);
         pass.set_bind_group(0, &mesh_view.main, &mesh_view.main_offsets);
         pass.set_bind_group(1, &mesh_view.binding_array, &[]);
-        pass.set_bind_group(2, &group_2, &[offset.0]);
+        pass.set_bind_group(2, &group_2, &[offset]);
         pass.draw(0..3, 0..1);
         span.end(&mut pass);
     }
     ctx.command_encoder().pop_debug_group();
+}
+
+/// Core3d system, after Bevy's deferred lighting (which leaves the pixels of our lighting pass
+/// id as it cleared them): the compute form, for the views that have it this frame; writes the
+/// lit mesostructure pixels into the view's main image, timed as `mesostructure/lighting`.
+pub fn lighting_compute_pass(
+    view: ViewQuery<(
+        LightingViewInputs,
+        &MeshViewBindGroup,
+        &ViewTarget,
+        &ViewPrepassTextures,
+        &ViewLightingPipeline,
+        &compute::ViewComputeLighting,
+    )>,
+    resources: LightingPassResources,
+    mut ctx: RenderContext,
+) {
+    let (inputs, mesh_view, target, prepass, pipelines, groups) = view.into_inner();
+    let offset = inputs.2.0;
+    let (Some(pipeline), Some(pass_ids), Some(group_2_entries)) = (
+        pipelines
+            .compute
+            .as_ref()
+            .and_then(|c| resources.pipeline_cache.get_compute_pipeline(c.id)),
+        prepass.deferred_lighting_pass_id.as_ref(),
+        group_2_inputs(&resources, inputs),
+    ) else {
+        return;
+    };
+    let [a, b, c, d, e, f, g, h] = group_2_entries;
+    let group_2 = ctx.render_device().create_bind_group(
+        "mesostructure_lighting_compute_bind_group",
+        &resources
+            .pipeline_cache
+            .get_bind_group_layout(&resources.lighting.compute.layout),
+        &BindGroupEntries::sequential((
+            a,
+            b,
+            c,
+            d,
+            e,
+            f,
+            g,
+            h,
+            target.main_texture_view(),
+            &pass_ids.texture.default_view,
+        )),
+    );
+    super::dispatch_per_pixel_with(
+        &mut ctx,
+        "mesostructure/lighting",
+        pipeline,
+        &[
+            (&groups.view, &mesh_view.main_offsets),
+            (&groups.empty, &[]),
+            (&group_2, &[offset]),
+        ],
+        {
+            let size = pass_ids.texture.texture.size();
+            UVec2::new(size.width, size.height)
+        },
+        |_| {},
+    );
 }
