@@ -9,7 +9,9 @@
 //!
 //! ```text
 //! cargo run --example translucent_accuracy -- [--medium skin1] [--budgets 250,500,1000,2000]
-//!     [--kernel dipole|burley] [--size 96] [--spp 1024] [--reference FILE.exr]
+//!     [--kernel dipole|burley] [--gather interpolation|photons] [--object-exit-share]
+//!     [--size 96] [--spp 1024]
+//!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
 //! ```
 //!
@@ -37,7 +39,7 @@ use std::{
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     DiffusionKernel, EnergyTransport, PatchLight, PatchObject, PatchSurface, SceneRays,
-    TranslucentPreset, TransportSettings, direct_light, gather::gathered_radiance,
+    GatherMethod, TranslucentPreset, TransportSettings, direct_light, gather::gathered_radiance,
     patches::world_triangles, resample_into_patches,
 };
 
@@ -61,6 +63,14 @@ struct Cli {
     /// Diffusion profile
     #[arg(long, value_enum, default_value_t = Kernel::Burley)]
     kernel: Kernel,
+    /// Scale the transport by random walks in the ball against a slab
+    /// (`TransportSettings::object_exit_share`)
+    #[arg(long)]
+    object_exit_share: bool,
+    /// How the pixels take the patches' light: interpolated radiance (the plugin's default)
+    /// or the seed's photons (density estimation)
+    #[arg(long, value_enum, default_value_t = Gather::Interpolation)]
+    gather: Gather,
     /// The direction the light travels, x,y,z (default -1,-0.2,-0.3: from the right, a
     /// little above and in front; 0.4,-0.2,1 lights the ball from behind)
     #[arg(long, value_parser = parse_direction, allow_negative_numbers = true)]
@@ -95,6 +105,12 @@ enum Medium {
     Marble,
     Ketchup,
     Apple,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum, Debug)]
+enum Gather {
+    Interpolation,
+    Photons,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum, Debug)]
@@ -233,13 +249,19 @@ fn main() {
             Kernel::Dipole => DiffusionKernel::Dipole,
             Kernel::Burley => DiffusionKernel::Burley,
         },
+        object_exit_share: cli.object_exit_share,
         ..default()
     };
     let lights = [PatchLight::Directional {
         direction: light,
         illuminance: Vec3::ONE,
     }];
-    let method = format!("patches_{:?}", cli.kernel).to_lowercase();
+    let (gather, gather_name) = match cli.gather {
+        Gather::Interpolation => (GatherMethod::Interpolation, ""),
+        Gather::Photons => (GatherMethod::PhotonDensity, "_photons"),
+    };
+    let walks = if cli.object_exit_share { "_walks" } else { "" };
+    let method = format!("patches_{:?}{gather_name}{walks}", cli.kernel).to_lowercase();
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
     for &budget in &cli.budgets {
@@ -261,6 +283,7 @@ fn main() {
                 };
                 let i = (y * size + x) as usize;
                 let radiance = gathered_radiance(
+                    gather,
                     &patches,
                     &albedo,
                     &direct.irradiance,

@@ -16,7 +16,7 @@ use super::{
     transport::{EnergyTransport, PatchSurface, SparseMatrix, TransportReport, TransportSettings},
 };
 
-const MAGIC: &[u8; 8] = b"BMSTRN01";
+const MAGIC: &[u8; 8] = b"BMSTRN02";
 
 /// FNV-1a, 64 bits: the cache's key and the plugin's change signatures.
 #[derive(Clone, Copy)]
@@ -55,6 +55,7 @@ pub fn scene_key(
             settings.form_factor_cutoff,
             settings.far_field_ratio,
             settings.cluster_size as f32,
+            settings.object_exit_share as u32 as f32,
         ]);
     for (positions, indices, surface) in objects {
         h = h.f32s(positions.iter().flat_map(|p| p.to_array()));
@@ -230,6 +231,9 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
                 r.diffusion_kept_mean.y,
                 r.diffusion_kept_mean.z,
                 r.seconds,
+                r.object_exit_over_slab_mean.x,
+                r.object_exit_over_slab_mean.y,
+                r.object_exit_over_slab_mean.z,
             ]
             .into_iter(),
         )?;
@@ -311,7 +315,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
     let areas = r.f32s()?;
     let counts = r.u32s()?;
     let figures = r.f32s()?;
-    if single_scattering.len() != n || areas.len() != n || counts.len() != 4 || figures.len() != 6 {
+    if single_scattering.len() != n || areas.len() != n || counts.len() != 4 || figures.len() != 9 {
         return Err(invalid("transport vectors"));
     }
     let patches = Patches {
@@ -345,6 +349,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
             dropped_form_factor_max: figures[1],
             diffusion_kept_mean: Vec3::new(figures[2], figures[3], figures[4]),
             seconds: figures[5],
+            object_exit_over_slab_mean: Vec3::new(figures[6], figures[7], figures[8]),
         },
     };
     Ok((patches, transport))

@@ -28,6 +28,7 @@ mod lights;
 pub mod medium;
 pub mod patches;
 mod plugin;
+pub mod random_walk;
 pub mod transport;
 
 use bevy::{
@@ -45,7 +46,7 @@ use bevy::{
 
 pub use gather::TranslucencyCamera;
 pub use plugin::{
-    MAX_PATCH_BUDGET, RadiosityReceiver, TranslucencyFrame, TranslucencyScene,
+    GatherMethod, MAX_PATCH_BUDGET, RadiosityReceiver, TranslucencyFrame, TranslucencyScene,
     TranslucencySettings, TranslucencyStatus, Translucent, TranslucentMaterials,
     precompute_elapsed, translucent_patch_cap,
 };
@@ -82,6 +83,11 @@ impl Plugin for TranslucencyPlugin {
                 )
                     .chain()
                     .after(TransformSystems::Propagate),
+            )
+            // The gather's compute form writes the main images itself.
+            .add_systems(
+                PostUpdate,
+                crate::render::request_storage_main_textures::<TranslucencyCamera>,
             );
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
             return;

@@ -70,6 +70,27 @@ pub struct TranslucencySettings {
     /// keyed by everything the transport depends on; `None` (the default) keeps nothing on
     /// disk.
     pub cache_dir: Option<std::path::PathBuf>,
+    /// How the patches' light reaches the pixels (changing it rebuilds nothing).
+    pub gather: GatherMethod,
+}
+
+/// How each pixel takes the light of the patches about it (seed 001's last step); both look
+/// at the patches within 1.5 of their own object's patch sizes whose normals agree with the
+/// pixel's (`smoothstep(0.3, 0.9, n·nᵢ)`). Measured against each other in
+/// `docs/translucent.md`.
+#[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum GatherMethod {
+    /// Interpolates the patches' outgoing radiance `Lᵢ = (Bᵢ − ρᵢE⁰ᵢ)/π`:
+    /// `Σ wᵢ Lᵢ / Σ wᵢ`, `wᵢ = (1 − d²/R²)²` times the normal agreement. Keeps a uniformly lit
+    /// surface uniform at any patch spacing.
+    #[default]
+    Interpolation,
+    /// The seed's photons: each patch's outgoing power `Φᵢ = (Bᵢ − ρᵢE⁰ᵢ) Aᵢ` at its centre,
+    /// gathered by a kernel of unit integral over the surface, `M(x) = Σ Φᵢ K(dᵢ)`,
+    /// `K(d) = 3/(πR²) (1 − d²/R²)²` (times the normal agreement), and `L = M/π`: density
+    /// estimation, which conserves the power the patches give off but ripples with their
+    /// spacing and darkens where the patches end.
+    PhotonDensity,
 }
 
 impl Default for TranslucencySettings {
@@ -82,6 +103,7 @@ impl Default for TranslucencySettings {
             max_iterations: 32,
             transport: TransportSettings::default(),
             cache_dir: None,
+            gather: GatherMethod::default(),
         }
     }
 }

@@ -1,10 +1,14 @@
-// Seed 001's last step, by per-pixel interpolation of the patches' outgoing radiance: each
-// pixel (world position from the depth prepass, normal from the normal prepass) gathers the
-// patches within their reach R (1.5 of their object's patch size) about it through a hashed grid, weighted by distance,
-// (1 − d²/R²)², and by how far their normals agree with its own; translucent patches give
-// their whole exitance B/π (their mesh's material has no diffuse), opaque patches the light
-// they bounce, (B − ρE⁰)/π = ρ(E − E⁰)/π (their direct light is Bevy's). Added to the lit
-// view (additive blending), times the view's exposure as Bevy's lighting is.
+// Seed 001's last step: each pixel (world position from the depth prepass, normal from the
+// normal prepass) gathers the patches within their reach R (1.5 of their object's patch size)
+// about it through a hashed grid, weighted by distance, (1 − d²/R²)², and by how far their
+// normals agree with its own — interpolating their outgoing radiance (the default), or, with
+// PHOTON_DENSITY, summing their power as photons under a kernel of unit integral
+// (`GatherMethod`). Translucent patches give their whole exitance B/π (their mesh's material
+// has no diffuse), opaque patches the light they bounce, (B − ρE⁰)/π = ρ(E − E⁰)/π (their
+// direct light is Bevy's). Added to the lit view, times the view's exposure as Bevy's
+// lighting is: by additive blending (`gather`, a fullscreen fragment pass), or, where the
+// view's main images take storage writes, by a compute pass writing lit + gathered into the
+// view's other main image (`gather_compute`).
 
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_render::view::View
@@ -20,7 +24,9 @@ struct GatherParams {
 }
 
 struct GatherPatch {
+    // (surface point, reach R)
     centre: vec4<f32>,
+    // (normal, area)
     normal: vec4<f32>,
     albedo: vec4<f32>,
 }
@@ -39,14 +45,14 @@ fn bucket(cell: vec3<i32>, mask: u32) -> u32 {
     return ((c.x * 73856093u) ^ (c.y * 19349663u) ^ (c.z * 83492791u)) & mask;
 }
 
-@fragment
-fn gather(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    let p = vec2<i32>(floor(in.position.xy));
+// The light the patches give the pixel `p` (centre `position`), times the exposure; `w` = 0
+// where no patch reaches it (or nothing was drawn there).
+fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
     let depth = textureLoad(depth_prepass, p, 0);
     if depth <= 0.0 {
-        discard;
+        return vec4(0.0);
     }
-    let uv = (in.position.xy - view.viewport.xy) / view.viewport.zw;
+    let uv = (position - view.viewport.xy) / view.viewport.zw;
     let ndc = vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
     let world = view.world_from_clip * ndc;
     let x = world.xyz / world.w;
@@ -78,7 +84,13 @@ fn gather(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
                         }
                         let agree = smoothstep(0.3, 0.9, dot(n, record.normal.xyz));
                         let falloff = 1.0 - d2 / r2;
+#ifdef PHOTON_DENSITY
+                        // The seed's photons: power Φ = M·A under a kernel of unit integral,
+                        // K(d) = 3/(πR²)(1 − d²/R²)² (`GatherMethod::PhotonDensity`).
+                        let w = falloff * falloff * agree * 3.0 / (3.14159265358979 * r2) * record.normal.w;
+#else
                         let w = falloff * falloff * agree;
+#endif
                         if w <= 0.0 {
                             continue;
                         }
@@ -92,7 +104,38 @@ fn gather(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         }
     }
     if weights <= 0.0 {
+        return vec4(0.0);
+    }
+#ifdef PHOTON_DENSITY
+    return vec4(sum * view.exposure, 1.0);
+#else
+    return vec4(sum / weights * view.exposure, 1.0);
+#endif
+}
+
+#ifdef COMPUTE_GATHER
+// The lit image and the image written (Bevy's post-process ping-pong): every pixel is copied,
+// with the gathered light added where there is some; alpha kept.
+@group(0) @binding(7) var lit: texture_2d<f32>;
+@group(0) @binding(8) var lit_out: texture_storage_2d<rgba16float, write>;
+
+@compute @workgroup_size(8, 8, 1)
+fn gather_compute(@builtin(global_invocation_id) id: vec3<u32>) {
+    if any(id.xy >= textureDimensions(lit)) {
+        return;
+    }
+    let p = vec2<i32>(id.xy);
+    let colour = textureLoad(lit, p, 0);
+    let added = gathered(p, vec2<f32>(id.xy) + 0.5);
+    textureStore(lit_out, p, vec4(colour.rgb + added.rgb, colour.a));
+}
+#else
+@fragment
+fn gather(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    let added = gathered(vec2<i32>(floor(in.position.xy)), in.position.xy);
+    if added.w == 0.0 {
         discard;
     }
-    return vec4(sum / weights * view.exposure, 0.0);
+    return vec4(added.rgb, 0.0);
 }
+#endif

@@ -18,7 +18,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{
     iteration::{GpuTransport, IterationLimits},
-    plugin::{TranslucencyFrame, TranslucencyScene},
+    plugin::{GatherMethod, TranslucencyFrame, TranslucencyScene},
 };
 
 /// Some patches in a hashed grid of cells as wide as their widest reach: a pixel looks in
@@ -102,11 +102,14 @@ impl PatchGrid {
 /// The most grids the gather looks in.
 pub const MAX_GRID_LEVELS: usize = 8;
 
-/// The radiance the gather gives a point `x` with normal `n` (before the view's exposure):
-/// the patches within `radius`, weighted by `(1 − d²/R²)²` and by `smoothstep(0.3, 0.9, n·n_i)`,
-/// each giving `(B_i − ρ_i E⁰_i) / π`; `None` where no patch is near. The CPU twin of
-/// `gather.wgsl` (brute force instead of the hashed grid), the oracle of its tests.
+/// The radiance the gather gives a point `x` with normal `n` (before the view's exposure) by
+/// `method` ([`GatherMethod`]): the patches within their reach `R`, weighted by
+/// `(1 − d²/R²)²` and by `smoothstep(0.3, 0.9, n·n_i)`, each giving `(B_i − ρ_i E⁰_i) / π` —
+/// interpolated, or as photons of that exitance times the patch's area under a kernel of
+/// unit integral; `None` where no patch is near. The CPU twin of `gather.wgsl` (brute force
+/// instead of the hashed grid), the oracle of its tests.
 pub fn gathered_radiance(
+    method: GatherMethod,
     patches: &super::patches::Patches,
     albedo: &[Vec3],
     direct: &[Vec3],
@@ -123,13 +126,20 @@ pub fn gathered_radiance(
             continue;
         }
         let t = ((n.dot(p.normal) - 0.3) / 0.6).clamp(0.0, 1.0);
-        let w = (1.0 - d2 / r2).powi(2) * t * t * (3.0 - 2.0 * t);
+        let mut w = (1.0 - d2 / r2).powi(2) * t * t * (3.0 - 2.0 * t);
         if w > 0.0 {
+            if method == GatherMethod::PhotonDensity {
+                // K(d) = 3/(πR²)(1 − d²/R²)², times the photon's area: Φ = M·A.
+                w *= 3.0 / (std::f32::consts::PI * r2) * p.area;
+            }
             sum += w * (exitance[i] - albedo[i] * direct[i]).max(Vec3::ZERO) / std::f32::consts::PI;
             weights += w;
         }
     }
-    (weights > 0.0).then(|| sum / weights)
+    (weights > 0.0).then(|| match method {
+        GatherMethod::Interpolation => sum / weights,
+        GatherMethod::PhotonDensity => sum,
+    })
 }
 
 /// `GatherParams` in `gather.wgsl`.
@@ -213,7 +223,7 @@ fn gather_buffers(
                 p.normal.x,
                 p.normal.y,
                 p.normal.z,
-                0.0,
+                p.area,
                 a.x,
                 a.y,
                 a.z,
@@ -297,10 +307,16 @@ pub fn translucency_iteration_pass(
 )]
 pub struct TranslucencyCamera;
 
-/// The gather's bind group layout and shader, specialised per view target format.
+/// The gather's bind group layouts and shader: the fragment form specialised per view target
+/// format; the compute form, for views whose main images take storage writes.
 #[derive(Resource)]
 pub struct GatherPipeline {
     layout: BindGroupLayoutDescriptor,
+    /// The fragment form's bindings visible to compute, then the lit image and the image
+    /// written.
+    compute_layout: BindGroupLayoutDescriptor,
+    /// The compute form, by gather method ([`GatherMethod`] as index).
+    compute: [CachedComputePipelineId; 2],
     fullscreen: FullscreenShader,
     shader: Handle<Shader>,
 }
@@ -310,11 +326,11 @@ pub fn init_gather_pipeline(
     mut commands: Commands,
     asset_server: Res<AssetServer>,
     fullscreen: Res<FullscreenShader>,
+    pipeline_cache: Res<PipelineCache>,
 ) {
-    let layout = BindGroupLayoutDescriptor::new(
-        "translucency_gather_layout",
-        &BindGroupLayoutEntries::sequential(
-            ShaderStages::FRAGMENT,
+    let inputs = |stages| {
+        BindGroupLayoutEntries::sequential(
+            stages,
             (
                 uniform_buffer::<ViewUniform>(true),
                 texture_depth_2d(),
@@ -324,28 +340,72 @@ pub fn init_gather_pipeline(
                 storage_buffer_read_only_sized(false, None),
                 storage_buffer_read_only_sized(false, None),
             ),
-        ),
+        )
+    };
+    let layout = BindGroupLayoutDescriptor::new(
+        "translucency_gather_layout",
+        &inputs(ShaderStages::FRAGMENT),
     );
+    let mut compute_entries = inputs(ShaderStages::COMPUTE).to_vec();
+    compute_entries.extend(BindGroupLayoutEntries::with_indices(
+        ShaderStages::COMPUTE,
+        (
+            (7, texture_2d(TextureSampleType::Float { filterable: false })),
+            (
+                8,
+                texture_storage_2d(
+                    crate::render::VIEW_TARGET_FORMAT,
+                    StorageTextureAccess::WriteOnly,
+                ),
+            ),
+        ),
+    ).iter());
+    let compute_layout =
+        BindGroupLayoutDescriptor::new("translucency_gather_compute_layout", &compute_entries);
+    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "gather.wgsl");
+    let compute = [GatherMethod::Interpolation, GatherMethod::PhotonDensity].map(|method| {
+        let mut shader_defs = vec!["COMPUTE_GATHER".into()];
+        shader_defs.extend(method_def(method));
+        pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
+            label: Some("translucency_gather_compute_pipeline".into()),
+            layout: vec![compute_layout.clone()],
+            shader: shader.clone(),
+            shader_defs,
+            entry_point: Some("gather_compute".into()),
+            ..default()
+        })
+    });
     commands.insert_resource(GatherPipeline {
         layout,
+        compute_layout,
+        compute,
         fullscreen: fullscreen.clone(),
-        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "gather.wgsl"),
+        shader,
     });
 }
 
-impl SpecializedRenderPipeline for GatherPipeline {
-    type Key = TextureFormat;
+/// The shader def of a gather method (none: interpolation).
+fn method_def(method: GatherMethod) -> Option<bevy::shader::ShaderDefVal> {
+    (method == GatherMethod::PhotonDensity).then(|| "PHOTON_DENSITY".into())
+}
 
-    fn specialize(&self, format: TextureFormat) -> RenderPipelineDescriptor {
+impl SpecializedRenderPipeline for GatherPipeline {
+    type Key = (TextureFormat, GatherMethod);
+
+    fn specialize(&self, (format, method): Self::Key) -> RenderPipelineDescriptor {
         // Added to the lit colour; alpha kept.
-        crate::render::additive_fullscreen_pipeline(
+        let mut descriptor = crate::render::additive_fullscreen_pipeline(
             "translucency_gather_pipeline",
             self.layout.clone(),
             &self.fullscreen,
             self.shader.clone(),
             "gather",
             format,
-        )
+        );
+        if let Some(fragment) = descriptor.fragment.as_mut() {
+            fragment.shader_defs.extend(method_def(method));
+        }
+        descriptor
     }
 }
 
@@ -365,6 +425,7 @@ pub(crate) fn prepare_gather_pipelines(
         With<TranslucencyCamera>,
     >,
     mut warned: ResMut<crate::warn_once::WarnedOnce>,
+    frame: Res<TranslucencyFrame>,
 ) {
     for (entity, target, msaa) in &views {
         if msaa.is_some_and(|m| *m != bevy::render::view::Msaa::Off) {
@@ -376,13 +437,15 @@ pub(crate) fn prepare_gather_pipelines(
             commands.entity(entity).remove::<ViewGatherPipeline>();
             continue;
         }
-        let id = pipelines.specialize(&pipeline_cache, &pipeline, target.main_texture_format());
+        let key = (target.main_texture_format(), frame.settings.gather);
+        let id = pipelines.specialize(&pipeline_cache, &pipeline, key);
         commands.entity(entity).insert(ViewGatherPipeline(id));
     }
 }
 
 /// Core3d system between the opaque and transparent passes: adds the patches' light to the
-/// view, timed as `translucency/gather`.
+/// view, timed as `translucency/gather` — as compute where the view's main images take
+/// storage writes (and its pipeline has compiled), else as a fullscreen fragment pass.
 pub fn translucency_gather_pass(
     view: ViewQuery<(
         &ViewTarget,
@@ -391,6 +454,7 @@ pub fn translucency_gather_pass(
         &ViewGatherPipeline,
     )>,
     gpu: Res<TranslucencyGpu>,
+    frame: Res<TranslucencyFrame>,
     pipeline: Res<GatherPipeline>,
     pipeline_cache: Res<PipelineCache>,
     view_uniforms: Res<ViewUniforms>,
@@ -404,8 +468,7 @@ pub fn translucency_gather_pass(
     if gpu.direct_generation == 0 {
         return;
     }
-    let (Some(render_pipeline), Some(view_binding), Some(depth), Some(normal)) = (
-        pipeline_cache.get_render_pipeline(gather.0),
+    let (Some(view_binding), Some(depth), Some(normal)) = (
         view_uniforms.uniforms.binding(),
         prepass.depth_view(),
         prepass.normal_view(),
@@ -414,18 +477,47 @@ pub fn translucency_gather_pass(
     };
     let device = ctx.render_device().clone();
     let (vectors, _) = transport.exitance();
+    let inputs = (
+        view_binding,
+        depth,
+        normal,
+        params.as_entire_binding(),
+        patches.as_entire_binding(),
+        vectors.as_entire_binding(),
+        grid.as_entire_binding(),
+    );
+    if crate::render::composites_in_compute(target)
+        && let Some(compute) =
+            pipeline_cache.get_compute_pipeline(pipeline.compute[frame.settings.gather as usize])
+    {
+        // Bevy's post-process ping-pong: read the lit image, write lit + gathered into the
+        // other main image, which becomes the view's main image.
+        let post = target.post_process_write();
+        let (a, b, c, d, e, f, g) = inputs;
+        let bind_group = device.create_bind_group(
+            "translucency_gather_compute_bind_group",
+            &pipeline_cache.get_bind_group_layout(&pipeline.compute_layout),
+            &BindGroupEntries::sequential((a, b, c, d, e, f, g, post.source, post.destination)),
+        );
+        let size = target.main_texture().size();
+        crate::render::dispatch_per_pixel(
+            &mut ctx,
+            "translucency/gather",
+            compute,
+            &bind_group,
+            &[view_offset.offset],
+            UVec2::new(size.width, size.height),
+            |_| {},
+        );
+        return;
+    }
+    let Some(render_pipeline) = pipeline_cache.get_render_pipeline(gather.0) else {
+        return;
+    };
     let bind_group = device.create_bind_group(
         "translucency_gather_bind_group",
         &pipeline_cache.get_bind_group_layout(&pipeline.layout),
-        &BindGroupEntries::sequential((
-            view_binding,
-            depth,
-            normal,
-            params.as_entire_binding(),
-            patches.as_entire_binding(),
-            vectors.as_entire_binding(),
-            grid.as_entire_binding(),
-        )),
+        &BindGroupEntries::sequential(inputs),
     );
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
