@@ -227,14 +227,14 @@ pub fn prepare_lighting_pipelines(
 
 /// What both forms of the pass read of a view: its settings, its passes' images and what says
 /// whether those passes ran this frame.
-type LightingViewInputs = (
-    &'static ExtractedView,
-    &'static ExtractedMesostructure,
-    &'static super::ViewMesostructureUniformOffset,
-    Option<&'static ViewHeightTextures>,
-    Option<(&'static ViewOcclusionTextures, &'static ViewOcclusionBindGroup)>,
-    Option<&'static ViewMicroShadowTexture>,
-    Option<&'static super::occlusion::ViewOcclusionPipeline>,
+type LightingViewInputs<'a> = (
+    &'a ExtractedView,
+    &'a ExtractedMesostructure,
+    &'a super::ViewMesostructureUniformOffset,
+    Option<&'a ViewHeightTextures>,
+    Option<(&'a ViewOcclusionTextures, &'a ViewOcclusionBindGroup)>,
+    Option<&'a ViewMicroShadowTexture>,
+    Option<&'a super::occlusion::ViewOcclusionPipeline>,
 );
 
 /// The render-world resources both forms of the pass read.
@@ -253,15 +253,7 @@ pub struct LightingPassResources<'w> {
 /// before, or the stand-ins where a pass did not run ("open", "no mesostructure here").
 fn group_2_inputs<'a>(
     r: &'a LightingPassResources,
-    (extracted_view, settings, _, height, occlusion_outputs, micro_shadow, occlusion_pipeline): (
-        &'a ExtractedView,
-        &'a ExtractedMesostructure,
-        &'a super::ViewMesostructureUniformOffset,
-        Option<&'a ViewHeightTextures>,
-        Option<(&'a ViewOcclusionTextures, &'a ViewOcclusionBindGroup)>,
-        Option<&'a ViewMicroShadowTexture>,
-        Option<&'a super::occlusion::ViewOcclusionPipeline>,
-    ),
+    (extracted_view, settings, _, height, occlusion_outputs, micro_shadow, occlusion_pipeline): LightingViewInputs<'a>,
 ) -> Option<[BindingResource<'a>; 8]> {
     let lighting = &r.lighting;
     let settings_binding = r.uniforms.0.binding()?;
@@ -320,7 +312,7 @@ fn group_2_inputs<'a>(
 pub fn lighting_pass(
     view: ViewQuery<
         (
-            LightingViewInputs,
+            LightingViewInputs<'static>,
             &MeshViewBindGroup,
             &ViewTarget,
             &DeferredLightingIdDepthTexture,
@@ -385,7 +377,7 @@ pub fn lighting_pass(
 /// lit mesostructure pixels into the view's main image, timed as `mesostructure/lighting`.
 pub fn lighting_compute_pass(
     view: ViewQuery<(
-        LightingViewInputs,
+        LightingViewInputs<'static>,
         &MeshViewBindGroup,
         &ViewTarget,
         &ViewPrepassTextures,
