@@ -1,4 +1,4 @@
-//! The unseen-content suite in CI (`examples/common/unseen.rs`, included by path): three of its
+//! The unseen-content suite in CI (`examples/common/unseen/`, included by path): three of its
 //! scenes — a photo-derived map seen top-down on the plane, an oblique whole sphere, the top of
 //! a torus ring — rendered small, scored against the ray-cast truth of the displaced mesh.
 //!
@@ -6,7 +6,7 @@
 //! "Unseen content") within a stated margin, in both directions: a change of the method that
 //! moves a score by more than the margin fails here and must update the documented figure.
 
-#[path = "../../examples/common/unseen.rs"]
+#[path = "../../examples/common/unseen/mod.rs"]
 mod suite;
 
 use bevy_mesostructure::prelude::*;
