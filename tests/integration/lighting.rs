@@ -562,8 +562,8 @@ fn lighting_runs_in_compute(app: &mut App) -> bool {
 /// plugin asks for them), and as a fullscreen fragment pass where a camera's usages leave them
 /// out; both give the same picture — to one 8-bit step — with everything Bevy's lighting reads
 /// bound: a shadowed directional, point and spot light, micro-shadows, ambient light, SSAO and
-/// distance fog on the camera. (Not Bevy's contact shadows: their ray march is jittered anew
-/// each frame, so two frames differ — by 7/255 here — whichever form draws them.)
+/// distance fog on the camera. (Not Bevy's contact shadows: their ray march is jittered by
+/// the frame count, so the two forms' frames — taken frames apart — differed by 7/255 with them.)
 #[test]
 fn the_compute_lighting_and_its_raster_fallback_give_the_same_picture() {
     if !gpu_or_skip() {
