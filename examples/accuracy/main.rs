@@ -71,10 +71,6 @@ use bevy::{
     core_pipeline::tonemapping::Tonemapping,
     pbr::ScreenSpaceAmbientOcclusion,
     prelude::*,
-    render::{
-        diagnostic::RenderDiagnosticsPlugin,
-        render_resource::{TextureFormat, TextureUsages},
-    },
 };
 use bevy_mesostructure::{
     CapturedFrame, HorizonSearchBaseline, MesostructureCapture, prelude::*,

@@ -23,15 +23,8 @@ pub(crate) fn render(
     ssao: bool,
     elevation: Option<f32>,
 ) -> (Render, Vec<f32>) {
-    let mut app = App::new();
-    app.add_plugins(common::headless_plugins().disable::<bevy::log::LogPlugin>())
-        .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
-    app.finish();
-    app.cleanup();
+    let (mut app, target) = common::unseen::measuring_app(common::headless_plugins(), size);
     let world = app.world_mut();
-    let mut image = Image::new_target_texture(size, size, TextureFormat::Rgba8UnormSrgb, None);
-    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
-    let target = world.resource_mut::<Assets<Image>>().add(image);
     let mut camera = world.spawn((
         Camera3d::default(),
         RenderTarget::Image(target.clone().into()),

@@ -563,19 +563,22 @@ impl EnergyTransport {
         // What each translucent object's columns give off of what enters it, in all: the
         // slab's W∞, times (`object_exit_share`) what random walks find in the object's own
         // shape over what they find in a slab.
-        let object_totals: Vec<Option<Vec3>> = profiles
+        // Per translucent object: the slab's W∞ of its profile, and the factor its columns
+        // carry beyond it — 1, or (`object_exit_share`) what random walks find leaving the
+        // object's own shape over what leaves a slab.
+        let object_totals: Vec<Option<(Vec3, Vec3)>> = profiles
             .iter()
             .enumerate()
             .map(|(object, profile)| {
                 let (profile, units_per_mm, _) = (*profile)?;
                 let total = profile.total_reflectance();
                 let slab = Vec3::new(total[0] as f32, total[1] as f32, total[2] as f32);
-                if !settings.object_exit_share {
-                    return Some(slab);
-                }
                 let PatchSurface::Translucent { medium, .. } = surfaces[object] else {
-                    return Some(slab);
+                    return Some((slab, Vec3::ONE));
                 };
+                if !settings.object_exit_share {
+                    return Some((slab, Vec3::ONE));
+                }
                 let entries: Vec<_> = (0..n)
                     .filter(|&i| p[i].object as usize == object)
                     .flat_map(|i| patches.samples_of(i))
@@ -585,45 +588,40 @@ impl EnergyTransport {
                         area: s.area,
                     })
                     .collect();
-                let Some((object_share, slab_share)) = super::random_walk::exit_shares(
+                let finite = super::random_walk::exit_shares(
                     &medium,
                     units_per_mm as f32,
                     &entries,
                     rays,
                     super::random_walk::WALKS_PER_CHANNEL,
                     object as u64,
-                ) else {
-                    return Some(slab);
-                };
-                // The profile's W∞ (its own calibration, the dipole's single scattering apart)
-                // times the object's walks over the slab's.
-                let finite = Vec3::select(
-                    slab_share.cmpgt(Vec3::ZERO),
-                    object_share / slab_share.max(Vec3::splat(1e-9)),
-                    Vec3::ONE,
-                );
-                Some(slab * finite)
+                )
+                .map_or(Vec3::ONE, |(object_share, slab_share)| {
+                    Vec3::select(
+                        slab_share.cmpgt(Vec3::ZERO),
+                        object_share / slab_share.max(Vec3::splat(1e-9)),
+                        Vec3::ONE,
+                    )
+                });
+                Some((slab, finite))
             })
             .collect();
         let (mut kept_sum, mut kept_count) = (Vec3::ZERO, 0);
-        let (mut walked_sum, mut walked_count) = (Vec3::ZERO, 0);
+        let mut walked_sum = Vec3::ZERO;
         let mut column_scale = vec![Vec3::ONE; n];
         for (j, pj) in p.iter().enumerate() {
-            if let (Some((profile, ..)), Some(Some(object_total))) = (
+            if let (Some((profile, ..)), Some(&Some((slab, finite)))) = (
                 profiles.get(pj.object as usize).copied().flatten(),
                 object_totals.get(pj.object as usize),
             ) {
-                let slab = profile.total_reflectance();
-                let slab = Vec3::new(slab[0] as f32, slab[1] as f32, slab[2] as f32);
-                walked_sum += *object_total / slab.max(Vec3::splat(1e-30));
-                walked_count += 1;
                 let entering = profile.entrance_transmittance as f32 * pj.area;
                 kept_sum += column_sums[j] / (slab * entering).max(Vec3::splat(1e-30));
+                walked_sum += finite;
                 kept_count += 1;
                 let held = column_sums[j];
                 column_scale[j] = Vec3::select(
                     held.cmpgt(Vec3::ZERO),
-                    *object_total * entering / held.max(Vec3::splat(1e-30)),
+                    slab * finite * entering / held.max(Vec3::splat(1e-30)),
                     Vec3::ONE,
                 );
             }
@@ -664,7 +662,7 @@ impl EnergyTransport {
             dropped_form_factor_mean: dropped.iter().sum::<f32>() / n.max(1) as f32,
             dropped_form_factor_max: dropped.iter().copied().fold(0.0, f32::max),
             diffusion_kept_mean: kept_sum / kept_count.max(1) as f32,
-            object_exit_over_slab_mean: walked_sum / walked_count.max(1) as f32,
+            object_exit_over_slab_mean: walked_sum / kept_count.max(1) as f32,
             seconds: start.elapsed().as_secs_f32(),
         };
         Self {

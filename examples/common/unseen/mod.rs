@@ -236,15 +236,8 @@ pub fn render(
     size: u32,
     to_light: Vec3,
 ) -> Option<(CapturedFrame, f64)> {
-    let mut app = App::new();
-    app.add_plugins(plugins.disable::<bevy::log::LogPlugin>())
-        .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
-    app.finish();
-    app.cleanup();
+    let (mut app, target) = measuring_app(plugins, size);
     let world = app.world_mut();
-    let mut image = Image::new_target_texture(size, size, TextureFormat::Rgba8UnormSrgb, None);
-    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
-    let target = world.resource_mut::<Assets<Image>>().add(image);
     let forward = (scene.target - scene.eye).normalize();
     let up = if forward.cross(Vec3::Y).length() < 1e-3 { Vec3::NEG_Z } else { Vec3::Y };
     let camera = world
@@ -302,6 +295,21 @@ pub fn render(
         .map(|p| median_gpu_ms(&app, &format!("mesostructure/{p}")))
         .sum();
     captured.map(|f| (f, gpu_ms))
+}
+
+/// A headless app with the plugin and GPU time spans (logging off), finished, and a `size`²
+/// sRGB image its camera can render into and be read back from: what each measured render of
+/// the accuracy suites starts from.
+pub fn measuring_app(plugins: bevy::app::PluginGroupBuilder, size: u32) -> (App, Handle<Image>) {
+    let mut app = App::new();
+    app.add_plugins(plugins.disable::<bevy::log::LogPlugin>())
+        .add_plugins((MesostructurePlugin, RenderDiagnosticsPlugin));
+    app.finish();
+    app.cleanup();
+    let mut image = Image::new_target_texture(size, size, TextureFormat::Rgba8UnormSrgb, None);
+    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+    let target = app.world_mut().resource_mut::<Assets<Image>>().add(image);
+    (app, target)
 }
 
 /// The plugin's passes but the lighting pass (which replaces Bevy's own deferred lighting for

@@ -249,12 +249,24 @@ pub struct LightingPassResources<'w> {
     height_compute: Res<'w, super::height::HeightComputePipeline>,
 }
 
+/// Group 2's first eight bindings, in order.
+type Group2Inputs<'a> = (
+    &'a TextureView,
+    &'a TextureView,
+    &'a TextureView,
+    &'a TextureView,
+    BindingResource<'a>,
+    &'a TextureView,
+    &'a TextureView,
+    &'a TextureView,
+);
+
 /// Group 2's first eight bindings for a view (both forms): this frame's images of the passes
 /// before, or the stand-ins where a pass did not run ("open", "no mesostructure here").
 fn group_2_inputs<'a>(
     r: &'a LightingPassResources,
     (extracted_view, settings, _, height, occlusion_outputs, micro_shadow, occlusion_pipeline): LightingViewInputs<'a>,
-) -> Option<[BindingResource<'a>; 8]> {
+) -> Option<Group2Inputs<'a>> {
     let lighting = &r.lighting;
     let settings_binding = r.uniforms.0.binding()?;
     // The images are only current when their passes ran this frame; otherwise "open" and
@@ -294,16 +306,16 @@ fn group_2_inputs<'a>(
         _ => (&lighting.empty, &lighting.empty, &lighting.empty, &lighting.open),
     };
     let micro_shadow = micro_shadow.map_or(&lighting.no_micro_shadow, |t| &t.0.default_view);
-    Some([
-        BindingResource::TextureView(occlusion),
-        BindingResource::TextureView(mhm),
-        BindingResource::TextureView(core_normal),
-        BindingResource::TextureView(sector_horizons),
+    Some((
+        occlusion,
+        mhm,
+        core_normal,
+        sector_horizons,
         settings_binding,
-        BindingResource::TextureView(bump_normal),
-        BindingResource::TextureView(micro_shadow),
-        BindingResource::TextureView(texture_visibility),
-    ])
+        bump_normal,
+        micro_shadow,
+        texture_visibility,
+    ))
 }
 
 /// Core3d system, before Bevy's deferred lighting (which discards the id-depth texture): the
@@ -334,10 +346,7 @@ pub fn lighting_pass(
     let group_2 = ctx.render_device().create_bind_group(
         "mesostructure_lighting_bind_group",
         &resources.pipeline_cache.get_bind_group_layout(&resources.lighting.layout),
-        &BindGroupEntries::sequential({
-            let [a, b, c, d, e, f, g, h] = group_2_entries;
-            (a, b, c, d, e, f, g, h)
-        }),
+        &BindGroupEntries::sequential(group_2_entries),
     );
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
@@ -399,7 +408,7 @@ pub fn lighting_compute_pass(
     ) else {
         return;
     };
-    let [a, b, c, d, e, f, g, h] = group_2_entries;
+    let (a, b, c, d, e, f, g, h) = group_2_entries;
     let group_2 = ctx.render_device().create_bind_group(
         "mesostructure_lighting_compute_bind_group",
         &resources
