@@ -4,7 +4,7 @@
 //! iterated to convergence. One CSV row per budget.
 //!
 //! ```text
-//! cargo run --example translucent_precompute -- [--budgets 1000,5000] [--kernel dipole|burley]
+//! cargo run --example translucent_precompute -- [--budgets 1000,5000] [--kernel scaled-dipole|burley|dipole]
 //!     [--cutoff 1e-5] [--out docs/translucent-precompute.csv]
 //! ```
 //!
@@ -42,7 +42,7 @@ struct Cli {
           value_parser = clap::value_parser!(u32).range(1..=200_000))]
     budgets: Vec<u32>,
     /// Diffusion profile
-    #[arg(long, value_enum, default_value_t = Kernel::Burley)]
+    #[arg(long, value_enum, default_value_t = Kernel::ScaledDipole)]
     kernel: Kernel,
     /// Form factors below this are dropped (before visibility)
     #[arg(long, default_value_t = 1e-5)]
@@ -59,6 +59,7 @@ struct Cli {
 enum Kernel {
     Dipole,
     Burley,
+    ScaledDipole,
 }
 
 fn main() {
@@ -74,6 +75,7 @@ fn main() {
         kernel: match cli.kernel {
             Kernel::Dipole => DiffusionKernel::Dipole,
             Kernel::Burley => DiffusionKernel::Burley,
+            Kernel::ScaledDipole => DiffusionKernel::ScaledDipole,
         },
         form_factor_cutoff: cli.cutoff,
         ..default()

@@ -340,6 +340,8 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
         },
         single_scattering,
         areas,
+        // Per frame only, from the surfaces the loader has (`incidence_weights`).
+        incidence: Vec::new(),
         report: TransportReport {
             form_factor_entries: counts[0] as usize,
             clusters: counts[1] as usize,

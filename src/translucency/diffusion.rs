@@ -27,7 +27,9 @@
 //!
 //! Light enters through the boundary with the hemispherical transmittance `1 − F_dr,ext(η)`,
 //! integrated from Fresnel's equations ([`diffuse_fresnel_reflectance`]): every light the
-//! transport sees arrives as irradiance, whose directional form the patches do not keep.
+//! transport sees arrives as irradiance, whose directional form the patches do not keep —
+//! except a light's own beam, which [`IncidenceWeight`] weights by its incidence
+//! (Chandrasekhar's plane albedo, [`collimated_albedo`]).
 
 use bevy::prelude::*;
 use std::f64::consts::PI;
@@ -40,11 +42,19 @@ pub enum DiffusionKernel {
     /// Jensen et al. 2001's dipole with its single-scattering term, as seed 001 uses it.
     Dipole,
     /// Christensen and Burley 2015's sum of two exponentials with the albedo of Chiang et al.
-    /// 2016's Monte Carlo fit. The default: against a path tracer (`docs/translucent.md`) its
-    /// pictures are 0.13 (marble) and 0.16 (skin) off in relative L1 where the dipole's are
-    /// 0.28 and 0.18 — the dipole gives marble 1.2× the light and skin's blue 1.35×.
-    #[default]
+    /// 2016's Monte Carlo fit. Close to [`ScaledDipole`](Self::ScaledDipole) lit from the
+    /// front (relative L1 0.051 marble, 0.089 skin against a light-traced reference), but its
+    /// tail falls as `e^(−s r/3)`, `s` up to 16 σtr for marble: light does not cross a thick
+    /// object (lit from behind: 0.93 marble, 0.75 skin; `docs/translucent.md`).
     Burley,
+    /// Jensen's dipole shape (its diffusion tail, `e^(−σtr r)` far from the entry) carrying
+    /// Chiang et al.'s albedo `A` in all, single scattering included: Burley's total with the
+    /// reach of diffusion theory. The default: against a light-traced reference of a 1 cm
+    /// ball (960 patches, the other defaults; `docs/translucent.md`) 0.045 (marble) and 0.076
+    /// (skin) in relative L1 lit from the front, where Burley's are 0.051 and 0.089 and the
+    /// dipole's 0.18; lit from behind 0.28 and 0.61, where Burley's are 0.93 and 0.75.
+    #[default]
+    ScaledDipole,
 }
 
 /// One colour channel's profile.
@@ -192,6 +202,88 @@ pub fn diffuse_single_scattering_shape() -> f64 {
     4.0 / 3.0 * (1.0 - std::f64::consts::LN_2)
 }
 
+/// Chandrasekhar's `H(μ)` for isotropic scattering of single-scattering albedo `alpha`, in
+/// Hapke's (2002) closed form `1 / (1 − α μ (r₀ + (1 − 2 r₀ μ)/2 · ln((1 + μ)/μ)))`,
+/// `r₀ = (1 − γ)/(1 + γ)`, `γ = √(1 − α)`: within 1 % of the integral equation's solution
+/// (tested).
+pub fn chandrasekhar_h(alpha: f64, mu: f64) -> f64 {
+    let alpha = alpha.clamp(0.0, 1.0);
+    let mu = mu.clamp(1e-9, 1.0);
+    let gamma = (1.0 - alpha).sqrt();
+    let r0 = (1.0 - gamma) / (1.0 + gamma);
+    1.0 / (1.0 - alpha * mu * (r0 + 0.5 * (1.0 - 2.0 * r0 * mu) * ((1.0 + mu) / mu).ln()))
+}
+
+/// The share of a collimated beam at incidence cosine `mu` that a semi-infinite,
+/// index-matched medium of isotropic single-scattering albedo `alpha` gives back, every order
+/// of scattering: Chandrasekhar's plane albedo `1 − H(μ) √(1 − α)`. Under diffuse light its
+/// cosine-weighted mean is the medium's diffuse albedo — the `A` Chiang et al.'s fit gives
+/// Burley's profile (they agree to 0.003, tested) — while a grazing beam comes back up to
+/// 1.9× as strongly as a normal one (skin's blue: 0.37 at μ = 0.1 against 0.20 at μ = 1).
+pub fn collimated_albedo(alpha: f64, mu: f64) -> f64 {
+    1.0 - chandrasekhar_h(alpha, mu) * (1.0 - alpha.clamp(0.0, 1.0)).sqrt()
+}
+
+/// Gauss–Legendre nodes and weights of 8 points on [0, 1].
+const GAUSS_8: [(f64, f64); 8] = [
+    (0.019855071751231912, 0.05061426814518853),
+    (0.10166676129318664, 0.11119051722668721),
+    (0.2372337950418355, 0.15685332293894344),
+    (0.4082826787521751, 0.18134189168918083),
+    (0.5917173212478248, 0.18134189168918083),
+    (0.7627662049581645, 0.15685332293894344),
+    (0.8983332387068134, 0.11119051722668721),
+    (0.9801449282487681, 0.05061426814518853),
+];
+
+/// How much of a beam a translucent surface takes in and gives back at the beam's own
+/// incidence, relative to diffuse light of the same irradiance: the patches' scattering `K`
+/// holds the diffuse albedo, and a directional light's irradiance on a translucent patch is
+/// weighted by this. `T(μ) r(μ_t) / (2 ∫₀¹ T(μ′) r(μ′_t) μ′ dμ′)` per channel, with `r` the
+/// [`collimated_albedo`], `T` the Fresnel transmittance into index `η` and `μ_t` the refracted
+/// cosine; exact for a flat index-matched surface (`η = 1`), an estimate otherwise (light
+/// reflected back inside is not followed). Its diffuse mean is 1, so diffuse light is unchanged.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IncidenceWeight {
+    alpha: [f64; 3],
+    eta: f64,
+    diffuse_mean: [f64; 3],
+}
+
+impl IncidenceWeight {
+    /// The weight of a medium with single-scattering albedos `alpha` (`g = 0`) and index `eta`.
+    pub fn new(alpha: [f64; 3], eta: f64) -> Self {
+        let mut weight = Self {
+            alpha,
+            eta: if eta.is_finite() && eta > 0.0 { eta } else { 1.0 },
+            diffuse_mean: [1.0; 3],
+        };
+        let mut mean = [0.0; 3];
+        for (mu, w) in GAUSS_8 {
+            let taken = weight.unnormalised(mu);
+            for c in 0..3 {
+                mean[c] += 2.0 * w * mu * taken[c];
+            }
+        }
+        weight.diffuse_mean = mean.map(|m| if m > 0.0 { m } else { 1.0 });
+        weight
+    }
+
+    fn unnormalised(&self, cos_i: f64) -> [f64; 3] {
+        let cos_i = cos_i.clamp(0.0, 1.0);
+        let sin_t2 = (1.0 - cos_i * cos_i) / (self.eta * self.eta);
+        let cos_t = (1.0 - sin_t2).max(0.0).sqrt();
+        let transmitted = 1.0 - fresnel_reflectance(cos_i, self.eta);
+        self.alpha.map(|a| transmitted * collimated_albedo(a, cos_t))
+    }
+
+    /// The weight per channel for a beam at incidence cosine `cos_i`.
+    pub fn at(&self, cos_i: f64) -> [f64; 3] {
+        let taken = self.unnormalised(cos_i);
+        std::array::from_fn(|c| taken[c] / self.diffuse_mean[c])
+    }
+}
+
 /// A medium's diffusion profile per RGB channel, distances in mm.
 #[derive(Clone, Copy, Debug)]
 pub struct DiffusionProfile {
@@ -223,6 +315,19 @@ impl DiffusionProfile {
             };
             match kernel {
                 DiffusionKernel::Dipole => dipole,
+                DiffusionKernel::ScaledDipole => {
+                    let Channel::Dipole { half_albedo, sigma_tr, z_real, z_virtual } = dipole else {
+                        unreachable!()
+                    };
+                    let total = dipole.total();
+                    let albedo = surface_albedo(alpha);
+                    Channel::Dipole {
+                        half_albedo: if total > 0.0 { half_albedo * albedo / total } else { 0.0 },
+                        sigma_tr,
+                        z_real,
+                        z_virtual,
+                    }
+                }
                 DiffusionKernel::Burley => {
                     let albedo = surface_albedo(alpha);
                     // d = ℓ_d / s with ℓ_d = 1/σtr, the diffuse mean free path (σtr ≥ 1e-6 σt′
@@ -247,7 +352,7 @@ impl DiffusionProfile {
                     );
                     s / (a + s)
                 }
-                DiffusionKernel::Burley => 0.0,
+                DiffusionKernel::Burley | DiffusionKernel::ScaledDipole => 0.0,
             }),
         }
     }

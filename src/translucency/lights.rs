@@ -13,7 +13,8 @@ use crate::volumetric::reference::SpotLight as ReferenceSpot;
 /// The lights' direct contribution to the patches.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct DirectLight {
-    /// Irradiance `E⁰` per patch.
+    /// Irradiance `E⁰` per patch; on translucent patches each light's weighted by its
+    /// incidence where the transport says so ([`EnergyTransport::incidence`]).
     pub irradiance: Vec<Vec3>,
     /// Exitance `S⁰` per patch besides `K E⁰` (may be empty: none): on translucent patches,
     /// the single scattering of each beam at its own incidence less the diffuse mean `K`
@@ -80,6 +81,10 @@ pub fn direct_light(
             .and_then(|t| t.single_scattering.get(i))
             .copied()
             .unwrap_or(Vec3::ZERO);
+        let incidence = transport
+            .and_then(|t| t.incidence.get(p.object as usize))
+            .copied()
+            .flatten();
         let (mut irradiance, mut exitance) = (Vec3::ZERO, Vec3::ZERO);
         for light in lights {
             let (e, to_light) = match *light {
@@ -123,6 +128,15 @@ pub fn direct_light(
                     ),
                     (position - x).normalize_or_zero(),
                 ),
+            };
+            // A beam takes in and gives back by its own incidence, not by the diffuse
+            // albedo `K` holds (Chandrasekhar's plane albedo; `IncidenceWeight`).
+            let e = match incidence {
+                Some(weight) if e != Vec3::ZERO => {
+                    let w = weight.at(p.normal.dot(to_light) as f64);
+                    e * Vec3::new(w[0] as f32, w[1] as f32, w[2] as f32)
+                }
+                _ => e,
             };
             irradiance += e;
             if single != Vec3::ZERO && e != Vec3::ZERO {

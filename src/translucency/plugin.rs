@@ -399,7 +399,7 @@ pub(crate) fn run_precompute(
                     None
                 }
             });
-            let (patches, transport) = cached.unwrap_or_else(|| {
+            let (patches, mut transport) = cached.unwrap_or_else(|| {
                 let caps: Vec<Option<f32>> = surfaces
                     .iter()
                     .map(|s| translucent_patch_cap(s, &transport_settings))
@@ -417,6 +417,7 @@ pub(crate) fn run_precompute(
                 }
                 (patches, transport)
             });
+            transport.incidence = EnergyTransport::incidence_weights(&surfaces, &transport_settings);
             let albedo = patches
                 .patches
                 .iter()

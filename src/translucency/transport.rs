@@ -150,26 +150,39 @@ pub struct TransportSettings {
     pub far_field_ratio: f32,
     /// Scale each translucent object's columns from the semi-infinite slab's total `W∞` by
     /// what random walks find leaves the object's own shape over what leaves a slab
-    /// (`random_walk`; 3 × 4096 walks an object at build time). Off by default: on a 1 cm skin
-    /// ball it brings red from 0.84 to 0.98 of a path tracer's and the relative L1 from 0.134
-    /// to 0.106–0.127, but marble, whose `W∞` was 3 % short, ends 2 % too bright and its L1
-    /// goes from 0.067 to 0.083 (`docs/translucent.md`).
+    /// (`random_walk`; 3 × 4096 walks an object at build time: +0.03–0.2 s for a 1 cm ball).
+    /// On by default: a 1 cm skin ball gives off 1.19× / 1.13× / 1.10× a slab's share, and
+    /// against a light-traced reference the walks take skin from 0.137 to 0.076 and marble
+    /// from 0.073 to 0.045 in relative L1 (`docs/translucent.md`).
     pub object_exit_share: bool,
+    /// Weight the direct light on translucent patches by how much a beam at its own
+    /// incidence takes in and gives back ([`IncidenceWeight`](super::diffusion::IncidenceWeight):
+    /// Chandrasekhar's plane albedo, up to 1.9× at grazing incidence against normal) instead of
+    /// the diffuse albedo `K` holds for every light. On by default: against a light-traced
+    /// reference it takes a 1 cm skin ball lit from the side from 0.112 to 0.076 in relative
+    /// L1 and marble from 0.053 to 0.045 (`docs/translucent.md`). Per frame only; the
+    /// transport is the same. Used with the kernels that carry Chiang et al.'s albedo (the dipole keeps its own
+    /// single-scattering term for a beam's incidence).
+    pub beam_incidence: bool,
 }
 
 impl Default for TransportSettings {
-    /// 99 % of the profile (the tail beyond holds 1 %); form factors down to 1e-5 (a
+    /// 99.9 % of the profile (the tail beyond holds 0.1 %: lit from behind, the light that
+    /// crosses a 2 cm marble ball — 0.55 → 0.28 relative L1 against 99 %, for 1.8× the ball's
+    /// memory, +3 % in the test room's); form factors down to 1e-5 (a
     /// patch of 1/1000 of a room's wall area seen face-on from 5 wall widths away); clusters
-    /// 4 patches wide linked as one beyond 3 radii (see `docs/translucent.md` for what each
-    /// costs and changes).
+    /// 4 patches wide linked as one beyond 3 radii; each object's own random walks and each
+    /// beam's incidence (both measured closer to a light-traced reference; see
+    /// `docs/translucent.md` for what each costs and changes).
     fn default() -> Self {
         Self {
-            kernel: DiffusionKernel::Burley,
-            diffusion_energy_kept: 0.99,
+            kernel: DiffusionKernel::ScaledDipole,
+            diffusion_energy_kept: 0.999,
             form_factor_cutoff: 1e-5,
             cluster_size: 4,
             far_field_ratio: 3.0,
-            object_exit_share: false,
+            object_exit_share: true,
+            beam_incidence: true,
         }
     }
 }
@@ -293,6 +306,10 @@ pub struct EnergyTransport {
     pub single_scattering: Vec<Vec3>,
     /// Patch areas (for energies).
     pub areas: Vec<f32>,
+    /// Per object, the weight of a beam's incidence on a translucent surface (`None`: opaque,
+    /// the dipole kernel, or [`TransportSettings::beam_incidence`] off); see
+    /// [`EnergyTransport::incidence_weights`]. Not kept in the cache: set again on load.
+    pub incidence: Vec<Option<super::diffusion::IncidenceWeight>>,
     /// What was kept and dropped.
     pub report: TransportReport,
 }
@@ -671,8 +688,39 @@ impl EnergyTransport {
             cluster_means,
             single_scattering,
             areas: p.iter().map(|q| q.area).collect(),
+            incidence: Self::incidence_weights(surfaces, settings),
             report,
         }
+    }
+
+    /// Per object, the [`IncidenceWeight`](super::diffusion::IncidenceWeight) of its medium
+    /// where it applies: translucent, valid, a kernel carrying Chiang et al.'s `A` (the diffuse
+    /// albedo; the dipole keeps its own single-scattering term for a beam's incidence), and
+    /// [`TransportSettings::beam_incidence`] on.
+    pub fn incidence_weights(
+        surfaces: &[PatchSurface],
+        settings: &TransportSettings,
+    ) -> Vec<Option<super::diffusion::IncidenceWeight>> {
+        surfaces
+            .iter()
+            .map(|s| match *s {
+                PatchSurface::Translucent { medium, .. }
+                    if settings.beam_incidence
+                        && settings.kernel != DiffusionKernel::Dipole
+                        && medium.invalid_reason().is_none() =>
+                {
+                    let alpha = std::array::from_fn(|c| {
+                        let (a, s) = (medium.absorption[c] as f64, medium.reduced_scattering[c] as f64);
+                        s / (a + s)
+                    });
+                    Some(super::diffusion::IncidenceWeight::new(
+                        alpha,
+                        medium.index_of_refraction as f64,
+                    ))
+                }
+                _ => None,
+            })
+            .collect()
     }
 
     /// Σ A_i (B_i.r + B_i.g + B_i.b): the flux of an exitance vector.

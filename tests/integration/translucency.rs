@@ -341,8 +341,9 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
         "{compared} pixels: mean |GPU − CPU| {mean:.2}/255, worst {worst:.1}/255; {glowing_in_shade} lit pixels in the shade"
     );
     assert!(compared > 500);
-    // Measured 0.22/255 mean and 2.7/255 worst (the mesh's facets against the sphere).
-    assert!(mean <= 1.0 && worst <= 8.0, "mean {mean}, worst {worst}");
+    // Measured 0.24/255 mean and 0.7/255 worst (2.7 worst before the grid walked a bucket
+    // that two cells share once only).
+    assert!(mean <= 1.0 && worst <= 2.0, "mean {mean}, worst {worst}");
     // Light carried under the surface past the terminator, where Bevy's own shading is
     // black: measured 68 pixels at ≥ 3/255.
     assert!(glowing_in_shade >= 34, "{glowing_in_shade}");
@@ -373,10 +374,9 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     eprintln!(
         "photons: {compared} pixels: mean |GPU − CPU| {mean:.2}/255, worst {worst:.1}/255; {glowing_in_shade} lit pixels in the shade"
     );
-    // Measured 0.26/255 mean and 7.9/255 worst: the density estimate follows the distance
-    // to each patch more steeply (1/R² kernel) than the interpolation, so the mesh's facets
-    // against the sphere show more.
-    assert!(mean <= 1.0 && worst <= 12.0, "photons: mean {mean}, worst {worst}");
+    // Measured 0.26/255 mean and 1.2/255 worst (19/255 before the grid walked a bucket
+    // that two cells share once only: the photons there counted twice).
+    assert!(mean <= 1.0 && worst <= 3.0, "photons: mean {mean}, worst {worst}");
     let a = shot.data.as_ref().unwrap();
     let moved = a
         .iter()
@@ -556,16 +556,26 @@ fn a_kept_transport_is_read_back_instead_of_built_again() {
             .scene
             .clone()
             .unwrap();
-        (scene.transport.report.clone(), scene.patches.patches.len())
+        (
+            scene.transport.report.clone(),
+            scene.patches.patches.len(),
+            scene.transport.incidence.clone(),
+        )
     };
-    let (first, patches) = build(&dir);
+    let (first, patches, incidence) = build(&dir);
+    assert!(
+        matches!(incidence[..], [Some(_)]),
+        "the ball's beams weighted by their incidence: {incidence:?}"
+    );
     let files: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
     assert_eq!(files.len(), 1, "one kept transport");
     // A second app with the same scene reads it: the same report, its build time included
     // (a rebuild would measure its own).
-    let (second, patches_again) = build(&dir);
+    let (second, patches_again, incidence_again) = build(&dir);
     assert_eq!(second, first);
     assert_eq!(patches_again, patches);
+    // The incidence weights are not kept in the file: set again from the scene on load.
+    assert_eq!(incidence_again, incidence);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -645,4 +655,68 @@ fn ambient_light_reaches_translucent_objects() {
     // Exitance ≈ A · π L (marble's red A ≈ 0.9) → radiance ≈ 0.9 × 400 × exposure (≈ 1e-3):
     // about 0.36 linear, 160/255 in sRGB; measured 156.
     assert!((130.0..=185.0).contains(&centre), "{centre}");
+}
+
+#[path = "../../examples/common/translucent_ball.rs"]
+mod translucent_ball;
+
+/// The light-traced reference of `medium`'s ball lit from `lighting` (tests/data/translucent,
+/// made by tools/translucent_light_tracer.py with 4·10⁷ photons a channel; its own noise
+/// 0.006–0.032 in relative L1, and Mitsuba's `volpathmis` agrees with it to 0.2 % in the
+/// mean on skin).
+fn light_traced(medium: &str, lighting: &str) -> image::Rgb32FImage {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(format!("tests/data/translucent/{medium}_{lighting}_lighttraced.exr"));
+    image::open(&path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgb32f()
+}
+
+/// The accuracy figure, held: the plugin's picture of a 1 cm ball (960 patches, the
+/// defaults) against a converged light-traced reference, relative L1 over the ball and the
+/// mean ratio per channel, each within 0.01 of what docs/translucent.md gives for it.
+#[test]
+fn translucent_balls_match_a_light_traced_reference_as_documented() {
+    use translucent_ball::{BACK_LIGHT, FRONT_LIGHT, plugin_picture, score};
+    // (medium, lighting, light, relative L1, mean ratio r/g/b): measured.
+    let cases = [
+        (TranslucentPreset::Skin1, "skin1", "front", FRONT_LIGHT, 0.0762, [0.978, 0.985, 0.986]),
+        (TranslucentPreset::Marble, "marble", "front", FRONT_LIGHT, 0.0447, [0.984, 0.976, 0.981]),
+        // Lit from behind the plugin gives too little: at an index-matched limb the light goes
+        // straight through the thin edge, which no surface-to-surface profile carries.
+        (TranslucentPreset::Skin1, "skin1", "back", BACK_LIGHT, 0.6119, [0.400, 0.254, 0.254]),
+        (TranslucentPreset::Marble, "marble", "back", BACK_LIGHT, 0.2774, [0.870, 0.733, 0.678]),
+    ];
+    for (preset, name, lighting, light, rel_l1, ratio) in cases {
+        let medium = bevy_mesostructure::translucency::TranslucentMedium {
+            index_of_refraction: 1.0,
+            ..preset.medium()
+        };
+        let picture = plugin_picture(
+            medium,
+            &TransportSettings::default(),
+            bevy_mesostructure::translucency::GatherMethod::Interpolation,
+            1000,
+            light.normalize(),
+            96,
+        );
+        let measured = score(&picture.pixels, &light_traced(name, lighting), 96);
+        eprintln!(
+            "{name} {lighting}: {} patches, relative L1 {:.4}, mean ratio {:.3?}",
+            picture.patches, measured.rel_l1, measured.ratio
+        );
+        assert!(
+            (measured.rel_l1 - rel_l1).abs() < 0.01,
+            "{name} {lighting}: relative L1 {:.4}, documented {rel_l1}",
+            measured.rel_l1
+        );
+        for c in 0..3 {
+            assert!(
+                (measured.ratio[c] - ratio[c]).abs() < 0.01,
+                "{name} {lighting}: channel {c} mean ratio {:.3}, documented {}",
+                measured.ratio[c],
+                ratio[c]
+            );
+        }
+    }
 }
