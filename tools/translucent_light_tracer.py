@@ -39,15 +39,7 @@ import time
 
 import numpy as np
 
-
-def triple(text):
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not three comma-separated numbers")
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"{text!r} is not three comma-separated numbers")
-    return values
+from translucent_scene import add_scene_arguments
 
 
 def normalize(v):
@@ -119,17 +111,10 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--sigma-a", type=triple, required=True, help="absorption per mm, r,g,b")
-    parser.add_argument("--sigma-s", type=triple, required=True, help="scattering per mm (g = 0), r,g,b")
-    parser.add_argument("--radius", type=float, required=True, help="ball radius, metres")
-    parser.add_argument("--eye", type=triple, required=True, help="camera position (looks at the origin, +Y up)")
-    parser.add_argument("--light", type=triple, required=True, help="direction the light travels")
-    parser.add_argument("--fov", type=float, default=45.0, help="vertical field of view, degrees")
-    parser.add_argument("--size", type=int, default=96, help="image width = height, pixels")
+    add_scene_arguments(parser)
     parser.add_argument("--photons", type=int, default=2_000_000, help="photons per channel")
     parser.add_argument("--batch", type=int, default=250_000, help="photons walked at once")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--out", required=True, help="EXR to write")
     args = parser.parse_args()
     if args.radius <= 0 or args.size <= 0 or args.photons < 2 or args.batch <= 0:
         parser.error("--radius, --size and --batch must be positive, --photons at least 2")

@@ -37,30 +37,15 @@ length. Not needed by the crate or its tests.
 import argparse
 import sys
 
-
-def triple(text):
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not three comma-separated numbers")
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"{text!r} is not three comma-separated numbers")
-    return values
+from translucent_scene import add_scene_arguments
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--sigma-a", type=triple, required=True, help="absorption per mm, r,g,b")
-    parser.add_argument("--sigma-s", type=triple, required=True, help="scattering per mm (g = 0), r,g,b")
-    parser.add_argument("--radius", type=float, required=True, help="ball radius, metres")
-    parser.add_argument("--eye", type=triple, required=True, help="camera position (looks at the origin, +Y up)")
-    parser.add_argument("--light", type=triple, required=True, help="direction the light travels")
-    parser.add_argument("--fov", type=float, default=45.0, help="vertical field of view, degrees")
-    parser.add_argument("--size", type=int, default=96, help="image width = height, pixels")
+    add_scene_arguments(parser)
     parser.add_argument("--spp", type=int, default=1024, help="samples per pixel")
     parser.add_argument("--integrator", default="volpathmis", choices=["volpathmis", "volpath"],
                         help="volumetric path tracer (volpath only to reproduce old figures)")
-    parser.add_argument("--out", required=True, help="EXR to write")
     args = parser.parse_args()
     if args.radius <= 0 or args.size <= 0 or args.spp <= 0:
         parser.error("--radius, --size and --spp must be positive")

@@ -1,0 +1,29 @@
+"""The translucency accuracy scene's command-line arguments, shared by the two reference
+renderers (translucent_reference.py: Mitsuba; translucent_light_tracer.py: numpy): a ball of a
+homogeneous medium at the origin, a perspective camera looking at it, one directional light.
+"""
+
+import argparse
+
+
+def triple(text):
+    """Three comma-separated numbers."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not three comma-separated numbers")
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r} is not three comma-separated numbers")
+    return values
+
+
+def add_scene_arguments(parser):
+    """The medium, the ball, the camera, the light and the picture's size."""
+    parser.add_argument("--sigma-a", type=triple, required=True, help="absorption per mm, r,g,b")
+    parser.add_argument("--sigma-s", type=triple, required=True, help="scattering per mm (g = 0), r,g,b")
+    parser.add_argument("--radius", type=float, required=True, help="ball radius, metres")
+    parser.add_argument("--eye", type=triple, required=True, help="camera position (looks at the origin, +Y up)")
+    parser.add_argument("--light", type=triple, required=True, help="direction the light travels")
+    parser.add_argument("--fov", type=float, default=45.0, help="vertical field of view, degrees")
+    parser.add_argument("--size", type=int, default=96, help="image width = height, pixels")
+    parser.add_argument("--out", required=True, help="EXR to write")
