@@ -342,14 +342,12 @@ pub(crate) fn adapt_standard_materials(
     mut events: MessageReader<AssetEvent<StandardMaterial>>,
 ) {
     for event in events.read() {
-        if let AssetEvent::Modified { id } = event {
-            if let Some(copy) = adapted.0.get(id).cloned() {
-                if let Some(original) = materials.get(*id).map(adapt) {
-                    if let Some(mut target) = materials.get_mut(&copy) {
-                        *target = original;
-                    }
-                }
-            }
+        if let AssetEvent::Modified { id } = event
+            && let Some(copy) = adapted.0.get(id).cloned()
+            && let Some(original) = materials.get(*id).map(adapt)
+            && let Some(mut target) = materials.get_mut(&copy)
+        {
+            *target = original;
         }
     }
     for (entity, material, prepared, swapped) in &entities {

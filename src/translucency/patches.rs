@@ -115,9 +115,7 @@ fn triangles<'a>(objects: &'a [PatchObject<'a>], skipped: &'a mut usize) -> Vec<
                 continue;
             };
             let area2 = (b - a).cross(c - a).length();
-            if !(a.is_finite() && b.is_finite() && c.is_finite())
-                || !(area2 > 0.0)
-                || !area2.is_finite()
+            if !(a.is_finite() && b.is_finite() && c.is_finite() && area2 > 0.0 && area2.is_finite())
             {
                 *skipped += 1;
                 continue;

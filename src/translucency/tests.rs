@@ -804,3 +804,30 @@ fn random_walks_find_a_small_ball_gives_off_more_than_a_slab() {
         );
     }
 }
+
+/// The gather's grid keeps each member's own cell beside it (the pass takes a member only
+/// from the cell it walks: two of the 27 cells about a pixel may hash to one bucket, and its
+/// patches counted twice — with photons, twice the light); every patch is in one bucket once.
+#[test]
+fn the_gathers_grid_keeps_each_members_own_cell() {
+    use super::gather::PatchGrid;
+    let centres: Vec<Vec3> = (0..500)
+        .map(|i| Vec3::new(i as f32 * 0.1 - 20.0, (i % 7) as f32 * -0.3, (i % 11) as f32 * 0.2))
+        .collect();
+    let indices: Vec<u32> = (0..500).collect();
+    let grid = PatchGrid::new(&centres, &indices, 0.3);
+    let mask = (grid.offsets.len() - 2) as u32;
+    assert_eq!(grid.members.len(), 500);
+    assert_eq!(grid.cells.len(), 500);
+    let mut seen = vec![0; 500];
+    for b in 0..grid.offsets.len() - 1 {
+        for k in grid.offsets[b] as usize..grid.offsets[b + 1] as usize {
+            let i = grid.members[k] as usize;
+            seen[i] += 1;
+            let cell = (centres[i] / 0.3).floor().as_ivec3();
+            assert_eq!(grid.cells[k], cell);
+            assert_eq!(PatchGrid::bucket(cell, mask), b as u32);
+        }
+    }
+    assert!(seen.iter().all(|&n| n == 1));
+}

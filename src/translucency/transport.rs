@@ -572,9 +572,9 @@ impl EnergyTransport {
         // on a 5 cm marble ball in 34 mm patches); the columns are rescaled to W∞, and what
         // they held before is reported.
         let mut column_sums = vec![Vec3::ZERO; n];
-        for i in 0..n {
+        for (i, pi) in p.iter().enumerate() {
             for (j, k) in scattering.row(i) {
-                column_sums[j] += k * p[i].area;
+                column_sums[j] += k * pi.area;
             }
         }
         // What each translucent object's columns give off of what enters it, in all: the
@@ -662,11 +662,11 @@ impl EnergyTransport {
             )
             .collect();
         let diffuse_shape = super::diffusion::diffuse_single_scattering_shape() as f32;
-        for i in 0..n {
+        for (i, single) in single_scattering.iter().enumerate() {
             let range = scattering.row_offsets[i] as usize..scattering.row_offsets[i + 1] as usize;
             for e in range {
                 if scattering.columns[e] as usize == i {
-                    scattering.values[e] += single_scattering[i] * diffuse_shape;
+                    scattering.values[e] += *single * diffuse_shape;
                 }
             }
         }

@@ -60,7 +60,7 @@ pub fn prepare_apex_sets(
         let block = settings.0.working_resolution.block();
         let blocks = (size + block - 1) / block;
         let bytes = blocks.x as u64 * blocks.y as u64 * stride as u64 * 4;
-        if bytes > device.limits().max_storage_buffer_binding_size as u64 {
+        if bytes > device.limits().max_storage_buffer_binding_size {
             warned.warn(format!("apex buffer {entity} {size}"), || {
                 format!(
                     "camera {entity}: {size} with {} apex directions needs a {bytes}-byte apex \

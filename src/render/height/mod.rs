@@ -534,7 +534,7 @@ pub fn queue_height_phase(
                 (Mesh::ATTRIBUTE_NORMAL, "NORMAL"),
             ]
             .into_iter()
-            .filter(|(a, _)| !mesh.layout.0.contains(a.clone()))
+            .filter(|(a, _)| !mesh.layout.0.contains(*a))
             .map(|(_, name)| name)
             .collect();
             if !missing.is_empty() {

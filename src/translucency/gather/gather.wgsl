@@ -15,7 +15,8 @@
 
 struct GatherParams {
     // Grids by reach (`PatchGrid::levels`): per grid four words at the start of `grid` (cell
-    // size, bucket mask, where its bucket offsets and its members start).
+    // size, bucket mask, where its bucket offsets and its members start; a member is four
+    // words: patch index and its cell).
     levels: u32,
     patches: u32,
     // Offsets in `vectors` (vec4s).
@@ -66,29 +67,25 @@ fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
         let table = grid[4u * level + 2u];
         let members = grid[4u * level + 3u];
         let centre_cell = vec3<i32>(floor(x / cell_size));
-        var cell_index = 0;
         for (var dz = -1; dz <= 1; dz += 1) {
             for (var dy = -1; dy <= 1; dy += 1) {
                 for (var dx = -1; dx <= 1; dx += 1) {
-                    let b = bucket(centre_cell + vec3(dx, dy, dz), mask);
-                    // A bucket that two of the 27 cells hash to is walked once: its patches
-                    // would count twice (photons: twice the light).
-                    var walked = false;
-                    for (var j = 0; j < cell_index; j += 1) {
-                        let earlier = vec3(j % 3 - 1, (j / 3) % 3 - 1, j / 9 - 1);
-                        if bucket(centre_cell + earlier, mask) == b {
-                            walked = true;
-                            break;
-                        }
-                    }
-                    cell_index += 1;
-                    if walked {
-                        continue;
-                    }
+                    let cell = centre_cell + vec3(dx, dy, dz);
+                    let b = bucket(cell, mask);
                     let start = grid[table + b];
                     let end = grid[table + b + 1u];
                     for (var k = start; k < end; k += 1u) {
-                        let i = grid[members + k];
+                        // Only the members of this very cell: a bucket that two of the 27
+                        // cells hash to would give its patches twice (photons: twice the
+                        // light); a member of another of them is taken when that one is walked.
+                        let member = members + 4u * k;
+                        let own_cell = bitcast<vec3<i32>>(
+                            vec3(grid[member + 1u], grid[member + 2u], grid[member + 3u]),
+                        );
+                        if any(own_cell != cell) {
+                            continue;
+                        }
+                        let i = grid[member];
                         let record = patches[i];
                         let d = record.centre.xyz - x;
                         let d2 = dot(d, d);

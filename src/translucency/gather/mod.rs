@@ -22,7 +22,9 @@ use super::{
 };
 
 /// Some patches in a hashed grid of cells as wide as their widest reach: a pixel looks in
-/// the 27 cells about it.
+/// the 27 cells about it and takes from each bucket only the members of the cell it walks —
+/// two of the 27 cells may hash to one bucket, whose patches would otherwise count twice
+/// (with photons, twice the light).
 #[derive(Clone, Debug, Default)]
 pub struct PatchGrid {
     /// Cell width (world units).
@@ -31,6 +33,8 @@ pub struct PatchGrid {
     pub offsets: Vec<u32>,
     /// Patch indices by bucket.
     pub members: Vec<u32>,
+    /// Each member's own cell.
+    pub cells: Vec<IVec3>,
 }
 
 impl PatchGrid {
@@ -39,10 +43,11 @@ impl PatchGrid {
     pub fn new(centres: &[Vec3], indices: &[u32], cell_size: f32) -> Self {
         let buckets = (indices.len() * 4).next_power_of_two().max(64) as u32;
         let mask = buckets - 1;
-        let bucket_of: Vec<u32> = indices
+        let cell_of: Vec<IVec3> = indices
             .iter()
-            .map(|&i| Self::bucket((centres[i as usize] / cell_size).floor().as_ivec3(), mask))
+            .map(|&i| (centres[i as usize] / cell_size).floor().as_ivec3())
             .collect();
+        let bucket_of: Vec<u32> = cell_of.iter().map(|&c| Self::bucket(c, mask)).collect();
         let mut offsets = vec![0u32; buckets as usize + 1];
         for &b in &bucket_of {
             offsets[b as usize + 1] += 1;
@@ -52,14 +57,17 @@ impl PatchGrid {
         }
         let mut fill = offsets.clone();
         let mut members = vec![0u32; indices.len()];
-        for (&i, &b) in indices.iter().zip(&bucket_of) {
+        let mut cells = vec![IVec3::ZERO; indices.len()];
+        for ((&i, &b), &cell) in indices.iter().zip(&bucket_of).zip(&cell_of) {
             members[fill[b as usize] as usize] = i;
+            cells[fill[b as usize] as usize] = cell;
             fill[b as usize] += 1;
         }
         Self {
             cell_size,
             offsets,
             members,
+            cells,
         }
     }
 
@@ -232,7 +240,7 @@ fn gather_buffers(
         })
         .collect();
     // Per grid: cell size, bucket mask, where its offsets and its members start; then the
-    // arrays themselves.
+    // arrays themselves, each member as four words (patch index, its cell).
     let mut words = vec![0u32; 4 * grids.len()];
     for (l, grid) in grids.iter().enumerate() {
         words[4 * l] = grid.cell_size.to_bits();
@@ -240,7 +248,9 @@ fn gather_buffers(
         words[4 * l + 2] = words.len() as u32;
         words.extend(&grid.offsets);
         words[4 * l + 3] = words.len() as u32;
-        words.extend(&grid.members);
+        for (&i, cell) in grid.members.iter().zip(&grid.cells) {
+            words.extend([i, cell.x as u32, cell.y as u32, cell.z as u32]);
+        }
     }
     words.push(0);
     let (direct, exitance) = transport.vector_offsets();
