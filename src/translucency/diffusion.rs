@@ -141,14 +141,19 @@ pub fn jensen_internal_diffuse_reflectance(eta: f64) -> f64 {
 /// 1 at `cos_i` onto index `eta`.
 pub fn fresnel_reflectance(cos_i: f64, eta: f64) -> f64 {
     let cos_i = cos_i.clamp(0.0, 1.0);
-    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
-    if sin_t2 >= 1.0 {
+    let Some(cos_t) = refracted_cosine(cos_i, eta) else {
         return 1.0;
-    }
-    let cos_t = (1.0 - sin_t2).sqrt();
+    };
     let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
     0.5 * (rs * rs + rp * rp)
+}
+
+/// Snell's law: the cosine of the refracted direction for light arriving at `cos_i` onto
+/// index `eta`; `None` past the critical angle.
+fn refracted_cosine(cos_i: f64, eta: f64) -> Option<f64> {
+    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
+    (sin_t2 < 1.0).then(|| (1.0 - sin_t2).sqrt())
 }
 
 /// Hemispherical (cosine-weighted) Fresnel reflectance `2 ∫ F(μ) μ dμ` for light arriving
@@ -271,8 +276,7 @@ impl IncidenceWeight {
 
     fn unnormalised(&self, cos_i: f64) -> [f64; 3] {
         let cos_i = cos_i.clamp(0.0, 1.0);
-        let sin_t2 = (1.0 - cos_i * cos_i) / (self.eta * self.eta);
-        let cos_t = (1.0 - sin_t2).max(0.0).sqrt();
+        let cos_t = refracted_cosine(cos_i, self.eta).unwrap_or(0.0);
         let transmitted = 1.0 - fresnel_reflectance(cos_i, self.eta);
         self.alpha.map(|a| transmitted * collimated_albedo(a, cos_t))
     }
@@ -301,32 +305,25 @@ impl DiffusionProfile {
         let eta = medium.index_of_refraction as f64;
         let f_dr = jensen_internal_diffuse_reflectance(eta);
         let a_boundary = (1.0 + f_dr) / (1.0 - f_dr);
+        let albedos = medium.single_scattering_albedo();
         let channels = std::array::from_fn(|c| {
             let sigma_a = medium.absorption[c] as f64;
-            let sigma_s = medium.reduced_scattering[c] as f64;
-            let sigma_t = sigma_a + sigma_s;
-            let alpha = sigma_s / sigma_t;
+            let sigma_t = sigma_a + medium.reduced_scattering[c] as f64;
+            let alpha = albedos[c];
             let z_real = 1.0 / sigma_t;
-            let dipole = Channel::Dipole {
-                half_albedo: alpha / 2.0,
+            let dipole = |half_albedo| Channel::Dipole {
+                half_albedo,
                 sigma_tr: (3.0 * sigma_a * sigma_t).sqrt(),
                 z_real,
                 z_virtual: z_real * (1.0 + 4.0 * a_boundary / 3.0),
             };
             match kernel {
-                DiffusionKernel::Dipole => dipole,
+                DiffusionKernel::Dipole => dipole(alpha / 2.0),
                 DiffusionKernel::ScaledDipole => {
-                    let Channel::Dipole { half_albedo, sigma_tr, z_real, z_virtual } = dipole else {
-                        unreachable!()
-                    };
-                    let total = dipole.total();
+                    // The dipole's shape, its total rescaled (linear in α′/2) to Chiang's `A`.
+                    let total = dipole(alpha / 2.0).total();
                     let albedo = surface_albedo(alpha);
-                    Channel::Dipole {
-                        half_albedo: if total > 0.0 { half_albedo * albedo / total } else { 0.0 },
-                        sigma_tr,
-                        z_real,
-                        z_virtual,
-                    }
+                    dipole(if total > 0.0 { alpha / 2.0 * albedo / total } else { 0.0 })
                 }
                 DiffusionKernel::Burley => {
                     let albedo = surface_albedo(alpha);
@@ -344,16 +341,10 @@ impl DiffusionProfile {
             channels,
             entrance_transmittance: 1.0 - diffuse_fresnel_reflectance(eta),
             // Burley's `A` holds single scattering already.
-            single_scattering_albedo: std::array::from_fn(|c| match kernel {
-                DiffusionKernel::Dipole => {
-                    let (a, s) = (
-                        medium.absorption[c] as f64,
-                        medium.reduced_scattering[c] as f64,
-                    );
-                    s / (a + s)
-                }
-                DiffusionKernel::Burley | DiffusionKernel::ScaledDipole => 0.0,
-            }),
+            single_scattering_albedo: match kernel {
+                DiffusionKernel::Dipole => albedos,
+                DiffusionKernel::Burley | DiffusionKernel::ScaledDipole => [0.0; 3],
+            },
         }
     }
 

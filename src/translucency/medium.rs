@@ -104,6 +104,14 @@ impl TranslucentPreset {
 }
 
 impl TranslucentMedium {
+    /// The single-scattering albedo `α′ = σs′ / (σa + σs′)` per channel (`g = 0`: `σs = σs′`).
+    pub fn single_scattering_albedo(&self) -> [f64; 3] {
+        std::array::from_fn(|c| {
+            let (a, s) = (self.absorption[c] as f64, self.reduced_scattering[c] as f64);
+            s / (a + s)
+        })
+    }
+
     /// Why the medium cannot be used, if it cannot: coefficients that are negative or not
     /// finite, no scattering, or an index of refraction outside 1.0 – 3.0.
     pub fn invalid_reason(&self) -> Option<String> {

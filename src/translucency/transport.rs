@@ -709,12 +709,8 @@ impl EnergyTransport {
                         && settings.kernel != DiffusionKernel::Dipole
                         && medium.invalid_reason().is_none() =>
                 {
-                    let alpha = std::array::from_fn(|c| {
-                        let (a, s) = (medium.absorption[c] as f64, medium.reduced_scattering[c] as f64);
-                        s / (a + s)
-                    });
                     Some(super::diffusion::IncidenceWeight::new(
-                        alpha,
+                        medium.single_scattering_albedo(),
                         medium.index_of_refraction as f64,
                     ))
                 }
