@@ -1,16 +1,29 @@
 //! Reading the working images back to the CPU: for tests, tools and the accuracy measurements
-//! (the `oracle` feature). A capture stalls the frame while it waits for the GPU; leave it off
-//! in a game.
+//! (the `oracle` feature). Leave it off in a game: it copies every working image every frame.
+//!
+//! The readback itself is Bevy's [`Readback`]: each captured camera owns one [`ShaderBuffer`]
+//! (resized to what its view needs) and a reader entity with `Readback::buffer` on it. During
+//! the frame the capture systems copy the working images into that buffer, each where its image
+//! holds what the oracle compares (the MHM to the occlusion after the occlusion pass, the lit
+//! image before the bleeding is added, the bleeding after its gather), behind a header that says
+//! where each one lies and which frame it is; Bevy copies the buffer out after the frame and
+//! hands it back in [`ReadbackComplete`], where it is cut up into a [`CapturedFrame`]. One
+//! buffer, so the images of a capture always come from one frame.
 
 use std::sync::{Arc, Mutex};
 
 use bevy::{
+    diagnostic::FrameCount,
+    image::ToExtents,
     platform::collections::HashMap,
     prelude::*,
     render::{
         Extract,
+        gpu_readback::{Readback, ReadbackComplete},
+        render_asset::RenderAssets,
         render_resource::*,
-        renderer::{RenderContext, RenderDevice, ViewQuery},
+        renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
+        storage::{GpuShaderBuffer, ShaderBuffer},
         sync_world::RenderEntity,
     },
 };
@@ -30,31 +43,22 @@ use crate::reference::{
     ASCENT_SHIFT, ApexSet, FLAG_VALID, GradientMap, ScreenHeightMap, ViewGeometry, unpack_apex_set,
 };
 
-/// Registers the captures' resources and systems: the copies after the passes whose images
-/// they read, the mapping after the frame is submitted.
+/// Registers the captures' resources and systems: the readback buffers in the main world; in
+/// the render world the copies after the passes whose images they read.
 pub(super) fn build(app: &mut App) {
     use bevy::{
-        core_pipeline::{
-            Core3d,
-            core_3d::main_opaque_pass_3d,
-        },
-        render::{Render, RenderApp, RenderSystems},
+        core_pipeline::{Core3d, core_3d::main_opaque_pass_3d},
+        render::RenderApp,
     };
     let captures = MesostructureCaptures::default();
-    app.insert_resource(captures.clone());
+    app.insert_resource(captures.clone())
+        .add_systems(PostUpdate, sync_capture_buffers);
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
     render_app
         .insert_resource(captures)
-        .init_resource::<PendingCaptures>()
         .add_systems(ExtractSchedule, extract_capture_requests)
-        .add_systems(
-            Render,
-            map_captures
-                .after(RenderSystems::Render)
-                .before(RenderSystems::Cleanup),
-        )
         .add_systems(
             Core3d,
             copy_capture
@@ -70,13 +74,19 @@ pub(super) fn build(app: &mut App) {
 }
 
 /// Put on a camera with [`Mesostructure`](crate::Mesostructure) to read its working images back
-/// every frame into [`MesostructureCaptures`].
+/// every frame into [`MesostructureCaptures`] (through Bevy's [`Readback`], a frame or more
+/// later).
 #[derive(Component, Clone, Copy, Debug, Default)]
 pub struct MesostructureCapture;
 
 /// The working images of one camera in one frame, read back from the GPU.
 #[derive(Clone, Debug, Default)]
 pub struct CapturedFrame {
+    /// The [`FrameCount`] of the frame these images were rendered in (the value the main world
+    /// holds after that frame's update): a capture with `frame > n` shows the world as it was
+    /// after update `n`. Readbacks arrive a frame or more late, so compare with this rather than
+    /// counting frames.
+    pub frame: u32,
     /// Width in pixels.
     pub width: u32,
     /// Height in pixels.
@@ -198,113 +208,308 @@ impl CapturedFrame {
 
 /// The newest [`CapturedFrame`] of each camera with [`MesostructureCapture`].
 #[derive(Resource, Clone, Default)]
-pub struct MesostructureCaptures(Arc<Mutex<HashMap<Entity, CapturedFrame>>>);
+pub struct MesostructureCaptures(Arc<Mutex<CaptureState>>);
+
+#[derive(Default)]
+struct CaptureState {
+    /// The newest capture of each camera not yet taken.
+    frames: HashMap<Entity, CapturedFrame>,
+    /// The newest frame delivered per camera: Bevy reads the buffer back every frame, also
+    /// in frames that copied nothing into it.
+    delivered: HashMap<Entity, u32>,
+    /// Bytes each camera's capture buffer needs (set by the render world).
+    needed: HashMap<Entity, u64>,
+}
 
 impl MesostructureCaptures {
     /// Takes the newest capture of `camera`, if one arrived since the last call.
     pub fn take(&self, camera: Entity) -> Option<CapturedFrame> {
-        self.0.lock().ok()?.remove(&camera)
+        self.0.lock().ok()?.frames.remove(&camera)
+    }
+
+    /// Takes the newest capture of `camera` if it was rendered after the main world's update
+    /// number `frame` ([`FrameCount`] read after that update, before changing the world);
+    /// older captures are dropped.
+    pub fn take_after(&self, camera: Entity, frame: u32) -> Option<CapturedFrame> {
+        self.take(camera).filter(|f| f.frame > frame)
+    }
+
+    fn receive(&self, camera: Entity, data: &[u8]) {
+        let Some(frame) = parse(data) else {
+            return;
+        };
+        let Ok(mut state) = self.0.lock() else {
+            return;
+        };
+        if state.delivered.get(&camera).is_some_and(|&d| d >= frame.frame) {
+            return;
+        }
+        state.delivered.insert(camera, frame.frame);
+        state.frames.insert(camera, frame);
     }
 }
 
-/// Render-world marker: read this view back; the main-world camera it belongs to.
-#[derive(Component, Clone, Copy)]
-pub struct ExtractedCapture(pub Entity);
+/// Main-world: the capture buffer of a camera and the entity reading it back.
+#[derive(Component)]
+struct CaptureBuffer {
+    buffer: Handle<ShaderBuffer>,
+    reader: Entity,
+}
+
+/// Main-world: on the entity that carries the [`Readback`] of a camera's capture buffer.
+#[derive(Component)]
+struct CaptureReaderOf(Entity);
+
+/// Main-world system: gives each captured camera its buffer and reader, grows the buffer to
+/// what the render world asked for, and removes both when the capture (or camera) goes.
+fn sync_capture_buffers(
+    mut commands: Commands,
+    new: Query<Entity, (With<MesostructureCapture>, Without<CaptureBuffer>)>,
+    cameras: Query<(Entity, &CaptureBuffer, Has<MesostructureCapture>)>,
+    readers: Query<(Entity, &CaptureReaderOf)>,
+    mut buffers: ResMut<Assets<ShaderBuffer>>,
+    captures: Res<MesostructureCaptures>,
+) {
+    for camera in &new {
+        // The header alone until the render world knows the view's size.
+        let buffer = buffers.add(ShaderBuffer::with_size(
+            HEADER_BYTES as usize,
+            bevy::asset::RenderAssetUsages::default(),
+        ));
+        let receiver = captures.clone();
+        let reader = commands
+            .spawn((Readback::buffer(buffer.clone()), CaptureReaderOf(camera)))
+            .observe(move |readback: On<ReadbackComplete>| {
+                receiver.receive(camera, &readback.data)
+            })
+            .id();
+        commands
+            .entity(camera)
+            .insert(CaptureBuffer { buffer, reader });
+    }
+    let needed = captures
+        .0
+        .lock()
+        .map(|s| s.needed.clone())
+        .unwrap_or_default();
+    for (camera, capture, wanted) in &cameras {
+        if !wanted {
+            commands.entity(capture.reader).despawn();
+            commands.entity(camera).remove::<CaptureBuffer>();
+            continue;
+        }
+        let Some(&bytes) = needed.get(&camera) else {
+            continue;
+        };
+        if let Some(mut buffer) = buffers.get_mut(&capture.buffer)
+            && buffer.buffer_description.size != bytes
+        {
+            buffer.buffer_description.size = bytes;
+        }
+    }
+    for (reader, of) in &readers {
+        if cameras.get(of.0).is_err() {
+            commands.entity(reader).despawn();
+        }
+    }
+}
+
+/// Render-world marker: read this view back; the main-world camera it belongs to and its
+/// capture buffer.
+#[derive(Component, Clone)]
+pub struct ExtractedCapture {
+    camera: Entity,
+    buffer: AssetId<ShaderBuffer>,
+}
 
 /// Marks the render views whose camera asks for a capture.
-pub fn extract_capture_requests(
+fn extract_capture_requests(
     mut commands: Commands,
     cameras: Extract<
-        Query<(RenderEntity, Entity, Has<MesostructureCapture>), With<crate::Mesostructure>>,
+        Query<
+            (RenderEntity, Entity, Option<&CaptureBuffer>),
+            With<crate::Mesostructure>,
+        >,
     >,
 ) {
     for (render_entity, entity, capture) in &cameras {
         let Ok(mut target) = commands.get_entity(render_entity) else {
             continue;
         };
-        if capture {
-            target.insert(ExtractedCapture(entity));
-        } else {
-            target.remove::<ExtractedCapture>();
+        match capture {
+            Some(capture) => {
+                target.insert(ExtractedCapture {
+                    camera: entity,
+                    buffer: capture.buffer.id(),
+                });
+            }
+            None => {
+                target.remove::<ExtractedCapture>();
+            }
         }
     }
 }
 
-struct Readback {
-    buffer: Buffer,
+/// The images of a capture, in the order of [`CaptureHeader::parts`].
+#[derive(Clone, Copy)]
+enum Part {
+    Mhm,
+    CoreNormal,
+    Mhgm,
+    ApexSets,
+    ApexStats,
+    Occlusion,
+    BumpNormal,
+    TextureTerms,
+    MicroShadow,
+    Lit,
+    Bleeding,
+}
+const PARTS: usize = 11;
+
+/// Where one image lies in the capture buffer; `rows == 0`: not copied this frame.
+#[repr(C)]
+#[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct PartPlace {
+    offset: u32,
     padded_row: u32,
     row: u32,
+    rows: u32,
+    /// The lit image's format ([`LIT_FORMATS`] index + 1); 0 for the others.
+    format: u32,
+    _pad: u32,
 }
 
-struct PendingCapture {
-    camera: Entity,
-    size: UVec2,
+/// The start of a capture buffer.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct CaptureHeader {
+    magic: u32,
+    /// [`FrameCount`] + 1 (0: never written).
+    frame: u32,
+    width: u32,
+    height: u32,
     apex_stride: u32,
     apex_block: u32,
-    view: ViewGeometry,
-    readbacks: Vec<Readback>,
-    micro_shadow: Option<Readback>,
-    lit: Option<(Readback, TextureFormat)>,
-    bleeding: Option<Readback>,
+    _pad: [u32; 2],
+    world_from_clip: [f32; 16],
+    viewport: [f32; 4],
+    parts: [PartPlace; PARTS],
 }
 
-/// Copies submitted this frame, mapped after submission.
-#[derive(Resource, Default)]
-pub struct PendingCaptures(Vec<PendingCapture>);
+const MAGIC: u32 = u32::from_le_bytes(*b"MSCP");
+/// Bytes kept for the header (the images start aligned after it).
+const HEADER_BYTES: u64 = 512;
+const _: () = assert!(size_of::<CaptureHeader>() as u64 <= HEADER_BYTES);
+/// The lit image's formats a capture reads (others are skipped).
+const LIT_FORMATS: [TextureFormat; 3] = [
+    TextureFormat::Rgba16Float,
+    TextureFormat::Rgba8UnormSrgb,
+    TextureFormat::Rgba8Unorm,
+];
+/// Bytes per pixel kept for the lit image: the widest of [`LIT_FORMATS`].
+const LIT_BYTES: u32 = 8;
 
-fn copy_texture(
-    ctx: &mut RenderContext,
-    device: &RenderDevice,
-    texture: &Texture,
-    format: TextureFormat,
-) -> Readback {
-    let size = texture.size();
-    let row = size.width * format.block_copy_size(None).unwrap();
-    let padded_row = RenderDevice::align_copy_bytes_per_row(row as usize) as u32;
-    let buffer = device.create_buffer(&BufferDescriptor {
-        label: Some("mesostructure_capture"),
-        size: padded_row as u64 * size.height as u64,
-        usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
+fn texture_place(offset: u64, size: UVec2, bytes_per_pixel: u32) -> PartPlace {
+    let row = size.x * bytes_per_pixel;
+    PartPlace {
+        offset: offset as u32,
+        padded_row: RenderDevice::align_copy_bytes_per_row(row as usize) as u32,
+        row,
+        rows: size.y,
+        ..default()
+    }
+}
+
+fn bytes_per_pixel(format: TextureFormat) -> u32 {
+    format.block_copy_size(None).unwrap_or(16)
+}
+
+/// The places of all images of a view of `size` with `apex_bytes` of apex sets and
+/// `stats_bytes` of counters; the buffer's length.
+fn layout(size: UVec2, apex_bytes: u64, stats_bytes: u64) -> ([PartPlace; PARTS], u64) {
+    let mut parts = [PartPlace::default(); PARTS];
+    let mut offset = HEADER_BYTES;
+    let sizes: [(Part, Option<TextureFormat>, u64); PARTS] = [
+        (Part::Mhm, Some(MHM_FORMAT), 0),
+        (Part::CoreNormal, Some(CORE_NORMAL_FORMAT), 0),
+        (Part::Mhgm, Some(MHGM_FORMAT), 0),
+        (Part::ApexSets, None, apex_bytes),
+        (Part::ApexStats, None, stats_bytes),
+        (Part::Occlusion, Some(OCCLUSION_FORMAT), 0),
+        (Part::BumpNormal, Some(BUMP_NORMAL_FORMAT), 0),
+        (Part::TextureTerms, Some(TEXTURE_VISIBILITY_FORMAT), 0),
+        (Part::MicroShadow, Some(MICRO_SHADOW_FORMAT), 0),
+        (Part::Lit, None, 0),
+        (Part::Bleeding, Some(BLEEDING_FORMAT), 0),
+    ];
+    for (part, format, bytes) in sizes {
+        let place = match (part, format) {
+            (Part::Lit, _) => texture_place(offset, size, LIT_BYTES),
+            (_, Some(format)) => texture_place(offset, size, bytes_per_pixel(format)),
+            (_, None) => PartPlace {
+                offset: offset as u32,
+                padded_row: bytes as u32,
+                row: bytes as u32,
+                rows: 1,
+                ..default()
+            },
+        };
+        parts[part as usize] = place;
+        offset += (place.padded_row as u64 * place.rows as u64).next_multiple_of(256);
+    }
+    // Copied later in the frame, where they run: marked absent until then.
+    for part in [Part::MicroShadow, Part::Lit, Part::Bleeding] {
+        parts[part as usize].rows = 0;
+    }
+    (parts, offset)
+}
+
+/// Copies `texture` into the capture buffer at `place`.
+fn copy_texture(ctx: &mut RenderContext, texture: &Texture, buffer: &Buffer, place: &PartPlace) {
     ctx.command_encoder().copy_texture_to_buffer(
         texture.as_image_copy(),
         TexelCopyBufferInfo {
-            buffer: &buffer,
+            buffer,
             layout: TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(padded_row),
+                offset: place.offset as u64,
+                bytes_per_row: Some(place.padded_row),
                 rows_per_image: None,
             },
         },
-        size,
+        texture.size(),
     );
-    Readback {
-        buffer,
-        padded_row,
-        row,
-    }
 }
 
-fn copy_buffer(ctx: &mut RenderContext, device: &RenderDevice, source: &Buffer) -> Readback {
-    let buffer = device.create_buffer(&BufferDescriptor {
-        label: Some("mesostructure_capture"),
-        size: source.size(),
-        usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    ctx.command_encoder()
-        .copy_buffer_to_buffer(source, 0, &buffer, 0, source.size());
-    Readback {
-        buffer,
-        padded_row: source.size() as u32,
-        row: source.size() as u32,
-    }
+/// Writes one part's place into the header of `buffer` (a queue write: it lands before this
+/// frame's copies are read back, and after the previous frame's were).
+fn write_place(queue: &RenderQueue, buffer: &Buffer, part: Part, place: &PartPlace) {
+    let at = std::mem::offset_of!(CaptureHeader, parts) + part as usize * size_of::<PartPlace>();
+    queue.write_buffer(buffer, at as u64, bytemuck::bytes_of(place));
 }
 
-/// Core3d system after the apex pass: copies the working images into mappable buffers.
-/// Views without a mesostructure surface this frame are not captured (their images are stale).
-pub fn copy_capture(
+/// The capture buffer of a view, if it is there and large enough for `bytes`; otherwise asks
+/// the main world for one that is.
+fn capture_buffer<'a>(
+    capture: &ExtractedCapture,
+    buffers: &'a RenderAssets<GpuShaderBuffer>,
+    captures: &MesostructureCaptures,
+    bytes: u64,
+) -> Option<&'a Buffer> {
+    let buffer = buffers.get(capture.buffer).map(|b| &b.buffer);
+    if buffer.is_some_and(|b| b.size() >= bytes) {
+        return buffer;
+    }
+    if let Ok(mut state) = captures.0.lock() {
+        state.needed.insert(capture.camera, bytes);
+    }
+    None
+}
+
+/// Core3d system after the occlusion pass: copies the working images into the view's capture
+/// buffer and writes its header. Views without a mesostructure surface this frame are not
+/// captured (their images are stale).
+fn copy_capture(
     view: ViewQuery<(
         (&ViewHeightTextures, &ViewGradientMap, &ViewApexSets, &ViewOcclusionTextures),
         &ExtractedCapture,
@@ -312,198 +517,229 @@ pub fn copy_capture(
         &crate::render::view_settings::ExtractedMesostructure,
     )>,
     phases: Res<bevy::render::render_phase::ViewSortedRenderPhases<super::height::HeightPhaseItem>>,
-    device: Res<RenderDevice>,
-    mut pending: ResMut<PendingCaptures>,
+    buffers: Res<RenderAssets<GpuShaderBuffer>>,
+    captures: Res<MesostructureCaptures>,
+    queue: Res<RenderQueue>,
+    frame_count: Option<Res<FrameCount>>,
     mut ctx: RenderContext,
 ) {
     let ((height, mhgm, apex, occlusion), capture, extracted_view, settings) = view.into_inner();
     if !settings.0.needs_gradient_map() || !super::view_has_mesostructure(&phases, extracted_view) {
         return;
     }
-    let readbacks = vec![
-        copy_texture(&mut ctx, &device, &height.mhm.texture, MHM_FORMAT),
-        copy_texture(&mut ctx, &device, &height.core_normal.texture, CORE_NORMAL_FORMAT),
-        copy_texture(&mut ctx, &device, &mhgm.0.texture, MHGM_FORMAT),
-        copy_buffer(&mut ctx, &device, &apex.sets),
-        copy_buffer(&mut ctx, &device, &apex.stats),
-        copy_texture(&mut ctx, &device, &occlusion.occlusion.texture, OCCLUSION_FORMAT),
-        copy_texture(&mut ctx, &device, &height.bump_normal.texture, BUMP_NORMAL_FORMAT),
-        copy_texture(
-            &mut ctx,
-            &device,
-            &height.texture_visibility.texture,
-            TEXTURE_VISIBILITY_FORMAT,
-        ),
+    let (parts, bytes) = layout(height.size, apex.sets.size(), apex.stats.size());
+    let Some(buffer) = capture_buffer(capture, &buffers, &captures, bytes) else {
+        return;
+    };
+    let textures = [
+        (Part::Mhm, &height.mhm.texture),
+        (Part::CoreNormal, &height.core_normal.texture),
+        (Part::Mhgm, &mhgm.0.texture),
+        (Part::Occlusion, &occlusion.occlusion.texture),
+        (Part::BumpNormal, &height.bump_normal.texture),
+        (Part::TextureTerms, &height.texture_visibility.texture),
     ];
+    for (part, texture) in textures {
+        copy_texture(&mut ctx, texture, buffer, &parts[part as usize]);
+    }
+    for (part, source) in [(Part::ApexSets, &apex.sets), (Part::ApexStats, &apex.stats)] {
+        let place = &parts[part as usize];
+        ctx.command_encoder().copy_buffer_to_buffer(
+            source,
+            0,
+            buffer,
+            place.offset as u64,
+            source.size(),
+        );
+    }
     let world_from_clip =
         extracted_view.world_from_view.to_matrix() * extracted_view.clip_from_view.inverse();
-    pending.0.push(PendingCapture {
-        camera: capture.0,
-        size: height.size,
+    let header = CaptureHeader {
+        magic: MAGIC,
+        frame: frame_count.map_or(0, |f| f.0).wrapping_add(1).max(1),
+        width: height.size.x,
+        height: height.size.y,
         apex_stride: apex.stride,
         apex_block: apex.block,
-        view: ViewGeometry {
-            world_from_clip,
-            viewport: extracted_view.viewport.as_vec4(),
-        },
-        readbacks,
-        micro_shadow: None,
-        lit: None,
-        bleeding: None,
-    });
+        _pad: [0; 2],
+        world_from_clip: world_from_clip.to_cols_array(),
+        viewport: extracted_view.viewport.as_vec4().to_array(),
+        parts,
+    };
+    queue.write_buffer(buffer, 0, bytemuck::bytes_of(&header));
 }
 
 /// Core3d system after Bevy's opaque pass: copies the micro-shadow visibility and the lit
-/// opaque image of views whose working images were captured this frame.
-pub fn copy_lighting_capture(
+/// opaque image (before the bleeding is added) of the views captured this frame.
+fn copy_lighting_capture(
     view: ViewQuery<(
         &ViewMicroShadowTexture,
+        &ViewHeightTextures,
+        &ViewApexSets,
         &ExtractedCapture,
         &bevy::render::view::ViewTarget,
+        &bevy::render::view::ExtractedView,
+        &crate::render::view_settings::ExtractedMesostructure,
     )>,
-    device: Res<RenderDevice>,
-    mut pending: ResMut<PendingCaptures>,
+    phases: Res<bevy::render::render_phase::ViewSortedRenderPhases<super::height::HeightPhaseItem>>,
+    buffers: Res<RenderAssets<GpuShaderBuffer>>,
+    captures: Res<MesostructureCaptures>,
+    queue: Res<RenderQueue>,
     mut ctx: RenderContext,
 ) {
-    let (micro_shadow, capture, target) = view.into_inner();
-    let Some(entry) = pending.0.iter_mut().rev().find(|p| p.camera == capture.0) else {
-        return;
-    };
-    if entry.micro_shadow.is_some() {
+    let (micro_shadow, height, apex, capture, target, extracted_view, settings) =
+        view.into_inner();
+    // Only where `copy_capture` ran this frame (the same conditions).
+    if !settings.0.needs_gradient_map() || !super::view_has_mesostructure(&phases, extracted_view) {
         return;
     }
-    entry.micro_shadow = Some(copy_texture(
-        &mut ctx,
-        &device,
-        &micro_shadow.0.texture,
-        MICRO_SHADOW_FORMAT,
-    ));
+    let (parts, bytes) = layout(height.size, apex.sets.size(), apex.stats.size());
+    let Some(buffer) = capture_buffer(capture, &buffers, &captures, bytes) else {
+        return;
+    };
+    if micro_shadow.0.texture.size() == height.size.to_extents() {
+        let place = PartPlace {
+            rows: height.size.y,
+            ..parts[Part::MicroShadow as usize]
+        };
+        copy_texture(&mut ctx, &micro_shadow.0.texture, buffer, &place);
+        write_place(&queue, buffer, Part::MicroShadow, &place);
+    }
     let format = target.main_texture_format();
-    if matches!(
-        format,
-        TextureFormat::Rgba16Float | TextureFormat::Rgba8UnormSrgb | TextureFormat::Rgba8Unorm
-    ) {
-        entry.lit = Some((
-            copy_texture(&mut ctx, &device, target.main_texture(), format),
-            format,
-        ));
+    let lit = target.main_texture();
+    if let Some(index) = LIT_FORMATS.iter().position(|&f| f == format)
+        && lit.size() == height.size.to_extents()
+    {
+        let place = PartPlace {
+            format: index as u32 + 1,
+            ..texture_place(
+                parts[Part::Lit as usize].offset as u64,
+                height.size,
+                bytes_per_pixel(format),
+            )
+        };
+        copy_texture(&mut ctx, lit, buffer, &place);
+        write_place(&queue, buffer, Part::Lit, &place);
     }
 }
 
-/// The bleeding pass's captures: the captured views and the copies pending this frame.
-pub(crate) type BleedingCaptures<'w, 's> =
-    (Query<'w, 's, &'static ExtractedCapture>, ResMut<'w, PendingCaptures>);
+/// The bleeding pass's captures: the captured views and their buffers.
+pub(crate) type BleedingCaptures<'w, 's> = (
+    Query<'w, 's, (&'static ExtractedCapture, &'static ViewApexSets)>,
+    Res<'w, RenderAssets<GpuShaderBuffer>>,
+    Res<'w, MesostructureCaptures>,
+    Res<'w, RenderQueue>,
+);
 
 /// After the bleeding gather (called by the bleeding pass, the only place that knows the
 /// gather ran this frame): copies the bleeding of a captured view.
 pub(crate) fn copy_bleeding(
     ctx: &mut RenderContext,
-    captures: &mut BleedingCaptures,
+    captures: &BleedingCaptures,
     view: Entity,
+    size: UVec2,
     bleeding: &bevy::render::texture::CachedTexture,
 ) {
-    let (captured, pending) = captures;
-    let Ok(capture) = captured.get(view) else {
+    let (captured, buffers, state, queue) = captures;
+    let Ok((capture, apex)) = captured.get(view) else {
         return;
     };
-    if let Some(entry) = pending.0.iter_mut().rev().find(|p| p.camera == capture.0) {
-        let device = ctx.render_device().clone();
-        entry.bleeding = Some(copy_texture(ctx, &device, &bleeding.texture, BLEEDING_FORMAT));
+    let (parts, bytes) = layout(size, apex.sets.size(), apex.stats.size());
+    let Some(buffer) = capture_buffer(capture, buffers, state, bytes) else {
+        return;
+    };
+    if bleeding.texture.size() != size.to_extents() {
+        return;
     }
+    let place = PartPlace {
+        rows: size.y,
+        ..parts[Part::Bleeding as usize]
+    };
+    copy_texture(ctx, &bleeding.texture, buffer, &place);
+    write_place(queue, buffer, Part::Bleeding, &place);
 }
 
-fn read(device: &RenderDevice, r: &Readback, rows: u32) -> Vec<u8> {
-    let slice = r.buffer.slice(..);
-    slice.map_async(MapMode::Read, |result| {
-        if let Err(err) = result {
-            error!("bevy_mesostructure: capture readback failed: {err}");
-        }
-    });
-    let _ = device.poll(PollType::wait_indefinitely());
-    let data = slice.get_mapped_range();
-    let mut out = Vec::with_capacity((r.row * rows) as usize);
-    for y in 0..rows as usize {
-        let start = y * r.padded_row as usize;
-        out.extend_from_slice(&data[start..start + r.row as usize]);
+/// The bytes of one part without the row padding; empty if it was not copied.
+fn part_bytes<'a>(data: &'a [u8], place: &PartPlace) -> Option<Vec<u8>> {
+    if place.rows == 0 {
+        return Some(Vec::new());
     }
-    drop(data);
-    r.buffer.unmap();
-    out
+    let start = place.offset as usize;
+    let end = start + place.padded_row as usize * (place.rows as usize - 1) + place.row as usize;
+    let bytes = data.get(start..end)?;
+    Some(
+        (0..place.rows as usize)
+            .flat_map(|y| {
+                let at = y * place.padded_row as usize;
+                &bytes[at..at + place.row as usize]
+            })
+            .copied()
+            .collect(),
+    )
 }
 
-/// After the frame is submitted: waits for the copies and hands the results to the main world.
-pub fn map_captures(
-    mut pending: ResMut<PendingCaptures>,
-    device: Res<RenderDevice>,
-    captures: Res<MesostructureCaptures>,
-) {
-    for PendingCapture {
-        camera,
-        size,
-        apex_stride,
-        apex_block,
-        view,
-        readbacks,
-        micro_shadow,
+/// A capture buffer as read back; `None` if it was never written or is cut short (a resize in
+/// flight).
+fn parse(data: &[u8]) -> Option<CapturedFrame> {
+    let header: CaptureHeader =
+        bytemuck::pod_read_unaligned(data.get(..size_of::<CaptureHeader>())?);
+    if header.magic != MAGIC || header.frame == 0 {
+        return None;
+    }
+    let part = |p: Part| part_bytes(data, &header.parts[p as usize]);
+    let floats = |bytes: Vec<u8>| -> Vec<[f32; 4]> { bytemuck::pod_collect_to_vec(&bytes) };
+    let half4 = |bytes: Vec<u8>| -> Vec<[f32; 4]> {
+        let halves: Vec<u16> = bytemuck::pod_collect_to_vec(&bytes);
+        halves
+            .chunks_exact(4)
+            .map(|c| std::array::from_fn(|i| crate::height_map_import::half_to_f32(c[i])))
+            .collect()
+    };
+    let lit_place = &header.parts[Part::Lit as usize];
+    let lit = part(Part::Lit)?;
+    let lit = match LIT_FORMATS.get((lit_place.format as usize).wrapping_sub(1)) {
+        Some(TextureFormat::Rgba16Float) => half4(lit),
+        Some(&format) => lit
+            .chunks_exact(4)
+            .map(|c| {
+                std::array::from_fn(|i| {
+                    let v = c[i] as f32 / 255.0;
+                    if i < 3 && format == TextureFormat::Rgba8UnormSrgb {
+                        srgb_to_linear(v)
+                    } else {
+                        v
+                    }
+                })
+            })
+            .collect(),
+        None => Vec::new(),
+    };
+    // (micro-shadow visibility, the first directional light's shadow-map visibility)
+    let micro_shadows: Vec<[f32; 2]> = bytemuck::pod_collect_to_vec(&part(Part::MicroShadow)?);
+    let stats: Vec<u32> = bytemuck::pod_collect_to_vec(&part(Part::ApexStats)?);
+    Some(CapturedFrame {
+        frame: header.frame - 1,
+        width: header.width,
+        height: header.height,
+        mhm: floats(part(Part::Mhm)?),
+        core_normal: floats(part(Part::CoreNormal)?),
+        mhgm: bytemuck::pod_collect_to_vec(&part(Part::Mhgm)?),
+        apex_sets: bytemuck::pod_collect_to_vec(&part(Part::ApexSets)?),
+        apex_stride: header.apex_stride,
+        apex_block: header.apex_block,
+        apex_stats: [0, 1, 2].map(|i| stats.get(i).copied().unwrap_or(0)),
+        occlusion: bytemuck::pod_collect_to_vec(&part(Part::Occlusion)?),
+        bump_normal: half4(part(Part::BumpNormal)?),
+        micro_shadow: micro_shadows.iter().map(|v| v[0]).collect(),
+        sun_shadow: micro_shadows.iter().map(|v| v[1]).collect(),
+        texture_terms: bytemuck::pod_collect_to_vec(&part(Part::TextureTerms)?),
         lit,
-        bleeding,
-    } in pending.0.drain(..)
-    {
-        let half4 = |bytes: Vec<u8>| -> Vec<[f32; 4]> {
-            let halves: Vec<u16> = bytemuck::cast_slice(&bytes).to_vec();
-            halves
-                .chunks_exact(4)
-                .map(|c| std::array::from_fn(|i| crate::height_map_import::half_to_f32(c[i])))
-                .collect()
-        };
-        let lit = lit.map_or_else(Vec::new, |(r, format)| {
-            let bytes = read(&device, &r, size.y);
-            match format {
-                TextureFormat::Rgba16Float => half4(bytes),
-                _ => bytes
-                    .chunks_exact(4)
-                    .map(|c| {
-                        std::array::from_fn(|i| {
-                            let v = c[i] as f32 / 255.0;
-                            if i < 3 && format == TextureFormat::Rgba8UnormSrgb {
-                                srgb_to_linear(v)
-                            } else {
-                                v
-                            }
-                        })
-                    })
-                    .collect(),
-            }
-        });
-        let floats = |bytes: Vec<u8>| -> Vec<[f32; 4]> { bytemuck::cast_slice(&bytes).to_vec() };
-        // (micro-shadow visibility, the first directional light's shadow-map visibility)
-        let micro_shadows: Vec<[f32; 2]> = micro_shadow.map_or_else(Vec::new, |r| {
-            bytemuck::cast_slice(&read(&device, &r, size.y)).to_vec()
-        });
-        let stats: Vec<u32> = bytemuck::cast_slice(&read(&device, &readbacks[4], 1)).to_vec();
-        let frame = CapturedFrame {
-            width: size.x,
-            height: size.y,
-            mhm: floats(read(&device, &readbacks[0], size.y)),
-            core_normal: floats(read(&device, &readbacks[1], size.y)),
-            mhgm: bytemuck::cast_slice(&read(&device, &readbacks[2], size.y)).to_vec(),
-            apex_sets: bytemuck::cast_slice(&read(&device, &readbacks[3], 1)).to_vec(),
-            apex_stride,
-            apex_block,
-            apex_stats: [stats[0], stats[1], stats[2]],
-            occlusion: bytemuck::cast_slice(&read(&device, &readbacks[5], size.y)).to_vec(),
-            bump_normal: half4(read(&device, &readbacks[6], size.y)),
-            micro_shadow: micro_shadows.iter().map(|v| v[0]).collect(),
-            sun_shadow: micro_shadows.iter().map(|v| v[1]).collect(),
-            texture_terms: bytemuck::cast_slice(&read(&device, &readbacks[7], size.y)).to_vec(),
-            lit,
-            bleeding: bleeding.map_or_else(Vec::new, |r| half4(read(&device, &r, size.y))),
-            view,
-        };
-        if let Ok(mut map) = captures.0.lock() {
-            map.insert(camera, frame);
-        }
-    }
+        bleeding: half4(part(Part::Bleeding)?),
+        view: ViewGeometry {
+            world_from_clip: Mat4::from_cols_array(&header.world_from_clip),
+            viewport: Vec4::from_array(header.viewport),
+        },
+    })
 }
 
 fn srgb_to_linear(v: f32) -> f32 {

@@ -155,18 +155,26 @@ pub fn run(app: &mut App, n: usize) {
     }
 }
 
-/// Runs 4 frames (assets prepared, pipelines compiled), then until `camera` has a capture (at
-/// most `max` more frames); returns the newest.
+/// The main world's frame count: captures with a later `frame` show the world as it is now.
+pub fn frame_count(app: &App) -> u32 {
+    app.world().resource::<bevy::diagnostic::FrameCount>().0
+}
+
+/// Runs 4 frames (assets prepared, pipelines compiled), then until `camera` has a capture of a
+/// frame rendered after this call began (at most `max` more frames); returns it.
 pub fn capture(app: &mut App, camera: Entity, max: usize) -> CapturedFrame {
     let captures = app.world().resource::<MesostructureCaptures>().clone();
+    let since = frame_count(app);
     run(app, 4);
-    captures.take(camera);
     assert_pipelines_ready(app);
     for _ in 0..max {
-        run(app, 1);
-        if let Some(frame) = captures.take(camera) {
+        if let Some(frame) = captures.take_after(camera, since) {
             return frame;
         }
+        run(app, 1);
+    }
+    if let Some(frame) = captures.take_after(camera, since) {
+        return frame;
     }
     panic!("no capture of camera {camera} after {max} frames: were the pipelines compiled?");
 }

@@ -330,12 +330,13 @@ pub fn wait_for_pipelines(app: &mut App) -> bool {
     false
 }
 
-/// The next capture of `camera`, within 10 frames.
+/// The next capture of `camera` rendered after this call, within 10 frames.
 pub fn take_capture(app: &mut App, camera: Entity) -> Option<CapturedFrame> {
     let captures = app.world().resource::<MesostructureCaptures>().clone();
+    let since = app.world().resource::<bevy::diagnostic::FrameCount>().0;
     (0..10).find_map(|_| {
         app.update();
-        captures.take(camera)
+        captures.take_after(camera, since)
     })
 }
 

@@ -223,7 +223,7 @@ pub fn bleeding_pass(
     uniforms: Res<MesostructureUniforms>,
     view_uniforms: Res<ViewUniforms>,
     light_meta: Res<LightMeta>,
-    #[cfg(feature = "oracle")] mut captures: super::capture::BleedingCaptures,
+    #[cfg(feature = "oracle")] captures: super::capture::BleedingCaptures,
     mut ctx: RenderContext,
 ) {
     #[cfg(feature = "oracle")]
@@ -307,7 +307,7 @@ pub fn bleeding_pass(
         |_| {},
     );
     #[cfg(feature = "oracle")]
-    super::capture::copy_bleeding(&mut ctx, &mut captures, view_entity, &bleeding.0);
+    super::capture::copy_bleeding(&mut ctx, &captures, view_entity, height.size, &bleeding.0);
 }
 
 /// Core3d system after the gather: adds the bleeding to the view's lit colour, timed as
