@@ -1,0 +1,98 @@
+use super::*;
+
+#[test]
+fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
+    let ball = mesh_object(
+        Sphere::new(0.05).mesh().ico(2).unwrap(),
+        Transform::from_xyz(0.0, 0.05, 0.0),
+    );
+    let floor = mesh_object(
+        Plane3d::new(Vec3::Y, Vec2::splat(0.2)).mesh().build(),
+        Transform::IDENTITY,
+    );
+    let objects = [ball, floor];
+    let views = views_of(&objects);
+    let surfaces = [
+        PatchSurface::Translucent {
+            medium: TranslucentPreset::Skin1.medium(),
+            world_units_per_mm: 0.001,
+        },
+        PatchSurface::Opaque {
+            albedo: Vec3::splat(0.8),
+        },
+    ];
+    let patches = resample_into_patches(&views, 200);
+    let rays = SceneRays::new(&views);
+    let settings = TransportSettings::default();
+    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
+    let dir = std::env::temp_dir().join(format!("bevy_mesostructure_cache_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("scene.translucency");
+    crate::translucency::cache::save(&path, &patches, &transport).unwrap();
+    let (p, t) = crate::translucency::cache::load(&path).unwrap();
+    assert_eq!(p.patches, patches.patches);
+    assert_eq!(p.samples, patches.samples);
+    assert_eq!(p.sample_offsets, patches.sample_offsets);
+    assert_eq!(p.object_patch_sizes, patches.object_patch_sizes);
+    assert_eq!(t.scattering, transport.scattering);
+    assert_eq!(t.form_factors, transport.form_factors);
+    assert_eq!(t.cluster_means, transport.cluster_means);
+    assert_eq!(t.single_scattering, transport.single_scattering);
+    assert_eq!(t.areas, transport.areas);
+    assert_eq!(t.report, transport.report);
+    // Cut short, or not a cache at all: an error, never a panic or a wrong transport.
+    let bytes = std::fs::read(&path).unwrap();
+    for cut in [0, 7, 100, bytes.len() / 2, bytes.len() - 1] {
+        std::fs::write(&path, &bytes[..cut]).unwrap();
+        assert!(crate::translucency::cache::load(&path).is_err(), "cut at {cut}");
+    }
+    let mut flipped = bytes.clone();
+    flipped[8] ^= 0xff;
+    std::fs::write(&path, &flipped).unwrap();
+    assert!(crate::translucency::cache::load(&path).is_err());
+    std::fs::remove_dir_all(&dir).unwrap();
+    // The key follows what the transport depends on.
+    let key = |surfaces: &[PatchSurface], budget| {
+        let keyed: Vec<_> = objects
+            .iter()
+            .zip(surfaces)
+            .map(|(o, s)| (o.0.as_slice(), o.1.as_slice(), *s))
+            .collect();
+        crate::translucency::cache::scene_key(&keyed, budget, &settings)
+    };
+    let base = key(&surfaces, 200);
+    assert_eq!(base, key(&surfaces, 200));
+    assert_ne!(base, key(&surfaces, 201));
+    let mut other = surfaces;
+    other[1] = PatchSurface::Opaque {
+        albedo: Vec3::splat(0.7),
+    };
+    assert_ne!(base, key(&other, 200));
+}
+
+/// The gather's grid keeps each member's own cell beside it (the pass takes a member only
+/// from the cell it walks: two of the 27 cells about a pixel may hash to one bucket, and its
+/// patches counted twice — with photons, twice the light); every patch is in one bucket once.
+#[test]
+fn the_gathers_grid_keeps_each_members_own_cell() {
+    use crate::translucency::gather::PatchGrid;
+    let centres: Vec<Vec3> = (0..500)
+        .map(|i| Vec3::new(i as f32 * 0.1 - 20.0, (i % 7) as f32 * -0.3, (i % 11) as f32 * 0.2))
+        .collect();
+    let indices: Vec<u32> = (0..500).collect();
+    let grid = PatchGrid::new(&centres, &indices, 0.3);
+    let mask = (grid.offsets.len() - 2) as u32;
+    assert_eq!(grid.members.len(), 500);
+    assert_eq!(grid.cells.len(), 500);
+    let mut seen = vec![0; 500];
+    for b in 0..grid.offsets.len() - 1 {
+        for k in grid.offsets[b] as usize..grid.offsets[b + 1] as usize {
+            let i = grid.members[k] as usize;
+            seen[i] += 1;
+            let cell = (centres[i] / 0.3).floor().as_ivec3();
+            assert_eq!(grid.cells[k], cell);
+            assert_eq!(PatchGrid::bucket(cell, mask), b as u32);
+        }
+    }
+    assert!(seen.iter().all(|&n| n == 1));
+}
