@@ -13,6 +13,7 @@
 //! cargo run --example translucent_accuracy -- [--medium skin1] [--budgets 250,500,1000,2000]
 //!     [--kernel scaled-dipole|burley|dipole] [--gather interpolation|photons]
 //!     [--object-exit-share true|false] [--beam-incidence true|false]
+//!     [--oriented-dipole true|false]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
@@ -75,6 +76,10 @@ struct Cli {
     /// `_diffuse` when off)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     beam_incidence: bool,
+    /// Take the dipole's flux along each exit patch's normal
+    /// (`TransportSettings::oriented_dipole`; method suffix `_oriented` when on)
+    #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
+    oriented_dipole: bool,
     /// How the pixels take the patches' light: interpolated radiance (the plugin's default)
     /// or the seed's photons (density estimation)
     #[arg(long, value_enum, default_value_t = Gather::Interpolation)]
@@ -241,6 +246,7 @@ fn main() {
         },
         object_exit_share: cli.object_exit_share,
         beam_incidence: cli.beam_incidence,
+        oriented_dipole: cli.oriented_dipole,
         diffusion_energy_kept: cli.energy_kept,
         ..default()
     };
@@ -250,13 +256,15 @@ fn main() {
     };
     let slab = if cli.object_exit_share { "" } else { "_slab" };
     let diffuse = if cli.beam_incidence { "" } else { "_diffuse" };
+    let oriented = if cli.oriented_dipole { "_oriented" } else { "" };
     let kept = if cli.energy_kept == TransportSettings::default().diffusion_energy_kept {
         String::new()
     } else {
         format!("_kept{}", cli.energy_kept)
     };
     let method =
-        format!("patches_{:?}{gather_name}{slab}{diffuse}{kept}", cli.kernel).to_lowercase();
+        format!("patches_{:?}{gather_name}{slab}{diffuse}{oriented}{kept}", cli.kernel)
+            .to_lowercase();
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
     for &budget in &cli.budgets {

@@ -56,6 +56,7 @@ pub fn scene_key(
             settings.far_field_ratio,
             settings.cluster_size as f32,
             settings.object_exit_share as u32 as f32,
+            settings.oriented_dipole as u32 as f32,
         ]);
     for (positions, indices, surface) in objects {
         h = h.f32s(positions.iter().flat_map(|p| p.to_array()));

@@ -96,6 +96,40 @@ impl Channel {
         }
     }
 
+    /// The dipole's exitance at `exit` (outward normal `exit_normal`) for flux entering at
+    /// `entry` (outward normal `entry_normal`), positions in mm: the real source a depth
+    /// `z_r` under the entry along its normal, the virtual one `z_v` above it, and the flux
+    /// `D ∇φ` of the pair taken along the exit's own normal. Where exit and entry share one
+    /// plane this is [`reflectance`](Self::reflectance) (the distances to the plane are `z_r`
+    /// and `−z_v`); across a curved object the flux meets the far surface head-on instead of
+    /// grazing it. `None` for Burley's profile, which has no sources.
+    fn oriented_reflectance(
+        &self,
+        entry: bevy::math::DVec3,
+        entry_normal: bevy::math::DVec3,
+        exit: bevy::math::DVec3,
+        exit_normal: bevy::math::DVec3,
+    ) -> Option<f64> {
+        let Channel::Dipole {
+            half_albedo,
+            sigma_tr,
+            z_real,
+            z_virtual,
+        } = *self
+        else {
+            return None;
+        };
+        // `(x − s)·n (σ d + 1) e^(−σ d) / d³`, the term of one source at `s`.
+        let term = |source: bevy::math::DVec3| {
+            let to_exit = exit - source;
+            let d = to_exit.length().max(1e-9);
+            to_exit.dot(exit_normal) * (sigma_tr * d + 1.0) * (-sigma_tr * d).exp() / (d * d * d)
+        };
+        let real = term(entry - z_real * entry_normal);
+        let virtual_ = term(entry + z_virtual * entry_normal);
+        Some((half_albedo / (2.0 * PI) * (real - virtual_)).max(0.0))
+    }
+
     fn within(&self, radius: f64) -> f64 {
         let radius = radius.max(0.0);
         match *self {
@@ -379,6 +413,29 @@ impl DiffusionProfile {
             if holds(mid) { hi = mid } else { lo = mid }
         }
         hi
+    }
+
+    /// How much more (or less) leaves at `exit` than the flat profile gives at their distance,
+    /// per channel, when the dipole's flux is taken along the exit's own normal (see
+    /// [`TransportSettings::oriented_dipole`](super::transport::TransportSettings::oriented_dipole));
+    /// positions in mm. 1 on a plane and for Burley's profile.
+    pub fn orientation_factor(
+        &self,
+        entry: bevy::math::DVec3,
+        entry_normal: bevy::math::DVec3,
+        exit: bevy::math::DVec3,
+        exit_normal: bevy::math::DVec3,
+    ) -> [f64; 3] {
+        let r = entry.distance(exit);
+        self.channels.map(|c| {
+            match c.oriented_reflectance(entry, entry_normal, exit, exit_normal) {
+                Some(oriented) => {
+                    let flat = c.reflectance(r);
+                    if flat > 0.0 { oriented / flat } else { 1.0 }
+                }
+                None => 1.0,
+            }
+        })
     }
 
     /// The share of the flux entering at one point that leaves through a patch of area

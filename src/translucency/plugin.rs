@@ -267,6 +267,8 @@ pub(crate) fn run_precompute(
             settings.transport.far_field_ratio,
             settings.transport.cluster_size as f32,
             settings.transport.kernel as u32 as f32,
+            settings.transport.object_exit_share as u32 as f32,
+            settings.transport.oriented_dipole as u32 as f32,
         ]),
     ];
     for (entity, mesh, material, transform, translucent, _) in &list {

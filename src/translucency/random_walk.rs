@@ -53,7 +53,8 @@ pub fn exit_shares(
 ) -> Option<(Vec3, Vec3)> {
     let object = exit_share(medium, world_units_per_mm, entries, walks, seed, |x, d| {
         rays.first_hit(x, d)
-    })?;
+    })?
+    .left;
     // The slab: the plane z = 0 above the medium, entered at the origin; downwards the
     // medium never ends.
     let flat = [EntryPoint {
@@ -67,8 +68,44 @@ pub fn exit_shares(
         } else {
             (f32::INFINITY, Vec3::Z)
         })
-    })?;
+    })?
+    .left;
     Some((object, slab))
+}
+
+/// The shares of the light entering a slab `thickness_mm` thick (diffusely, through its top
+/// face) that leave through the top and through the bottom, per channel: what the oriented
+/// dipole is held to (`TransportSettings::oriented_dipole`).
+pub fn slab_exits(
+    medium: &TranslucentMedium,
+    thickness_mm: f32,
+    walks: usize,
+    seed: u64,
+) -> Option<(Vec3, Vec3)> {
+    let top = [EntryPoint {
+        position: Vec3::ZERO,
+        normal: Vec3::Z,
+        area: 1.0,
+    }];
+    let exits = exit_share(medium, 1.0, &top, walks, seed, |x, d| {
+        Some(if d.z > 0.0 {
+            ((-x.z).max(0.0) / d.z, Vec3::Z)
+        } else if d.z < 0.0 {
+            ((x.z + thickness_mm).max(0.0) / -d.z, Vec3::Z)
+        } else {
+            (f32::INFINITY, Vec3::Z)
+        })
+    })?;
+    Some((exits.left - exits.facing_away, exits.facing_away))
+}
+
+/// What walks from a set of entry points do, per channel.
+struct Exits {
+    /// The share that leaves.
+    left: Vec3,
+    /// The share that leaves through a surface facing away from the one it entered by (its
+    /// outward normal against the entry's).
+    facing_away: Vec3,
 }
 
 /// [`exit_shares`] for one boundary: `first_hit(x, d)` the distance to it along the unit `d`
@@ -80,7 +117,7 @@ fn exit_share(
     walks: usize,
     seed: u64,
     first_hit: impl Fn(Vec3, Vec3) -> Option<(f32, Vec3)>,
-) -> Option<Vec3> {
+) -> Option<Exits> {
     if medium.invalid_reason().is_some()
         || !(world_units_per_mm.is_finite() && world_units_per_mm > 0.0)
         || entries.is_empty()
@@ -98,14 +135,14 @@ fn exit_share(
         return None;
     }
     let eta = medium.index_of_refraction.max(1.0) as f64;
-    let channel = |c: usize| -> f32 {
+    let channel = |c: usize| -> (f32, f32) {
         let sigma_s = medium.reduced_scattering[c] as f64 / world_units_per_mm as f64;
         let sigma_t = sigma_s + medium.absorption[c] as f64 / world_units_per_mm as f64;
         let albedo = sigma_s / sigma_t;
         // Steps off the surface: a thousandth of a mean free path.
         let epsilon = (1e-3 / sigma_t) as f32;
         let mut random = SplitMix(seed ^ (c as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        let mut left = 0usize;
+        let (mut left, mut facing_away) = (0usize, 0usize);
         for _ in 0..walks {
             let pick = random.next() * total;
             let e = &entries[cumulative.partition_point(|&c| c < pick).min(entries.len() - 1)];
@@ -138,12 +175,20 @@ fn exit_share(
                     continue;
                 }
                 left += 1;
+                if e.normal.dot(outward) < 0.0 {
+                    facing_away += 1;
+                }
                 break;
             }
         }
-        left as f32 / walks.max(1) as f32
+        let n = walks.max(1) as f32;
+        (left as f32 / n, facing_away as f32 / n)
     };
-    Some(Vec3::new(channel(0), channel(1), channel(2)))
+    let [r, g, b] = [channel(0), channel(1), channel(2)];
+    Some(Exits {
+        left: Vec3::new(r.0, g.0, b.0),
+        facing_away: Vec3::new(r.1, g.1, b.1),
+    })
 }
 
 /// A direction cosine-distributed about the unit vector `axis`.

@@ -164,6 +164,12 @@ pub struct TransportSettings {
     /// transport is the same. Used with the kernels that carry Chiang et al.'s albedo (the dipole keeps its own
     /// single-scattering term for a beam's incidence).
     pub beam_incidence: bool,
+    /// Take the dipole's flux between two patches along the exit patch's own normal, from
+    /// sources placed along the entry patch's normal, instead of the flat profile at their
+    /// distance ([`DiffusionProfile::orientation_factor`]): on a plane the same, across a
+    /// curved object the light that crosses its bulk meets the far side head-on. The columns
+    /// keep their totals; only where the light leaves changes.
+    pub oriented_dipole: bool,
 }
 
 impl Default for TransportSettings {
@@ -183,6 +189,7 @@ impl Default for TransportSettings {
             far_field_ratio: 3.0,
             object_exit_share: true,
             beam_incidence: true,
+            oriented_dipole: false,
         }
     }
 }
@@ -526,6 +533,8 @@ impl EnergyTransport {
                 _ => None,
             })
             .collect();
+        // Each row's entries: the column and `K_ij` (`oriented_dipole`: times the pair's
+        // orientation factor; the columns' totals are set below).
         let scattering_rows = parallel_rows(n, |i| {
             let pi = &p[i];
             let surface = surfaces.get(pi.object as usize);
@@ -545,14 +554,22 @@ impl EnergyTransport {
                             (r_mm <= reach_mm).then(|| {
                                 let share = profile.patch_transfer(r_mm, area_i_mm2);
                                 let k = t_in * pj.area as f64 / pi.area as f64;
-                                (
-                                    j as u32,
-                                    Vec3::new(
-                                        (share[0] * k) as f32,
-                                        (share[1] * k) as f32,
-                                        (share[2] * k) as f32,
-                                    ),
-                                )
+                                let factor = if settings.oriented_dipole && i != j {
+                                    profile.orientation_factor(
+                                        pj.centre.as_dvec3() * mm,
+                                        pj.normal.as_dvec3(),
+                                        pi.centre.as_dvec3() * mm,
+                                        pi.normal.as_dvec3(),
+                                    )
+                                } else {
+                                    [1.0; 3]
+                                };
+                                let value = Vec3::new(
+                                    (share[0] * k * factor[0]) as f32,
+                                    (share[1] * k * factor[1]) as f32,
+                                    (share[2] * k * factor[2]) as f32,
+                                );
+                                (j as u32, value)
                             })
                         })
                         .collect()
@@ -564,22 +581,9 @@ impl EnergyTransport {
                 _ => Vec::new(),
             }
         });
+
         let mut scattering = SparseMatrix::from_rows(scattering_rows);
 
-        // Each translucent column carries the slab's total reflectance: Σ_i P_ij = W∞. The
-        // cut-off drops ~1 %, and equal-area discs about neighbouring centres overlap the
-        // source's own disc where the profile is narrower than a patch (measured up to +28 %
-        // on a 5 cm marble ball in 34 mm patches); the columns are rescaled to W∞, and what
-        // they held before is reported.
-        let mut column_sums = vec![Vec3::ZERO; n];
-        for (i, pi) in p.iter().enumerate() {
-            for (j, k) in scattering.row(i) {
-                column_sums[j] += k * pi.area;
-            }
-        }
-        // What each translucent object's columns give off of what enters it, in all: the
-        // slab's W∞, times (`object_exit_share`) what random walks find in the object's own
-        // shape over what they find in a slab.
         // Per translucent object: the slab's W∞ of its profile, and the factor its columns
         // carry beyond it — 1, or (`object_exit_share`) what random walks find leaving the
         // object's own shape over what leaves a slab.
@@ -623,6 +627,18 @@ impl EnergyTransport {
                 Some((slab, finite))
             })
             .collect();
+
+        // Each translucent column carries the slab's total reflectance: Σ_i P_ij = W∞. The
+        // cut-off drops ~1 %, and equal-area discs about neighbouring centres overlap the
+        // source's own disc where the profile is narrower than a patch (measured up to +28 %
+        // on a 5 cm marble ball in 34 mm patches); the columns are rescaled to W∞, and what
+        // they held before is reported.
+        let mut column_sums = vec![Vec3::ZERO; n];
+        for (i, pi) in p.iter().enumerate() {
+            for (j, k) in scattering.row(i) {
+                column_sums[j] += k * pi.area;
+            }
+        }
         let (mut kept_sum, mut kept_count) = (Vec3::ZERO, 0);
         let mut walked_sum = Vec3::ZERO;
         let mut column_scale = vec![Vec3::ONE; n];
