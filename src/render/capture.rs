@@ -660,7 +660,7 @@ pub(crate) fn copy_bleeding(
 }
 
 /// The bytes of one part without the row padding; empty if it was not copied.
-fn part_bytes<'a>(data: &'a [u8], place: &PartPlace) -> Option<Vec<u8>> {
+fn part_bytes(data: &[u8], place: &PartPlace) -> Option<Vec<u8>> {
     if place.rows == 0 {
         return Some(Vec::new());
     }

@@ -96,16 +96,45 @@ pub fn slab_exits(
             (f32::INFINITY, Vec3::Z)
         })
     })?;
-    Some((exits.left - exits.facing_away, exits.facing_away))
+    Some((exits.left - exits.other_face, exits.other_face))
+}
+
+/// The shares of the light entering a right-angled edge of a medium (the quarter-space
+/// `x < 0, y < 0`) through its face `y = 0`, `distance_mm` from the edge, that leave through
+/// that face and through the other one, `x = 0`, per channel: the geometry a convex object's
+/// curve between two patches a quarter of the way round it stands for.
+pub fn edge_exits(
+    medium: &TranslucentMedium,
+    distance_mm: f32,
+    walks: usize,
+    seed: u64,
+) -> Option<(Vec3, Vec3)> {
+    let entry = [EntryPoint {
+        position: Vec3::new(-distance_mm, 0.0, 0.0),
+        normal: Vec3::Y,
+        area: 1.0,
+    }];
+    let exits = exit_share(medium, 1.0, &entry, walks, seed, |x, d| {
+        let to = |position: f32, direction: f32| {
+            if direction > 0.0 {
+                (-position).max(0.0) / direction
+            } else {
+                f32::INFINITY
+            }
+        };
+        let (tx, ty) = (to(x.x, d.x), to(x.y, d.y));
+        Some(if tx < ty { (tx, Vec3::X) } else { (ty, Vec3::Y) })
+    })?;
+    Some((exits.left - exits.other_face, exits.other_face))
 }
 
 /// What walks from a set of entry points do, per channel.
 struct Exits {
     /// The share that leaves.
     left: Vec3,
-    /// The share that leaves through a surface facing away from the one it entered by (its
-    /// outward normal against the entry's).
-    facing_away: Vec3,
+    /// The share that leaves through another face than the one it entered by (outward
+    /// normals' cosine below 0.99).
+    other_face: Vec3,
 }
 
 /// [`exit_shares`] for one boundary: `first_hit(x, d)` the distance to it along the unit `d`
@@ -142,7 +171,7 @@ fn exit_share(
         // Steps off the surface: a thousandth of a mean free path.
         let epsilon = (1e-3 / sigma_t) as f32;
         let mut random = SplitMix(seed ^ (c as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        let (mut left, mut facing_away) = (0usize, 0usize);
+        let (mut left, mut other_face) = (0usize, 0usize);
         for _ in 0..walks {
             let pick = random.next() * total;
             let e = &entries[cumulative.partition_point(|&c| c < pick).min(entries.len() - 1)];
@@ -175,19 +204,19 @@ fn exit_share(
                     continue;
                 }
                 left += 1;
-                if e.normal.dot(outward) < 0.0 {
-                    facing_away += 1;
+                if e.normal.dot(outward) < 0.99 {
+                    other_face += 1;
                 }
                 break;
             }
         }
         let n = walks.max(1) as f32;
-        (left as f32 / n, facing_away as f32 / n)
+        (left as f32 / n, other_face as f32 / n)
     };
     let [r, g, b] = [channel(0), channel(1), channel(2)];
     Some(Exits {
         left: Vec3::new(r.0, g.0, b.0),
-        facing_away: Vec3::new(r.1, g.1, b.1),
+        other_face: Vec3::new(r.1, g.1, b.1),
     })
 }
 
