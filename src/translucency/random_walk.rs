@@ -63,11 +63,7 @@ pub fn exit_shares(
         area: 1.0,
     }];
     let slab = exit_share(medium, world_units_per_mm, &flat, walks, seed, |x, d| {
-        Some(if d.z > 0.0 {
-            ((-x.z).max(0.0) / d.z, Vec3::Z)
-        } else {
-            (f32::INFINITY, Vec3::Z)
-        })
+        Some(slab_hit(x, d, f32::INFINITY))
     })?
     .left;
     Some((object, slab))
@@ -88,15 +84,22 @@ pub fn slab_exits(
         area: 1.0,
     }];
     let exits = exit_share(medium, 1.0, &top, walks, seed, |x, d| {
-        Some(if d.z > 0.0 {
-            ((-x.z).max(0.0) / d.z, Vec3::Z)
-        } else if d.z < 0.0 {
-            ((x.z + thickness_mm).max(0.0) / -d.z, Vec3::Z)
-        } else {
-            (f32::INFINITY, Vec3::Z)
-        })
+        Some(slab_hit(x, d, thickness_mm))
     })?;
     Some((exits.left - exits.other_face, exits.other_face))
+}
+
+/// The first face a ray from `x` along `d` meets in the slab `−thickness < z < 0` (infinite:
+/// the half-space), with the faces' normal.
+fn slab_hit(x: Vec3, d: Vec3, thickness: f32) -> (f32, Vec3) {
+    let distance = if d.z > 0.0 {
+        (-x.z).max(0.0) / d.z
+    } else if d.z < 0.0 {
+        (x.z + thickness).max(0.0) / -d.z
+    } else {
+        f32::INFINITY
+    };
+    (distance, Vec3::Z)
 }
 
 /// The shares of the light entering a right-angled edge of a medium (the quarter-space

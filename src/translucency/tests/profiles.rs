@@ -226,6 +226,23 @@ fn the_oriented_dipole_is_the_flat_profile_on_a_plane() {
     }
 }
 
+/// Holds a model's share of light to random walks' (`walked`), with the oriented dipole
+/// (`through(true)`) and the flat profile (`through(false)`), each to its measured ratio ±0.05.
+fn holds_to_walks(
+    case: &str,
+    walked: f64,
+    through: impl Fn(bool) -> f64,
+    oriented_ratio: f64,
+    flat_ratio: f64,
+) {
+    let (oriented, flat) = (through(true) / walked, through(false) / walked);
+    eprintln!("{case}: walks {walked:.5}, oriented {oriented:.3}×, flat {flat:.3}×");
+    assert!(
+        (oriented - oriented_ratio).abs() < 0.05 && (flat - flat_ratio).abs() < 0.05,
+        "{case}: oriented {oriented:.3}× (measured {oriented_ratio}), flat {flat:.3}× (measured {flat_ratio})"
+    );
+}
+
 /// Across a slab, the oriented dipole's flux through the far face is the leading term of
 /// diffusion theory's slab transmittance (Contini et al. 1997, their `m = 0` image pair). Held
 /// to random walks through index-matched slabs (16 384 walks a channel, the channels where
@@ -273,15 +290,8 @@ fn the_oriented_dipole_carries_a_slabs_transmission_where_the_flat_profile_does_
                 48,
             )
         };
-        let walked = transmitted[c] as f64;
-        let (oriented, flat) = (through(true) / walked, through(false) / walked);
-        eprintln!(
-            "{preset:?} {thickness} mm, channel {c}: walks {walked:.5}, oriented {oriented:.3}×, flat {flat:.3}×"
-        );
-        assert!(
-            (oriented - oriented_ratio).abs() < 0.05 && (flat - flat_ratio).abs() < 0.05,
-            "{preset:?} {thickness} mm, channel {c}: oriented {oriented:.3}× (measured {oriented_ratio}), flat {flat:.3}× (measured {flat_ratio})"
-        );
+        let case = format!("{preset:?} {thickness} mm, channel {c}");
+        holds_to_walks(&case, transmitted[c] as f64, through, oriented_ratio, flat_ratio);
     }
 }
 
@@ -338,14 +348,7 @@ fn at_a_convex_edge_the_profiles_carry_less_round_the_corner_than_walks() {
                 24,
             )
         };
-        let walked = round[c] as f64;
-        let (oriented, flat) = (through(true) / walked, through(false) / walked);
-        eprintln!(
-            "{preset:?} {distance} mm, channel {c}: walks {walked:.5}, oriented {oriented:.3}×, flat {flat:.3}×"
-        );
-        assert!(
-            (oriented - oriented_ratio).abs() < 0.05 && (flat - flat_ratio).abs() < 0.05,
-            "{preset:?} {distance} mm, channel {c}: oriented {oriented:.3}× (measured {oriented_ratio}), flat {flat:.3}× (measured {flat_ratio})"
-        );
+        let case = format!("{preset:?} {distance} mm from the edge, channel {c}");
+        holds_to_walks(&case, round[c] as f64, through, oriented_ratio, flat_ratio);
     }
 }
