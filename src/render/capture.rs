@@ -292,10 +292,17 @@ fn sync_capture_buffers(
         .lock()
         .map(|s| s.needed.clone())
         .unwrap_or_default();
+    let forget = |camera: Entity| {
+        if let Ok(mut state) = captures.0.lock() {
+            state.needed.remove(&camera);
+            state.delivered.remove(&camera);
+        }
+    };
     for (camera, capture, wanted) in &cameras {
         if !wanted {
             commands.entity(capture.reader).despawn();
             commands.entity(camera).remove::<CaptureBuffer>();
+            forget(camera);
             continue;
         }
         let Some(&bytes) = needed.get(&camera) else {
@@ -310,6 +317,7 @@ fn sync_capture_buffers(
     for (reader, of) in &readers {
         if cameras.get(of.0).is_err() {
             commands.entity(reader).despawn();
+            forget(of.0);
         }
     }
 }
