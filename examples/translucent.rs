@@ -139,6 +139,7 @@ fn setup(world: &mut World) {
         Translucent {
             medium: TranslucentPreset::Marble.medium(),
             world_units_per_mm: 0.001,
+            ..default()
         },
     ));
     world.spawn((
@@ -148,6 +149,7 @@ fn setup(world: &mut World) {
         Translucent {
             medium: TranslucentPreset::Skin1.medium(),
             world_units_per_mm: 0.001,
+            ..default()
         },
     ));
     // The room, inside out: each plane's normal faces inwards.

@@ -77,7 +77,7 @@ struct Cli {
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     beam_incidence: bool,
     /// Take the dipole's flux along each exit patch's normal
-    /// (`TransportSettings::oriented_dipole`; method suffix `_oriented` when on)
+    /// (`Translucent::oriented_dipole`; method suffix `_oriented` when on)
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
     oriented_dipole: bool,
     /// How the pixels take the patches' light: interpolated radiance (the plugin's default)
@@ -246,7 +246,6 @@ fn main() {
         },
         object_exit_share: cli.object_exit_share,
         beam_incidence: cli.beam_incidence,
-        oriented_dipole: cli.oriented_dipole,
         diffusion_energy_kept: cli.energy_kept,
         ..default()
     };
@@ -268,7 +267,15 @@ fn main() {
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
     for &budget in &cli.budgets {
-        let result = plugin_picture(medium, &settings, gather, budget, light, size);
+        let result = plugin_picture(
+            medium,
+            cli.oriented_dipole,
+            &settings,
+            gather,
+            budget,
+            light,
+            size,
+        );
         let picture = &result.pixels;
         let scores = score(picture, &reference, size);
         let rel_l1 = scores.rel_l1;

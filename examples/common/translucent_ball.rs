@@ -63,6 +63,7 @@ pub struct BallPicture {
 /// `light` (unit), at `budget` patches, `size`² pixels.
 pub fn plugin_picture(
     medium: TranslucentMedium,
+    oriented_dipole: bool,
     settings: &TransportSettings,
     gather: GatherMethod,
     budget: u32,
@@ -81,6 +82,7 @@ pub fn plugin_picture(
     let surfaces = [PatchSurface::Translucent {
         medium,
         world_units_per_mm: 0.001,
+        oriented_dipole,
     }];
     let lights = [PatchLight::Directional {
         direction: light,

@@ -85,6 +85,7 @@ pub fn translucent_room(bunny: &Path) -> Vec<SceneObject> {
             PatchSurface::Translucent {
                 medium: TranslucentPreset::Marble.medium(),
                 world_units_per_mm: mm,
+                oriented_dipole: false,
             },
         ),
         object(
@@ -97,6 +98,7 @@ pub fn translucent_room(bunny: &Path) -> Vec<SceneObject> {
             PatchSurface::Translucent {
                 medium: TranslucentPreset::Skin1.medium(),
                 world_units_per_mm: mm,
+                oriented_dipole: false,
             },
         ),
         object("floor", plane(Vec3::Y), Transform::IDENTITY, white),

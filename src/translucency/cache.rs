@@ -56,7 +56,6 @@ pub fn scene_key(
             settings.far_field_ratio,
             settings.cluster_size as f32,
             settings.object_exit_share as u32 as f32,
-            settings.oriented_dipole as u32 as f32,
         ]);
     for (positions, indices, surface) in objects {
         h = h.f32s(positions.iter().flat_map(|p| p.to_array()));
@@ -66,11 +65,13 @@ pub fn scene_key(
             PatchSurface::Translucent {
                 medium,
                 world_units_per_mm,
+                oriented_dipole,
             } => h
                 .bytes(b"translucent")
                 .f32s(medium.absorption.to_array())
                 .f32s(medium.reduced_scattering.to_array())
-                .f32s([medium.index_of_refraction, *world_units_per_mm]),
+                .f32s([medium.index_of_refraction, *world_units_per_mm])
+                .bytes(&[*oriented_dipole as u8]),
         };
     }
     h.0

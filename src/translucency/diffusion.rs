@@ -417,7 +417,7 @@ impl DiffusionProfile {
 
     /// How much more (or less) leaves at `exit` than the flat profile gives at their distance,
     /// per channel, when the dipole's flux is taken along the exit's own normal (see
-    /// [`TransportSettings::oriented_dipole`](super::transport::TransportSettings::oriented_dipole));
+    /// [`Translucent::oriented_dipole`](super::plugin::Translucent::oriented_dipole));
     /// positions in mm. 1 on a plane and for Burley's profile.
     pub fn orientation_factor(
         &self,

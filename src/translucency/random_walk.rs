@@ -71,7 +71,7 @@ pub fn exit_shares(
 
 /// The shares of the light entering a slab `thickness_mm` thick (diffusely, through its top
 /// face) that leave through the top and through the bottom, per channel: what the oriented
-/// dipole is held to (`TransportSettings::oriented_dipole`).
+/// dipole is held to (`Translucent::oriented_dipole`).
 pub fn slab_exits(
     medium: &TranslucentMedium,
     thickness_mm: f32,

@@ -126,6 +126,9 @@ pub enum PatchSurface {
         medium: TranslucentMedium,
         /// World units per millimetre (0.001 for a scene in metres).
         world_units_per_mm: f32,
+        /// Take the dipole's flux along the exit patch's own normal
+        /// ([`Translucent::oriented_dipole`](super::plugin::Translucent::oriented_dipole)).
+        oriented_dipole: bool,
     },
     /// Lambertian, with this albedo per channel (0–1).
     Opaque {
@@ -164,12 +167,6 @@ pub struct TransportSettings {
     /// transport is the same. Used with the kernels that carry Chiang et al.'s albedo (the dipole keeps its own
     /// single-scattering term for a beam's incidence).
     pub beam_incidence: bool,
-    /// Take the dipole's flux between two patches along the exit patch's own normal, from
-    /// sources placed along the entry patch's normal, instead of the flat profile at their
-    /// distance ([`DiffusionProfile::orientation_factor`]): on a plane the same, across a
-    /// curved object the light that crosses its bulk meets the far side head-on. The columns
-    /// keep their totals; only where the light leaves changes.
-    pub oriented_dipole: bool,
 }
 
 impl Default for TransportSettings {
@@ -189,7 +186,6 @@ impl Default for TransportSettings {
             far_field_ratio: 3.0,
             object_exit_share: true,
             beam_incidence: true,
-            oriented_dipole: false,
         }
     }
 }
@@ -521,6 +517,7 @@ impl EnergyTransport {
                 PatchSurface::Translucent {
                     medium,
                     world_units_per_mm,
+                    ..
                 } if medium.invalid_reason().is_none()
                     && world_units_per_mm.is_finite()
                     && world_units_per_mm > 0.0 =>
@@ -533,14 +530,16 @@ impl EnergyTransport {
                 _ => None,
             })
             .collect();
-        // Each row's entries: the column and `K_ij` (`oriented_dipole`: times the pair's
-        // orientation factor; the columns' totals are set below).
+        // Each row's entries: the column and `K_ij` (an object with `oriented_dipole`: times the
+        // pair's orientation factor; the columns' totals are set below).
         let scattering_rows = parallel_rows(n, |i| {
             let pi = &p[i];
             let surface = surfaces.get(pi.object as usize);
             match (surface, profiles.get(pi.object as usize).copied().flatten()) {
                 (
-                    Some(PatchSurface::Translucent { .. }),
+                    Some(&PatchSurface::Translucent {
+                        oriented_dipole, ..
+                    }),
                     Some((profile, units_per_mm, reach_mm)),
                 ) => {
                     let mm = 1.0 / units_per_mm;
@@ -554,7 +553,7 @@ impl EnergyTransport {
                             (r_mm <= reach_mm).then(|| {
                                 let share = profile.patch_transfer(r_mm, area_i_mm2);
                                 let k = t_in * pj.area as f64 / pi.area as f64;
-                                let factor = if settings.oriented_dipole && i != j {
+                                let factor = if oriented_dipole && i != j {
                                     profile.orientation_factor(
                                         pj.centre.as_dvec3() * mm,
                                         pj.normal.as_dvec3(),

@@ -90,6 +90,7 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
         PatchSurface::Translucent {
             medium: TranslucentPreset::Marble.medium(),
             world_units_per_mm: 0.001,
+            oriented_dipole: false,
         },
         PatchSurface::Opaque {
             albedo: Vec3::splat(0.8),
@@ -700,10 +701,8 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
         let label = if oriented_dipole { format!("{name} (oriented dipole)") } else { name.to_string() };
         let picture = plugin_picture(
             medium,
-            &TransportSettings {
-                oriented_dipole,
-                ..default()
-            },
+            oriented_dipole,
+            &TransportSettings::default(),
             bevy_mesostructure::translucency::GatherMethod::Interpolation,
             1000,
             light.normalize(),

@@ -16,6 +16,7 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
         PatchSurface::Translucent {
             medium: TranslucentPreset::Skin1.medium(),
             world_units_per_mm: 0.001,
+            oriented_dipole: false,
         },
         PatchSurface::Opaque {
             albedo: Vec3::splat(0.8),

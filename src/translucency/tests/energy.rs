@@ -218,6 +218,7 @@ fn the_sparse_iteration_converges_to_the_dense_solution() {
         PatchSurface::Translucent {
             medium: TranslucentPreset::Marble.medium(),
             world_units_per_mm: 0.001,
+            oriented_dipole: false,
         },
         PatchSurface::Opaque {
             albedo: Vec3::splat(0.8),
@@ -301,4 +302,54 @@ fn the_sparse_iteration_converges_to_the_dense_solution() {
         .filter(|((_, e), b)| e.x == 0.0 && b.x > 0.0)
         .count();
     assert!(dark_but_glowing > 0);
+}
+
+/// `Translucent::oriented_dipole` is per object: on for one of two balls, it changes that
+/// ball's rows of `K` and leaves the other's bit for bit; the cache key tells the scenes apart.
+#[test]
+fn the_oriented_dipole_changes_only_its_own_objects_transport() {
+    let ball = |x: f32| {
+        mesh_object(
+            Sphere::new(0.01).mesh().ico(3).unwrap(),
+            Transform::from_xyz(x, 0.0, 0.0),
+        )
+    };
+    let objects = [ball(-0.02), ball(0.02)];
+    let views = views_of(&objects);
+    let patches = resample_into_patches(&views, 400);
+    let rays = SceneRays::new(&views);
+    let surface = |oriented_dipole| PatchSurface::Translucent {
+        medium: TranslucentPreset::Skin1.medium(),
+        world_units_per_mm: 0.001,
+        oriented_dipole,
+    };
+    let settings = TransportSettings {
+        object_exit_share: false,
+        ..default()
+    };
+    let flat = [surface(false), surface(false)];
+    let second_oriented = [surface(false), surface(true)];
+    let off = EnergyTransport::build(&patches, &flat, &rays, &settings);
+    let on = EnergyTransport::build(&patches, &second_oriented, &rays, &settings);
+    let (mut kept, mut changed) = (0, 0);
+    for (i, patch) in patches.patches.iter().enumerate() {
+        let before: Vec<_> = off.scattering.row(i).collect();
+        let after: Vec<_> = on.scattering.row(i).collect();
+        if patch.object == 0 {
+            assert_eq!(before, after, "patch {i} of the flat ball");
+            kept += 1;
+        } else if before != after {
+            changed += 1;
+        }
+    }
+    assert!(kept > 0 && changed > 0, "{kept} rows kept, {changed} changed");
+    let key = |surfaces: &[PatchSurface; 2]| {
+        let keyed: Vec<_> = objects
+            .iter()
+            .zip(surfaces)
+            .map(|(o, s)| (&o.0[..], &o.1[..], *s))
+            .collect();
+        crate::translucency::cache::scene_key(&keyed, 400, &settings)
+    };
+    assert_ne!(key(&flat), key(&second_oriented));
 }

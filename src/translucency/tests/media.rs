@@ -21,6 +21,7 @@ fn invalid_media_scatter_nothing_and_say_why() {
     let surfaces = [PatchSurface::Translucent {
         medium,
         world_units_per_mm: 1.0,
+        oriented_dipole: false,
     }];
     let transport = EnergyTransport::build(&patches, &surfaces, &rays, &default());
     assert_eq!(transport.scattering.entries(), 0);
