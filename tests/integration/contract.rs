@@ -64,10 +64,11 @@ fn compare_with_oracle(frame: &CapturedFrame, settings: &Mesostructure) -> (usiz
             }
             if let Some(cd) = c.direct {
                 direct_total += 1;
-                if let Some(gd) = g.direct {
-                    if (gd.x - cd.x).abs() <= 1 && (gd.y - cd.y).abs() <= 1 {
-                        direct_close += 1;
-                    }
+                if let Some(gd) = g.direct
+                    && (gd.x - cd.x).abs() <= 1
+                    && (gd.y - cd.y).abs() <= 1
+                {
+                    direct_close += 1;
                 }
             }
         }

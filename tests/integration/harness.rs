@@ -161,12 +161,13 @@ pub fn frame_count(app: &App) -> u32 {
 }
 
 /// Runs 4 frames (assets prepared, pipelines compiled), then until `camera` has a capture of a
-/// frame rendered after this call began (at most `max` more frames); returns it.
+/// frame rendered after that (at most `max` more frames); returns it. (Captures arrive a frame
+/// or more late: one from the first frames may show a pass before its pipeline compiled.)
 pub fn capture(app: &mut App, camera: Entity, max: usize) -> CapturedFrame {
     let captures = app.world().resource::<MesostructureCaptures>().clone();
-    let since = frame_count(app);
     run(app, 4);
     assert_pipelines_ready(app);
+    let since = frame_count(app);
     for _ in 0..max {
         if let Some(frame) = captures.take_after(camera, since) {
             return frame;
