@@ -226,16 +226,25 @@ fn the_oriented_dipole_is_the_flat_profile_on_a_plane() {
     }
 }
 
-/// Holds a model's share of light to random walks' (`walked`), with the oriented dipole
-/// (`through(true)`) and the flat profile (`through(false)`), each to its measured ratio ±0.05.
+/// Holds a model's share of light to random walks' in an index-matched `preset`: `walked` the
+/// walks' share, `through(profile, oriented)` the scaled dipole's with the orientation factor
+/// (`true`) and without it (the flat profile), each to its measured ratio ±0.05.
 fn holds_to_walks(
     case: &str,
-    walked: f64,
-    through: impl Fn(bool) -> f64,
+    preset: TranslucentPreset,
+    walked: impl Fn(&TranslucentMedium) -> f64,
+    through: impl Fn(&DiffusionProfile, bool) -> f64,
     oriented_ratio: f64,
     flat_ratio: f64,
 ) {
-    let (oriented, flat) = (through(true) / walked, through(false) / walked);
+    let medium = TranslucentMedium {
+        index_of_refraction: 1.0,
+        ..preset.medium()
+    };
+    let profile = DiffusionProfile::new(&medium, DiffusionKernel::ScaledDipole);
+    let walked = walked(&medium);
+    let oriented = through(&profile, true) / walked;
+    let flat = through(&profile, false) / walked;
     eprintln!("{case}: walks {walked:.5}, oriented {oriented:.3}×, flat {flat:.3}×");
     assert!(
         (oriented - oriented_ratio).abs() < 0.05 && (flat - flat_ratio).abs() < 0.05,
@@ -267,14 +276,11 @@ fn the_oriented_dipole_carries_a_slabs_transmission_where_the_flat_profile_does_
         (TranslucentPreset::Marble, 20.0, 0, 0.600, 0.263),
     ];
     for (preset, thickness, c, oriented_ratio, flat_ratio) in cases {
-        let medium = TranslucentMedium {
-            index_of_refraction: 1.0,
-            ..preset.medium()
+        let transmitted = |medium: &TranslucentMedium| {
+            slab_exits(medium, thickness as f32, 16384, 3).unwrap().1[c] as f64
         };
-        let profile = DiffusionProfile::new(&medium, DiffusionKernel::ScaledDipole);
-        let (_, transmitted) = slab_exits(&medium, thickness as f32, 16384, 3).unwrap();
         // ∫ 2πρ R(ρ) dρ over the far face, with and without the orientation factor.
-        let through = |oriented: bool| {
+        let through = |profile: &DiffusionProfile, oriented: bool| {
             integrate_log(
                 |rho| {
                     let exit = DVec3::new(rho, 0.0, -thickness);
@@ -291,7 +297,7 @@ fn the_oriented_dipole_carries_a_slabs_transmission_where_the_flat_profile_does_
             )
         };
         let case = format!("{preset:?} {thickness} mm, channel {c}");
-        holds_to_walks(&case, transmitted[c] as f64, through, oriented_ratio, flat_ratio);
+        holds_to_walks(&case, preset, transmitted, through, oriented_ratio, flat_ratio);
     }
 }
 
@@ -317,15 +323,12 @@ fn at_a_convex_edge_the_profiles_carry_less_round_the_corner_than_walks() {
         (TranslucentPreset::Marble, 10.0, 0, 0.659, 0.599),
     ];
     for (preset, distance, c, oriented_ratio, flat_ratio) in cases {
-        let medium = TranslucentMedium {
-            index_of_refraction: 1.0,
-            ..preset.medium()
+        let round = |medium: &TranslucentMedium| {
+            edge_exits(medium, distance as f32, 16384, 5).unwrap().1[c] as f64
         };
-        let profile = DiffusionProfile::new(&medium, DiffusionKernel::ScaledDipole);
-        let (_, round) = edge_exits(&medium, distance as f32, 16384, 5).unwrap();
         let entry = DVec3::new(-distance, 0.0, 0.0);
         // ∫∫ over the face x = 0 (y < 0, both signs of z).
-        let through = |oriented: bool| {
+        let through = |profile: &DiffusionProfile, oriented: bool| {
             integrate_log(
                 |y| {
                     integrate_log(
@@ -349,6 +352,6 @@ fn at_a_convex_edge_the_profiles_carry_less_round_the_corner_than_walks() {
             )
         };
         let case = format!("{preset:?} {distance} mm from the edge, channel {c}");
-        holds_to_walks(&case, round[c] as f64, through, oriented_ratio, flat_ratio);
+        holds_to_walks(&case, preset, round, through, oriented_ratio, flat_ratio);
     }
 }
