@@ -29,6 +29,8 @@ pub mod medium;
 pub mod patches;
 mod plugin;
 pub mod random_walk;
+mod rays;
+mod sparse;
 pub mod transport;
 
 use bevy::{

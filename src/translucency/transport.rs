@@ -22,100 +22,17 @@
 //! The kernels and far-field clusters of `F` are in `far_field.rs`; the lights' direct part,
 //! re-exported here, in `lights.rs`.
 
-use std::{
-    ops::{AddAssign, Mul},
-    time::Instant,
-};
+use std::time::Instant;
 
 use bevy::prelude::*;
-use obvhs::{
-    BvhBuildParams,
-    cwbvh::{CwBvh, builder::build_cwbvh_from_tris},
-    ray::{Ray, RayHit},
-    triangle::Triangle,
-};
-use obvhs_glam::Vec3A;
-
 use super::far_field::{Cluster, clusters, coarser_clusters, disc_kernel, near_kernel};
 pub use super::lights::{DirectLight, PatchLight, direct_irradiance, direct_light};
+pub use super::{rays::SceneRays, sparse::SparseMatrix};
 use super::{
     diffusion::{DiffusionKernel, DiffusionProfile},
     medium::TranslucentMedium,
-    patches::{PatchObject, Patches},
+    patches::Patches,
 };
-
-/// A sparse matrix in compressed rows, laid out as the GPU reads it.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct SparseMatrix<T> {
-    /// Row `i`'s entries are `row_offsets[i]..row_offsets[i + 1]`; `rows + 1` offsets.
-    pub row_offsets: Vec<u32>,
-    /// Column of each entry.
-    pub columns: Vec<u32>,
-    /// Value of each entry.
-    pub values: Vec<T>,
-}
-
-impl<T: Copy> SparseMatrix<T> {
-    /// Builds the matrix from each row's `(column, value)` entries.
-    pub fn from_rows(rows: Vec<Vec<(u32, T)>>) -> Self {
-        let mut m = Self {
-            row_offsets: Vec::with_capacity(rows.len() + 1),
-            columns: Vec::new(),
-            values: Vec::new(),
-        };
-        m.row_offsets.push(0);
-        for mut row in rows {
-            row.sort_by_key(|e| e.0);
-            for (c, v) in row {
-                m.columns.push(c);
-                m.values.push(v);
-            }
-            m.row_offsets.push(m.columns.len() as u32);
-        }
-        m
-    }
-
-    /// Number of rows.
-    pub fn rows(&self) -> usize {
-        self.row_offsets.len().saturating_sub(1)
-    }
-
-    /// Number of stored entries.
-    pub fn entries(&self) -> usize {
-        self.columns.len()
-    }
-
-    /// Row `i`'s `(column, value)` entries.
-    pub fn row(&self, i: usize) -> impl Iterator<Item = (usize, T)> + '_ {
-        let range = self.row_offsets[i] as usize..self.row_offsets[i + 1] as usize;
-        self.columns[range.clone()]
-            .iter()
-            .zip(&self.values[range])
-            .map(|(&c, &v)| (c as usize, v))
-    }
-
-    /// The value at `(i, j)`, zero where nothing is stored.
-    pub fn get(&self, i: usize, j: usize) -> Option<T> {
-        self.row(i).find(|&(c, _)| c == j).map(|(_, v)| v)
-    }
-
-    /// `y = M x`.
-    pub fn mul_vec<V>(&self, x: &[V]) -> Vec<V>
-    where
-        T: Mul<V, Output = V>,
-        V: Copy + Default + AddAssign,
-    {
-        (0..self.rows())
-            .map(|i| {
-                let mut sum = V::default();
-                for (j, v) in self.row(i) {
-                    sum += v * x[j];
-                }
-                sum
-            })
-            .collect()
-    }
-}
 
 /// What an object's surface does with the light that reaches it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -187,81 +104,6 @@ impl Default for TransportSettings {
             object_exit_share: true,
             beam_incidence: true,
         }
-    }
-}
-
-/// Visibility between points: the scene's triangles in a BVH.
-pub struct SceneRays {
-    bvh: CwBvh,
-    triangles: Vec<Triangle>,
-}
-
-fn to_a(v: Vec3) -> Vec3A {
-    Vec3A::new(v.x, v.y, v.z)
-}
-
-impl SceneRays {
-    /// All objects' valid triangles.
-    pub fn new(objects: &[PatchObject]) -> Self {
-        let triangles: Vec<Triangle> = objects
-            .iter()
-            .flat_map(|o| {
-                o.indices.chunks_exact(3).filter_map(|t| {
-                    let v = |k: usize| o.positions.get(t[k] as usize).copied();
-                    let (a, b, c) = (v(0)?, v(1)?, v(2)?);
-                    (a.is_finite() && b.is_finite() && c.is_finite()).then(|| Triangle {
-                        v0: to_a(a),
-                        v1: to_a(b),
-                        v2: to_a(c),
-                    })
-                })
-            })
-            .collect();
-        let mut time = std::time::Duration::ZERO;
-        let bvh = build_cwbvh_from_tris(&triangles, BvhBuildParams::fast_build(), &mut time);
-        Self { bvh, triangles }
-    }
-
-    /// Whether the segment from `a` towards `b` is free over `[0, length · (1 − 1e-3)]`;
-    /// `b = None` with `direction`: free to infinity.
-    pub(super) fn free(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
-        if self.triangles.is_empty() {
-            return true;
-        }
-        // A zero component makes the traversal miss everything along the ray.
-        let nudge = |c: f32| if c.abs() < 1e-9 { 1e-9 } else { c };
-        let d = Vec3A::new(nudge(direction.x), nudge(direction.y), nudge(direction.z));
-        let ray = Ray::new(to_a(origin), d, 0.0, t_max);
-        self.bvh.ray_traverse_miss(ray, |r, id| {
-            self.triangles[self.bvh.primitive_indices[id] as usize].intersect(r)
-        })
-    }
-
-    /// The nearest triangle along the unit `direction` from `origin`: its distance and unit
-    /// normal (either side); `None` where the ray leaves the scene.
-    pub fn first_hit(&self, origin: Vec3, direction: Vec3) -> Option<(f32, Vec3)> {
-        if self.triangles.is_empty() {
-            return None;
-        }
-        let nudge = |c: f32| if c.abs() < 1e-9 { 1e-9 } else { c };
-        let d = Vec3A::new(nudge(direction.x), nudge(direction.y), nudge(direction.z));
-        let ray = Ray::new(to_a(origin), d, 0.0, f32::INFINITY);
-        let mut hit = RayHit::none();
-        let found = self.bvh.ray_traverse(ray, &mut hit, |r, id| {
-            self.triangles[self.bvh.primitive_indices[id] as usize].intersect(r)
-        });
-        found.then(|| {
-            let t = &self.triangles[self.bvh.primitive_indices[hit.primitive_id as usize] as usize];
-            let n = (t.v1 - t.v0).cross(t.v2 - t.v0).normalize_or_zero();
-            (hit.t, Vec3::new(n.x, n.y, n.z))
-        })
-    }
-
-    /// Whether `b` is visible from `a`.
-    pub fn visible(&self, a: Vec3, b: Vec3) -> bool {
-        let d = b - a;
-        let length = d.length();
-        length > 0.0 && self.free(a, d / length, length * (1.0 - 1e-4))
     }
 }
 

@@ -1,0 +1,90 @@
+//! Visibility between points of the scene: its triangles in a BVH (`obvhs`'s compressed wide
+//! BVH), for the form factors' rays, the lights' shadow rays and the random walks.
+
+use bevy::prelude::*;
+use obvhs::{
+    BvhBuildParams,
+    cwbvh::{CwBvh, builder::build_cwbvh_from_tris},
+    ray::{Ray, RayHit},
+    triangle::Triangle,
+};
+use obvhs_glam::Vec3A;
+
+use super::patches::PatchObject;
+
+/// Visibility between points: the scene's triangles in a BVH.
+pub struct SceneRays {
+    bvh: CwBvh,
+    triangles: Vec<Triangle>,
+}
+
+fn to_a(v: Vec3) -> Vec3A {
+    Vec3A::new(v.x, v.y, v.z)
+}
+
+/// The BVH's ray from `origin` along `direction` over `[0, t_max]`.
+fn ray(origin: Vec3, direction: Vec3, t_max: f32) -> Ray {
+    // A zero component makes the traversal miss everything along the ray.
+    let nudge = |c: f32| if c.abs() < 1e-9 { 1e-9 } else { c };
+    let d = Vec3A::new(nudge(direction.x), nudge(direction.y), nudge(direction.z));
+    Ray::new(to_a(origin), d, 0.0, t_max)
+}
+
+impl SceneRays {
+    /// All objects' valid triangles.
+    pub fn new(objects: &[PatchObject]) -> Self {
+        let triangles: Vec<Triangle> = objects
+            .iter()
+            .flat_map(|o| {
+                o.indices.chunks_exact(3).filter_map(|t| {
+                    let v = |k: usize| o.positions.get(t[k] as usize).copied();
+                    let (a, b, c) = (v(0)?, v(1)?, v(2)?);
+                    (a.is_finite() && b.is_finite() && c.is_finite()).then(|| Triangle {
+                        v0: to_a(a),
+                        v1: to_a(b),
+                        v2: to_a(c),
+                    })
+                })
+            })
+            .collect();
+        let mut time = std::time::Duration::ZERO;
+        let bvh = build_cwbvh_from_tris(&triangles, BvhBuildParams::fast_build(), &mut time);
+        Self { bvh, triangles }
+    }
+
+    /// Whether the ray from `origin` along the unit `direction` is free over `[0, t_max]`.
+    pub(super) fn free(&self, origin: Vec3, direction: Vec3, t_max: f32) -> bool {
+        if self.triangles.is_empty() {
+            return true;
+        }
+        let ray = ray(origin, direction, t_max);
+        self.bvh.ray_traverse_miss(ray, |r, id| {
+            self.triangles[self.bvh.primitive_indices[id] as usize].intersect(r)
+        })
+    }
+
+    /// The nearest triangle along the unit `direction` from `origin`: its distance and unit
+    /// normal (either side); `None` where the ray leaves the scene.
+    pub fn first_hit(&self, origin: Vec3, direction: Vec3) -> Option<(f32, Vec3)> {
+        if self.triangles.is_empty() {
+            return None;
+        }
+        let ray = ray(origin, direction, f32::INFINITY);
+        let mut hit = RayHit::none();
+        let found = self.bvh.ray_traverse(ray, &mut hit, |r, id| {
+            self.triangles[self.bvh.primitive_indices[id] as usize].intersect(r)
+        });
+        found.then(|| {
+            let t = &self.triangles[self.bvh.primitive_indices[hit.primitive_id as usize] as usize];
+            let n = (t.v1 - t.v0).cross(t.v2 - t.v0).normalize_or_zero();
+            (hit.t, Vec3::new(n.x, n.y, n.z))
+        })
+    }
+
+    /// Whether `b` is visible from `a`.
+    pub fn visible(&self, a: Vec3, b: Vec3) -> bool {
+        let d = b - a;
+        let length = d.length();
+        length > 0.0 && self.free(a, d / length, length * (1.0 - 1e-4))
+    }
+}
