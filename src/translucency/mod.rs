@@ -23,6 +23,7 @@ pub mod cache;
 pub mod diffusion;
 mod far_field;
 pub mod gather;
+pub mod injection;
 pub mod iteration;
 mod lights;
 pub mod medium;
@@ -48,7 +49,7 @@ use bevy::{
 
 pub use gather::TranslucencyCamera;
 pub use plugin::{
-    GatherMethod, MAX_PATCH_BUDGET, RadiosityReceiver, TranslucencyFrame, TranslucencyScene,
+    GatherMethod, InjectedLights, LightInjection, MAX_PATCH_BUDGET, RadiosityReceiver, TranslucencyFrame, TranslucencyScene,
     TranslucencySettings, TranslucencyStatus, Translucent, TranslucentMaterials,
     precompute_elapsed, translucent_patch_cap,
 };
@@ -108,6 +109,9 @@ impl Plugin for TranslucencyPlugin {
             .add_systems(
                 Core3d,
                 (
+                    gather::translucency_injection_pass
+                        .in_set(Core3dSystems::MainPass)
+                        .before(gather::translucency_iteration_pass),
                     gather::translucency_iteration_pass
                         .in_set(Core3dSystems::MainPass)
                         .before(main_opaque_pass_3d),

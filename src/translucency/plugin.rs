@@ -83,6 +83,39 @@ pub struct TranslucencySettings {
     pub cache_dir: Option<std::path::PathBuf>,
     /// How the patches' light reaches the pixels (changing it rebuilds nothing).
     pub gather: GatherMethod,
+    /// How the lights' direct light reaches the patches (changing it rebuilds nothing).
+    pub light_injection: LightInjection,
+}
+
+/// How the lights' direct light reaches the patches whenever a light changes (seed 001's
+/// injection). Both give the same fall-off, range window and incidence weights; they differ
+/// in where they run and how they see shadows (measured against each other in
+/// `docs/translucent.md`).
+#[derive(Reflect, Clone, Copy, Debug, PartialEq)]
+pub enum LightInjection {
+    /// One shadow ray per patch and light from its centre through the precompute's BVH, on
+    /// the CPU (main world, every core): exact visibility at the patch centre, whatever the
+    /// lights, at main-thread time on every frame a light moves.
+    ShadowRays,
+    /// The seed's way, on the GPU (`injection/`): each light's depth map splatted from the
+    /// patches' samples in compute (`resolution` texels a side per face: one face for a
+    /// directional light over the whole scene, six for a point or spot light), and each
+    /// patch's light with the share of 3×3 texels about it that the light reaches. Costs the
+    /// CPU nothing when lights move; shadow edges soften over a texel. More than
+    /// [`MAX_INJECTED_LIGHTS`](super::injection::MAX_INJECTED_LIGHTS) lights are injected by
+    /// `ShadowRays` (with a warning).
+    LightViewMaps {
+        /// Texels a side of each map face (32 – 2048).
+        resolution: u32,
+    },
+}
+
+impl Default for LightInjection {
+    /// On the GPU, 512 texels a side: within a few per cent of the shadow rays on the
+    /// patches away from shadow edges (`docs/translucent.md`), 6 MB of maps per light.
+    fn default() -> Self {
+        Self::LightViewMaps { resolution: 512 }
+    }
 }
 
 /// How each pixel takes the light of the patches about it (seed 001's last step); both look
@@ -115,6 +148,7 @@ impl Default for TranslucencySettings {
             transport: TransportSettings::default(),
             cache_dir: None,
             gather: GatherMethod::default(),
+            light_injection: LightInjection::default(),
         }
     }
 }
@@ -170,10 +204,24 @@ pub struct TranslucencyFrame {
     /// The scene and its generation (changes when it is rebuilt).
     pub scene: Option<(u64, Arc<TranslucencyScene>)>,
     /// This frame's direct light per patch, and its generation (changes when a light
-    /// does).
+    /// does), where the CPU injects it ([`LightInjection::ShadowRays`]).
     pub direct: Option<(u64, Arc<DirectLight>)>,
+    /// The lights for the GPU to inject, and their generation (changes when a light does),
+    /// where the GPU injects them ([`LightInjection::LightViewMaps`]).
+    pub lights: Option<(u64, Arc<InjectedLights>)>,
     /// The settings.
     pub settings: TranslucencySettings,
+}
+
+/// The lights for the GPU's injection ([`LightInjection::LightViewMaps`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct InjectedLights {
+    /// The lights, at most [`MAX_INJECTED_LIGHTS`](super::injection::MAX_INJECTED_LIGHTS).
+    pub lights: Vec<PatchLight>,
+    /// Bevy's ambient irradiance, taken by translucent patches.
+    pub ambient: Vec3,
+    /// Texels a side of each map face.
+    pub resolution: u32,
 }
 
 /// The signature of what takes part: when it changes, the precompute runs again.
@@ -326,6 +374,7 @@ pub(crate) fn run_precompute(
                 state.task = None;
                 frame.scene = None;
                 frame.direct = None;
+                frame.lights = None;
                 *status = TranslucencyStatus::Loading;
             }
             if frames < SETTLE_FRAMES {
@@ -339,6 +388,7 @@ pub(crate) fn run_precompute(
         state.task = None;
         frame.scene = None;
         frame.direct = None;
+        frame.lights = None;
         if list.iter().all(|p| p.4.is_none()) {
             *status = TranslucencyStatus::Idle;
             return;
@@ -493,6 +543,7 @@ pub(crate) fn inject_direct_light(
     ambient: Option<Res<bevy::light::GlobalAmbientLight>>,
     mut state: ResMut<Precompute>,
     mut frame: ResMut<TranslucencyFrame>,
+    mut warned: ResMut<WarnedOnce>,
 ) {
     let Some((_, scene)) = frame.scene.clone() else {
         return;
@@ -534,11 +585,43 @@ pub(crate) fn inject_direct_light(
     });
     let mut signature: Vec<u64> = lights.iter().map(|l| hash_f32s(light_numbers(l))).collect();
     signature.push(hash_f32s(ambient.to_array()));
-    if signature == state.direct_signature && frame.direct.is_some() {
+    let on_gpu = match frame.settings.light_injection {
+        LightInjection::LightViewMaps { resolution }
+            if lights.len() <= super::injection::MAX_INJECTED_LIGHTS =>
+        {
+            Some(resolution)
+        }
+        LightInjection::LightViewMaps { .. } => {
+            warned.warn("translucency-injection-lights", || {
+                format!(
+                    "translucency: {} lights are more than the GPU injection's {}; they are injected on the CPU",
+                    lights.len(),
+                    super::injection::MAX_INJECTED_LIGHTS
+                )
+            });
+            None
+        }
+        LightInjection::ShadowRays => None,
+    };
+    signature.push(on_gpu.map_or(0, |r| r as u64 + 1));
+    if signature == state.direct_signature && (frame.direct.is_some() || frame.lights.is_some()) {
         return;
     }
     state.direct_signature = signature;
     state.direct_generation += 1;
+    if let Some(resolution) = on_gpu {
+        frame.direct = None;
+        frame.lights = Some((
+            state.direct_generation,
+            Arc::new(InjectedLights {
+                lights,
+                ambient,
+                resolution,
+            }),
+        ));
+        return;
+    }
+    frame.lights = None;
     let mut direct = direct_light(&scene.patches, Some(&scene.transport), &lights, &scene.rays);
     if ambient != Vec3::ZERO {
         for (e, albedo) in direct.irradiance.iter_mut().zip(&scene.albedo) {

@@ -17,6 +17,7 @@ use bevy::{
 use bytemuck::{Pod, Zeroable};
 
 use super::{
+    injection::{GpuInjection, LIGHT_VIEW_RESOLUTIONS},
     iteration::{GpuTransport, IterationLimits},
     plugin::{GatherMethod, TranslucencyFrame, TranslucencyScene},
 };
@@ -168,10 +169,22 @@ pub const GATHER_RADIUS_IN_PATCHES: f32 = 1.5;
 pub struct TranslucencyGpu {
     scene_generation: u64,
     direct_generation: u64,
+    lights_generation: u64,
     /// The lights changed since the last iteration ran.
     iteration_pending: bool,
+    /// And the GPU injects them ([`LightInjection::LightViewMaps`](super::LightInjection)).
+    injection_pending: bool,
     transport: Option<GpuTransport>,
+    injection: Option<GpuInjection>,
     gather: Option<(Buffer, Buffer, Buffer)>,
+}
+
+impl TranslucencyGpu {
+    /// The scene's transport on the GPU, once uploaded: its vectors hold this frame's `E⁰`
+    /// and `B` ([`GpuTransport::direct_offsets`], [`GpuTransport::exitance`]).
+    pub fn transport(&self) -> Option<&GpuTransport> {
+        self.transport.as_ref()
+    }
 }
 
 /// Uploads a new scene and each frame's new direct light (render `PrepareResources`).
@@ -193,14 +206,44 @@ pub fn prepare_translucency(
         let transport = GpuTransport::new(&device, &scene.transport, limits);
         gpu.gather = Some(gather_buffers(&device, scene, &transport));
         gpu.transport = Some(transport);
+        gpu.injection = None;
         gpu.scene_generation = *generation;
         gpu.direct_generation = 0;
+        gpu.lights_generation = 0;
     }
-    if let (Some((direct_generation, direct)), Some(transport)) = (&frame.direct, &gpu.transport)
+    let gpu = &mut *gpu;
+    let Some(transport) = &gpu.transport else {
+        return;
+    };
+    if let Some((direct_generation, direct)) = &frame.direct
         && *direct_generation != gpu.direct_generation
     {
         transport.write_direct(&queue, direct);
         gpu.direct_generation = *direct_generation;
+        gpu.iteration_pending = true;
+        gpu.injection_pending = false;
+    }
+    if let Some((lights_generation, lights)) = &frame.lights
+        && *lights_generation != gpu.lights_generation
+    {
+        let wanted = lights.resolution.clamp(
+            *LIGHT_VIEW_RESOLUTIONS.start(),
+            *LIGHT_VIEW_RESOLUTIONS.end(),
+        );
+        let injection = match &mut gpu.injection {
+            Some(injection) if injection.resolution() == wanted => injection,
+            slot => slot.insert(GpuInjection::new(
+                &device,
+                &scene.patches,
+                &scene.transport,
+                &scene.albedo,
+                transport,
+                wanted,
+            )),
+        };
+        injection.write_lights(&queue, &lights.lights, lights.ambient);
+        gpu.lights_generation = *lights_generation;
+        gpu.injection_pending = true;
         gpu.iteration_pending = true;
     }
 }
@@ -276,6 +319,29 @@ fn gather_buffers(
         usage: BufferUsages::UNIFORM,
     });
     (patch_buffer, grid_buffer, params_buffer)
+}
+
+/// Core3d system before the iteration: where the GPU injects the lights
+/// ([`LightInjection::LightViewMaps`](super::LightInjection)) and they changed, writes each
+/// patch's `E⁰` and `S⁰` (the first view of the frame does it), timed as
+/// `translucency/injection`. Its own system, so its own command encoder.
+pub fn translucency_injection_pass(
+    _view: ViewQuery<&TranslucencyCamera>,
+    mut gpu: ResMut<TranslucencyGpu>,
+    mut ctx: RenderContext,
+) {
+    if !gpu.injection_pending {
+        return;
+    }
+    let Some(injection) = &gpu.injection else {
+        return;
+    };
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let span = diagnostics.time_span(ctx.command_encoder(), "translucency/injection");
+    injection.record(ctx.command_encoder());
+    span.end(ctx.command_encoder());
+    gpu.injection_pending = false;
 }
 
 /// Core3d system before the opaque pass: iterates the transport when the lights changed (the
@@ -475,7 +541,7 @@ pub fn translucency_gather_pass(
         return;
     };
     // Nothing lit yet.
-    if gpu.direct_generation == 0 {
+    if gpu.direct_generation == 0 && gpu.lights_generation == 0 {
         return;
     }
     let (Some(view_binding), Some(depth), Some(normal)) = (

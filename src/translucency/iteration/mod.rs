@@ -356,6 +356,12 @@ impl GpuTransport {
         (self.layout.direct, self.layout.exitance)
     }
 
+    /// Where the direct light's irradiance `E⁰` and exitance `S⁰` start in the vectors buffer
+    /// (in `vec4<f32>`s): what the light injection writes.
+    pub fn direct_offsets(&self) -> (u32, u32) {
+        (self.layout.direct, self.layout.direct_exitance)
+    }
+
     /// The buffer holding the iteration's state (`iterations: u32` at byte 24,
     /// `energy_left: f32` at byte 32).
     pub fn state(&self) -> &Buffer {

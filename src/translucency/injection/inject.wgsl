@@ -1,0 +1,312 @@
+// Seed 001's light injection (its step 2) on the GPU: each light's view of the scene as a depth
+// map splatted from the patches' surface samples (`splat`), then each patch's direct
+// irradiance E⁰ with the share of the light its neighbourhood sees in that map (`inject`),
+// weighted by each beam's incidence. The GPU form of `lights::direct_light`, whose one shadow
+// ray per patch is its oracle (the same fall-off, range window and incidence arithmetic).
+//
+// Maps: a directional light sees the scene's bounding sphere orthographically (one face); a
+// point or spot light sees it through the six faces of a cube, the depth being the distance.
+// Depths are stored as `~bitcast<u32>(depth)` with `atomicMax`: positive floats order as their
+// bits, and a cleared (zero) texel is "nothing there".
+
+const MAX_LIGHTS: u32 = 8u;
+const DIRECTIONAL: u32 = 0u;
+const POINT: u32 = 1u;
+const SPOT: u32 = 2u;
+// A splat's radius against its sample's disc (samples of ≤ h/2 sides do not tile as discs),
+// and the widest splat in texels.
+const SPLAT_COVER: f32 = 1.5;
+const MAX_SPLAT_TEXELS: f32 = 12.0;
+
+struct InjectedLight {
+    // Directional: unused; point and spot: the light's position.
+    position: vec3<f32>,
+    kind: u32,
+    // Directional: the way the light travels; spot: its axis.
+    direction: vec3<f32>,
+    range: f32,
+    // Illuminance (directional) or luminous intensity (point, spot) per channel.
+    intensity: vec3<f32>,
+    cos_outer: f32,
+    // Spot: 1 / (cos inner − cos outer), as Bevy.
+    cone_scale: f32,
+    pad0: f32,
+    pad1: f32,
+    pad2: f32,
+}
+
+struct Injection {
+    lights: array<InjectedLight, MAX_LIGHTS>,
+    // Bevy's ambient irradiance, taken by translucent patches.
+    ambient: vec3<f32>,
+    light_count: u32,
+    bounds_centre: vec3<f32>,
+    bounds_radius: f32,
+    resolution: u32,
+    samples: u32,
+    patches: u32,
+    table_size: u32,
+    // Offsets (in vec4s) of each array in `scene`.
+    samples_at: u32,
+    patches_at: u32,
+    tables_at: u32,
+    // Offsets (in vec4s) of E⁰ and S⁰ in the iteration's `vectors`.
+    direct: u32,
+    direct_exitance: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+@group(0) @binding(0) var<uniform> injection: Injection;
+// Samples: (position, radius), (normal, 0). Patches: (surface point, size),
+// (normal, object), (single-scattering factor, 1 on translucent patches).
+// Tables per object: (incidence weight, single-scattering shape − its diffuse mean) at
+// cosines 0, 1/(n−1), …, 1.
+@group(0) @binding(1) var<storage, read> scene: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> depth_maps: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read_write> vectors: array<vec4<f32>>;
+
+// A place in one face of a light's map.
+struct MapPoint {
+    // Texel coordinates (texel centres at .5).
+    texel: vec2<f32>,
+    depth: f32,
+    // The world size of one texel there.
+    texel_world: f32,
+    // The way the light's ray runs there.
+    ray: vec3<f32>,
+    // The face's two world axes across the map (one texel = texel_world along them).
+    across: vec3<f32>,
+    up: vec3<f32>,
+    face: u32,
+    inside: bool,
+}
+
+fn orthonormal(d: vec3<f32>) -> mat3x3<f32> {
+    let helper = select(vec3(0.0, 1.0, 0.0), vec3(1.0, 0.0, 0.0), abs(d.y) > 0.9);
+    let across = normalize(cross(helper, d));
+    return mat3x3(across, cross(d, across), d);
+}
+
+fn cube_axis(face: u32) -> mat3x3<f32> {
+    // Face f looks along ±axis f/2; the two others run across it.
+    let a = face / 2u;
+    let s = select(-1.0, 1.0, face % 2u == 0u);
+    var e = array(vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0), vec3(0.0, 0.0, 1.0));
+    return mat3x3(e[(a + 1u) % 3u], e[(a + 2u) % 3u], s * e[a]);
+}
+
+fn map_point(light: InjectedLight, face: u32, p: vec3<f32>) -> MapPoint {
+    let res = f32(injection.resolution);
+    var m: MapPoint;
+    m.face = face;
+    if light.kind == DIRECTIONAL {
+        let radius = injection.bounds_radius;
+        let basis = orthonormal(normalize(light.direction));
+        let local = p - injection.bounds_centre;
+        let uv = vec2(dot(local, basis[0]), dot(local, basis[1])) / radius;
+        m.texel = (uv * 0.5 + 0.5) * res;
+        m.depth = dot(local, basis[2]) + radius;
+        m.texel_world = 2.0 * radius / res;
+        m.ray = basis[2];
+        m.across = basis[0];
+        m.up = basis[1];
+        m.inside = all(abs(uv) <= vec2(1.0)) && m.depth >= 0.0;
+        return m;
+    }
+    let basis = cube_axis(face);
+    let local = p - light.position;
+    let major = dot(local, basis[2]);
+    let uv = vec2(dot(local, basis[0]), dot(local, basis[1])) / max(major, 1e-20);
+    m.texel = (uv * 0.5 + 0.5) * res;
+    m.depth = length(local);
+    m.texel_world = 2.0 * major / res;
+    m.ray = local / max(m.depth, 1e-20);
+    m.across = basis[0];
+    m.up = basis[1];
+    m.inside = major > 0.0 && all(abs(uv) <= vec2(1.0));
+    return m;
+}
+
+fn map_index(light: u32, face: u32, texel: vec2<i32>) -> u32 {
+    let res = injection.resolution;
+    return ((light * 6u + face) * res + u32(texel.y)) * res + u32(texel.x);
+}
+
+fn faces_of(light: InjectedLight) -> u32 {
+    return select(6u, 1u, light.kind == DIRECTIONAL);
+}
+
+// Each sample's disc into each face of each light's map that it reaches, at the depth of the
+// sample's own plane across the disc (so that a tilted surface does not shadow itself).
+@compute @workgroup_size(64)
+fn splat(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let l = id.y;
+    if l >= injection.light_count {
+        return;
+    }
+    // Strided: the dispatch is capped at the 65 535 groups a dimension may have.
+    for (var s = id.x; s < injection.samples; s += groups.x * 64u) {
+        splat_sample(l, s);
+    }
+}
+
+fn splat_sample(l: u32, s: u32) {
+    let light = injection.lights[l];
+    let a = scene[injection.samples_at + 2u * s];
+    let n = scene[injection.samples_at + 2u * s + 1u].xyz;
+    let res = i32(injection.resolution);
+    let cover = SPLAT_COVER * a.w;
+    for (var face = 0u; face < faces_of(light); face++) {
+        let m = map_point(light, face, a.xyz);
+        if m.texel_world <= 0.0 {
+            continue;
+        }
+        // A disc may reach into a face whose centre it is outside of.
+        let reach = min(cover / m.texel_world, MAX_SPLAT_TEXELS);
+        let lo = vec2<i32>(floor(m.texel - reach));
+        let hi = vec2<i32>(floor(m.texel + reach));
+        if any(hi < vec2(0)) || any(lo >= vec2(res)) {
+            continue;
+        }
+        let own = vec2<i32>(floor(m.texel));
+        var basis = cube_axis(face);
+        if light.kind == DIRECTIONAL {
+            basis = orthonormal(normalize(light.direction));
+        }
+        for (var y = max(lo.y, 0); y <= min(hi.y, res - 1); y++) {
+            for (var x = max(lo.x, 0); x <= min(hi.x, res - 1); x++) {
+                // Where this texel's ray meets the sample's plane: the disc's texels are those
+                // within its (widened) radius there, so a surface seen edge-on covers few.
+                let offset = vec2(f32(x), f32(y)) + 0.5 - m.texel;
+                var depth = m.depth;
+                var ray = m.ray;
+                var q = a.xyz;
+                if light.kind == DIRECTIONAL {
+                    let o = (offset.x * basis[0] + offset.y * basis[1]) * m.texel_world;
+                    let facing = dot(n, ray);
+                    let along = select(-dot(n, o) / facing, 0.0, abs(facing) < 1e-4);
+                    depth = m.depth + along;
+                    q = a.xyz + o + along * ray;
+                } else {
+                    let uv = (vec2(f32(x), f32(y)) + 0.5) / f32(res) * 2.0 - 1.0;
+                    ray = normalize(uv.x * basis[0] + uv.y * basis[1] + basis[2]);
+                    let facing = dot(n, ray);
+                    depth = select(dot(n, a.xyz - light.position) / facing, m.depth, abs(facing) < 1e-4);
+                    q = light.position + depth * ray;
+                }
+                let is_own = all(vec2(x, y) == own);
+                if !is_own && (depth <= 0.0 || distance(q, a.xyz) > cover) {
+                    continue;
+                }
+                if is_own {
+                    depth = m.depth;
+                }
+                atomicMax(&depth_maps[map_index(l, face, vec2(x, y))], ~bitcast<u32>(max(depth, 0.0)));
+            }
+        }
+    }
+}
+
+// The share of 3×3 texels about `p` where nothing lies nearer the light than `p` less `bias`.
+fn seen_share(l: u32, m: MapPoint, bias: f32) -> f32 {
+    let res = i32(injection.resolution);
+    let centre = vec2<i32>(floor(m.texel));
+    var seen = 0.0;
+    for (var y = -1; y <= 1; y++) {
+        for (var x = -1; x <= 1; x++) {
+            let texel = clamp(centre + vec2(x, y), vec2(0), vec2(res - 1));
+            let stored = atomicLoad(&depth_maps[map_index(l, m.face, texel)]);
+            if stored == 0u || m.depth <= bitcast<f32>(~stored) + bias {
+                seen += 1.0;
+            }
+        }
+    }
+    return seen / 9.0;
+}
+
+fn cube_face(local: vec3<f32>) -> u32 {
+    let a = abs(local);
+    if a.x >= a.y && a.x >= a.z {
+        return select(1u, 0u, local.x >= 0.0);
+    }
+    if a.y >= a.z {
+        return select(3u, 2u, local.y >= 0.0);
+    }
+    return select(5u, 4u, local.z >= 0.0);
+}
+
+fn incidence_entry(object: u32, cos_i: f32) -> vec4<f32> {
+    let last = f32(injection.table_size - 1u);
+    let f = clamp(cos_i, 0.0, 1.0) * last;
+    let i = min(u32(f), injection.table_size - 2u);
+    let at = injection.tables_at + object * injection.table_size + i;
+    return mix(scene[at], scene[at + 1u], f - f32(i));
+}
+
+@compute @workgroup_size(64)
+fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= injection.patches {
+        return;
+    }
+    let a = scene[injection.patches_at + 3u * i];
+    let b = scene[injection.patches_at + 3u * i + 1u];
+    let c = scene[injection.patches_at + 3u * i + 2u];
+    let n = b.xyz;
+    let object = u32(b.w);
+    // Where the oracle's shadow ray starts, and what its fall-off sees.
+    let x = a.xyz + n * (0.05 * a.w);
+    var irradiance = vec3(0.0);
+    var exitance = vec3(0.0);
+    for (var l = 0u; l < injection.light_count; l++) {
+        let light = injection.lights[l];
+        var e = vec3(0.0);
+        var to_light: vec3<f32>;
+        if light.kind == DIRECTIONAL {
+            to_light = -normalize(light.direction);
+            e = light.intensity * max(dot(n, to_light), 0.0);
+        } else {
+            let d = light.position - x;
+            let dist2 = dot(d, d);
+            to_light = d * inverseSqrt(dist2);
+            let cos_i = dot(n, to_light);
+            var falloff = 1.0;
+            if light.kind == SPOT {
+                let cos_psi = dot(-to_light, normalize(light.direction));
+                let t = clamp((cos_psi - light.cos_outer) * light.cone_scale, 0.0, 1.0);
+                falloff = t * t;
+            }
+            // Bevy's range window.
+            let f = dist2 / (light.range * light.range);
+            let s = clamp(1.0 - f * f, 0.0, 1.0);
+            e = light.intensity * max(falloff * s * s * cos_i / dist2, 0.0);
+        }
+        if all(e == vec3(0.0)) {
+            continue;
+        }
+        // Visibility: the patch's point lifted off its surface by a texel, with a slope-scaled
+        // depth bias (a texel's depth step across a surface at this incidence).
+        let cos_i = dot(n, to_light);
+        var face = 0u;
+        if light.kind != DIRECTIONAL {
+            face = cube_face(x - light.position);
+        }
+        let here = map_point(light, face, a.xyz);
+        let m = map_point(light, face, a.xyz + n * max(0.05 * a.w, here.texel_world));
+        let slope = min(sqrt(max(1.0 - cos_i * cos_i, 0.0)) / max(cos_i, 1e-3), 8.0);
+        e *= seen_share(l, m, m.texel_world * (1.5 + slope));
+        // A beam takes in and gives back by its own incidence (`IncidenceWeight`).
+        let entry = incidence_entry(object, cos_i);
+        e *= entry.xyz;
+        irradiance += e;
+        exitance += c.xyz * e * entry.w;
+    }
+    irradiance += injection.ambient * c.w;
+    vectors[injection.direct + i] = vec4(irradiance, 0.0);
+    vectors[injection.direct_exitance + i] = vec4(exitance, 0.0);
+}

@@ -1,0 +1,399 @@
+//! Seed 001's light injection on the GPU (`inject.wgsl`, beside this file): each light's view
+//! of the scene as a depth map splatted from the patches' surface samples in compute, then
+//! each patch's direct irradiance `E⁰` and single-scattering exitance `S⁰` written straight
+//! into the iteration's vectors, so a moving light costs the CPU nothing.
+//!
+//! The seed counts each patch's pixels in a light-view raster of patch ids; here the light's
+//! view is a depth map and each patch takes the share of 3×3 texels about its centre that
+//! the light reaches — the same idea (the share of the light the patch's neighbourhood
+//! receives) with no raster pipeline and no per-patch atomics. Its oracle is
+//! [`direct_light`](super::lights::direct_light), one shadow ray per patch through the
+//! precompute's BVH: the same fall-off, range window and incidence weights (the latter from
+//! [`IncidenceWeight`] itself, tabulated), visibility to within a texel at shadow edges
+//! (`translucency::the_gpu_light_injection_matches_the_shadow_rays`).
+
+use bevy::{
+    math::Vec3,
+    render::{
+        render_resource::{
+            BindGroup, BindGroupEntry, BindGroupLayoutEntry, BindingType, Buffer,
+            BufferBindingType, BufferDescriptor, BufferInitDescriptor, BufferUsages,
+            CommandEncoder, ComputePassDescriptor, ComputePipeline, PipelineCompilationOptions,
+            PipelineLayoutDescriptor, RawComputePipelineDescriptor, ShaderModuleDescriptor,
+            ShaderSource, ShaderStages,
+        },
+        renderer::{RenderDevice, RenderQueue},
+    },
+};
+use bytemuck::{Pod, Zeroable};
+
+use super::{
+    diffusion::{IncidenceWeight, diffuse_single_scattering_shape, single_scattering_shape},
+    iteration::GpuTransport,
+    patches::Patches,
+    transport::{EnergyTransport, PatchLight},
+};
+
+const WORKGROUP: u32 = 64;
+
+/// The most lights one injection takes (`MAX_LIGHTS` in `inject.wgsl`); a scene with more is
+/// injected on the CPU.
+pub const MAX_INJECTED_LIGHTS: usize = 8;
+
+/// Entries of each object's incidence table over cosines 0 – 1: `IncidenceWeight` and the
+/// single-scattering shape vary smoothly there except the shape's `μ ln μ` at grazing
+/// incidence, where the irradiance is nearly zero anyway.
+pub const INCIDENCE_TABLE_SIZE: u32 = 128;
+
+/// Light-view map resolutions (per face) the injection accepts.
+pub const LIGHT_VIEW_RESOLUTIONS: std::ops::RangeInclusive<u32> = 32..=2048;
+
+/// `InjectedLight` in `inject.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable, Debug, Default)]
+struct InjectedLight {
+    position: [f32; 3],
+    kind: u32,
+    direction: [f32; 3],
+    range: f32,
+    intensity: [f32; 3],
+    cos_outer: f32,
+    cone_scale: f32,
+    pad: [f32; 3],
+}
+
+/// `Injection` in `inject.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable, Debug)]
+struct Injection {
+    lights: [InjectedLight; MAX_INJECTED_LIGHTS],
+    ambient: [f32; 3],
+    light_count: u32,
+    bounds_centre: [f32; 3],
+    bounds_radius: f32,
+    resolution: u32,
+    samples: u32,
+    patches: u32,
+    table_size: u32,
+    samples_at: u32,
+    patches_at: u32,
+    tables_at: u32,
+    direct: u32,
+    direct_exitance: u32,
+    pad: [u32; 3],
+}
+
+impl InjectedLight {
+    fn new(light: &PatchLight) -> Self {
+        match *light {
+            PatchLight::Directional {
+                direction,
+                illuminance,
+            } => Self {
+                kind: 0,
+                direction: direction.to_array(),
+                intensity: illuminance.to_array(),
+                ..default_light()
+            },
+            PatchLight::Point {
+                position,
+                intensity,
+                range,
+            } => Self {
+                kind: 1,
+                position: position.to_array(),
+                intensity: intensity.to_array(),
+                range,
+                ..default_light()
+            },
+            PatchLight::Spot {
+                position,
+                direction,
+                intensity,
+                inner_angle,
+                outer_angle,
+                range,
+            } => {
+                // Bevy's cone, as `SpotLight::falloff` of the oracle.
+                let cos_outer = outer_angle.cos();
+                Self {
+                    kind: 2,
+                    position: position.to_array(),
+                    direction: direction.to_array(),
+                    intensity: intensity.to_array(),
+                    range,
+                    cos_outer,
+                    cone_scale: 1.0 / (inner_angle.cos() - cos_outer).max(1e-4),
+                    ..default_light()
+                }
+            }
+        }
+    }
+}
+
+fn default_light() -> InjectedLight {
+    InjectedLight {
+        direction: [0.0, 0.0, -1.0],
+        range: 1.0,
+        ..Zeroable::zeroed()
+    }
+}
+
+/// One object's incidence table (`INCIDENCE_TABLE_SIZE` entries at cosines `i/(n−1)`): the
+/// weight of a beam at that incidence (1 without one) and the single-scattering shape less
+/// its diffuse mean, as [`direct_light`](super::lights::direct_light) computes them.
+pub fn incidence_table(weight: Option<&IncidenceWeight>) -> Vec<[f32; 4]> {
+    let diffuse_shape = diffuse_single_scattering_shape() as f32;
+    (0..INCIDENCE_TABLE_SIZE)
+        .map(|i| {
+            let cos = i as f64 / (INCIDENCE_TABLE_SIZE - 1) as f64;
+            let w = weight.map_or([1.0; 3], |w| w.at(cos));
+            let shape = single_scattering_shape(cos) as f32 - diffuse_shape;
+            [w[0] as f32, w[1] as f32, w[2] as f32, shape]
+        })
+        .collect()
+}
+
+/// One static scene's light injection on the GPU, writing into a [`GpuTransport`]'s `E⁰`
+/// and `S⁰`.
+pub struct GpuInjection {
+    injection: Injection,
+    uniform: Buffer,
+    depth_maps: Buffer,
+    bind_group: BindGroup,
+    splat: ComputePipeline,
+    inject: ComputePipeline,
+}
+
+impl GpuInjection {
+    /// Uploads the patches (their samples, centres, normals), each patch's single-scattering
+    /// factor and each object's incidence table, and builds the pipelines. `albedo` is zero on
+    /// translucent patches (these take Bevy's ambient light); `resolution` is each map face's
+    /// (clamped to [`LIGHT_VIEW_RESOLUTIONS`]).
+    pub fn new(
+        device: &RenderDevice,
+        patches: &Patches,
+        transport: &EnergyTransport,
+        albedo: &[Vec3],
+        target: &GpuTransport,
+        resolution: u32,
+    ) -> Self {
+        let resolution = resolution.clamp(
+            *LIGHT_VIEW_RESOLUTIONS.start(),
+            *LIGHT_VIEW_RESOLUTIONS.end(),
+        );
+        let mut scene: Vec<[f32; 4]> = Vec::new();
+        let samples_at = scene.len() as u32;
+        for s in &patches.samples {
+            let radius = (s.area.max(0.0) / std::f32::consts::PI).sqrt();
+            scene.push([s.position.x, s.position.y, s.position.z, radius]);
+            scene.push([s.normal.x, s.normal.y, s.normal.z, 0.0]);
+        }
+        let patches_at = scene.len() as u32;
+        let mut objects = 0;
+        for (i, p) in patches.patches.iter().enumerate() {
+            let single = transport.single_scattering.get(i).copied().unwrap_or(Vec3::ZERO);
+            let translucent = albedo.get(i).is_some_and(|a| *a == Vec3::ZERO);
+            objects = objects.max(p.object as usize + 1);
+            scene.push([
+                p.surface_point.x,
+                p.surface_point.y,
+                p.surface_point.z,
+                patches.size_of(i),
+            ]);
+            // The object as a float (exact below 2²⁴): its bits as a float could be a denormal,
+            // which a GPU may flush to zero.
+            scene.push([p.normal.x, p.normal.y, p.normal.z, p.object as f32]);
+            scene.push([single.x, single.y, single.z, translucent as u32 as f32]);
+        }
+        let tables_at = scene.len() as u32;
+        for object in 0..objects {
+            let weight = transport.incidence.get(object).and_then(Option::as_ref);
+            scene.extend(incidence_table(weight));
+        }
+        scene.push([0.0; 4]);
+
+        // The maps see the patches' bounding sphere (directional lights).
+        let (lo, hi) = patches.samples.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), s| (lo.min(s.position), hi.max(s.position)),
+        );
+        let (centre, radius) = if lo.x <= hi.x {
+            ((lo + hi) * 0.5, ((hi - lo).length() * 0.5).max(1e-6) * 1.01)
+        } else {
+            (Vec3::ZERO, 1.0)
+        };
+        let (direct, direct_exitance) = target.direct_offsets();
+        let injection = Injection {
+            lights: [default_light(); MAX_INJECTED_LIGHTS],
+            ambient: [0.0; 3],
+            light_count: 0,
+            bounds_centre: centre.to_array(),
+            bounds_radius: radius,
+            resolution,
+            samples: patches.samples.len() as u32,
+            patches: patches.patches.len() as u32,
+            table_size: INCIDENCE_TABLE_SIZE,
+            samples_at,
+            patches_at,
+            tables_at,
+            direct,
+            direct_exitance,
+            pad: [0; 3],
+        };
+
+        let uniform = device.create_buffer_with_data(&BufferInitDescriptor {
+            label: Some("translucency_injection"),
+            contents: bytemuck::bytes_of(&injection),
+            usage: BufferUsages::UNIFORM | BufferUsages::COPY_DST,
+        });
+        let scene_buffer = device.create_buffer_with_data(&BufferInitDescriptor {
+            label: Some("translucency_injection_scene"),
+            contents: bytemuck::cast_slice(&scene),
+            usage: BufferUsages::STORAGE,
+        });
+        let depth_maps = device.create_buffer(&BufferDescriptor {
+            label: Some("translucency_light_view_maps"),
+            size: Self::map_bytes(resolution, MAX_INJECTED_LIGHTS as u32),
+            usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let storage = |binding, read_only| BindGroupLayoutEntry {
+            binding,
+            visibility: ShaderStages::COMPUTE,
+            ty: BindingType::Buffer {
+                ty: BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(
+            Some("translucency_injection_layout"),
+            &[
+                BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: ShaderStages::COMPUTE,
+                    ty: BindingType::Buffer {
+                        ty: BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                storage(1, true),
+                storage(2, false),
+                storage(3, false),
+            ],
+        );
+        let (vectors, _) = target.exitance();
+        let bind_group = device.create_bind_group(
+            Some("translucency_injection"),
+            &layout,
+            &[
+                BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                },
+                BindGroupEntry {
+                    binding: 1,
+                    resource: scene_buffer.as_entire_binding(),
+                },
+                BindGroupEntry {
+                    binding: 2,
+                    resource: depth_maps.as_entire_binding(),
+                },
+                BindGroupEntry {
+                    binding: 3,
+                    resource: vectors.as_entire_binding(),
+                },
+            ],
+        );
+        let module = device.create_and_validate_shader_module(ShaderModuleDescriptor {
+            label: Some("translucency_inject"),
+            source: ShaderSource::Wgsl(include_str!("inject.wgsl").into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&PipelineLayoutDescriptor {
+            label: Some("translucency_injection"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |entry: &str| {
+            device.create_compute_pipeline(&RawComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: PipelineCompilationOptions::default(),
+                cache: None,
+            })
+        };
+        Self {
+            injection,
+            uniform,
+            depth_maps,
+            bind_group,
+            splat: pipeline("splat"),
+            inject: pipeline("inject"),
+        }
+    }
+
+    /// Bytes of `lights` lights' maps, six faces each.
+    fn map_bytes(resolution: u32, lights: u32) -> u64 {
+        lights as u64 * 6 * (resolution as u64).pow(2) * 4
+    }
+
+    /// Each map face's resolution.
+    pub fn resolution(&self) -> u32 {
+        self.injection.resolution
+    }
+
+    /// Sets the lights (the first [`MAX_INJECTED_LIGHTS`]) and Bevy's ambient irradiance for
+    /// the next [`record`](Self::record); returns how many lights it took.
+    pub fn write_lights(&mut self, queue: &RenderQueue, lights: &[PatchLight], ambient: Vec3) -> usize {
+        let taken = lights.len().min(MAX_INJECTED_LIGHTS);
+        for (slot, light) in self.injection.lights.iter_mut().zip(&lights[..taken]) {
+            *slot = InjectedLight::new(light);
+        }
+        self.injection.light_count = taken as u32;
+        self.injection.ambient = ambient.to_array();
+        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&self.injection));
+        taken
+    }
+
+    /// Records the injection: the maps cleared and splatted, then every patch's `E⁰` and `S⁰`
+    /// written into the transport's vectors (record the iteration after it).
+    pub fn record(&self, encoder: &mut CommandEncoder) {
+        let injection = &self.injection;
+        if injection.patches == 0 {
+            return;
+        }
+        encoder.push_debug_group("translucency_injection");
+        let lights = injection.light_count;
+        if lights > 0 {
+            encoder.clear_buffer(
+                &self.depth_maps,
+                0,
+                Some(Self::map_bytes(injection.resolution, lights)),
+            );
+        }
+        {
+            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
+                label: Some("translucency_injection"),
+                timestamp_writes: None,
+            });
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            if lights > 0 && injection.samples > 0 {
+                pass.set_pipeline(&self.splat);
+                pass.dispatch_workgroups(
+                    injection.samples.div_ceil(WORKGROUP).min(65_535),
+                    lights,
+                    1,
+                );
+            }
+            pass.set_pipeline(&self.inject);
+            pass.dispatch_workgroups(injection.patches.div_ceil(WORKGROUP), 1, 1);
+        }
+        encoder.pop_debug_group();
+    }
+}
