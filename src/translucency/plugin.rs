@@ -589,7 +589,17 @@ pub(crate) fn inject_direct_light(
         LightInjection::LightViewMaps { resolution }
             if lights.len() <= super::injection::MAX_INJECTED_LIGHTS =>
         {
-            Some(resolution)
+            let range = super::injection::LIGHT_VIEW_RESOLUTIONS;
+            if !range.contains(&resolution) {
+                warned.warn("translucency-injection-resolution", || {
+                    format!(
+                        "translucency: a light-view resolution of {resolution} is outside {} – {}; clamped",
+                        range.start(),
+                        range.end()
+                    )
+                });
+            }
+            Some(resolution.clamp(*range.start(), *range.end()))
         }
         LightInjection::LightViewMaps { .. } => {
             warned.warn("translucency-injection-lights", || {

@@ -602,8 +602,8 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
 #[test]
 fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     use bevy_mesostructure::translucency::{
-        TranslucencyCamera, TranslucencyPlugin, TranslucencySettings, Translucent,
-        TranslucentMaterials, TranslucentMedium,
+        LightInjection, TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin,
+        TranslucencySettings, Translucent, TranslucentMaterials, TranslucentMedium,
     };
     if !gpu_or_skip() {
         return;
@@ -720,6 +720,26 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     assert!(warnings(&app).iter().any(|c| c == "translucency-moved"));
     run_until_ready(&mut app);
     assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
+
+    // A light-view resolution out of range: a warning, clamped.
+    app.world_mut()
+        .resource_mut::<TranslucencySettings>()
+        .light_injection = LightInjection::LightViewMaps { resolution: 0 };
+    run(&mut app, 2);
+    assert!(warnings(&app).iter().any(|c| c == "translucency-injection-resolution"));
+    let frame = app.world().resource::<TranslucencyFrame>();
+    assert_eq!(frame.lights.as_ref().map(|l| l.1.resolution), Some(32));
+    // More lights than the GPU injection takes: a warning, and the CPU injects them.
+    for i in 0..=MAX_INJECTED_LIGHTS {
+        app.world_mut().spawn((
+            PointLight::default(),
+            Transform::from_xyz(0.1 * i as f32, 0.3, 0.3),
+        ));
+    }
+    run(&mut app, 2);
+    assert!(warnings(&app).iter().any(|c| c == "translucency-injection-lights"));
+    let frame = app.world().resource::<TranslucencyFrame>();
+    assert!(frame.direct.is_some() && frame.lights.is_none());
 }
 
 #[test]
