@@ -10,7 +10,7 @@
 //!
 //! ```text
 //! cargo run --example translucent -- [--frames N] [--out DIR] [--size WxH] [--headless]
-//!     [--patches N]
+//!     [--patches N] [--injection light-view|shadow-rays]
 //! ```
 
 #[path = "common/mod.rs"]
@@ -22,7 +22,7 @@ mod meshes;
 
 use bevy::{camera::Exposure, camera::Hdr, prelude::*};
 use bevy_mesostructure::translucency::{
-    RadiosityReceiver, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings, Translucent,
+    LightInjection, RadiosityReceiver, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings, Translucent,
     TranslucentPreset,
 };
 
@@ -36,6 +36,16 @@ struct Cli {
     /// Patch budget of the scene (16 – 200000)
     #[arg(long, default_value_t = 4000, value_parser = clap::value_parser!(u32).range(16..=200_000))]
     patches: u32,
+    /// How the lights reach the patches: the GPU's light-view maps or the CPU's shadow rays
+    #[arg(long, value_enum, default_value_t = Injection::LightView)]
+    injection: Injection,
+}
+
+/// `--injection`: [`LightInjection`]'s two ways.
+#[derive(clap::ValueEnum, Clone, Copy)]
+enum Injection {
+    LightView,
+    ShadowRays,
 }
 
 /// Where the spot is: `0` in front of the objects, `1` behind them (headless shots set it;
@@ -82,6 +92,10 @@ fn main() {
         })
         .insert_resource(TranslucencySettings {
             patch_budget: cli.patches,
+            light_injection: match cli.injection {
+                Injection::LightView => LightInjection::default(),
+                Injection::ShadowRays => LightInjection::ShadowRays,
+            },
             ..default()
         })
         .insert_resource(SpotPlace {

@@ -10,9 +10,11 @@
 //!
 //! CSV header: `patches,budget,precompute_s,memory_mb,form_factor_entries,scattering_entries,
 //! rays,dropped_form_factor_mean,dropped_form_factor_max,diffusion_kept_r,diffusion_kept_g,
-//! diffusion_kept_b,iterations,solve_ms,threads`
+//! diffusion_kept_b,iterations,solve_ms,threads,shadow_ray_injection_ms`
 //! (`memory_mb`: the two CSR matrices as the GPU would hold them; `solve_ms`: the CPU iteration
-//! to a threshold of 1e-3, one thread).
+//! to a threshold of 1e-3, one thread; `shadow_ray_injection_ms`: the spot's direct light by
+//! one shadow ray per patch on every core, what `LightInjection::ShadowRays` costs the main
+//! thread each frame the light moves).
 
 // Only `read_obj` and `asset_path` are used here.
 #[allow(dead_code)]
@@ -93,7 +95,7 @@ fn main() {
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let header = "patches,budget,precompute_s,memory_mb,form_factor_entries,scattering_entries,rays,\
 dropped_form_factor_mean,dropped_form_factor_max,diffusion_kept_r,diffusion_kept_g,diffusion_kept_b,\
-iterations,solve_ms,threads";
+iterations,solve_ms,threads,shadow_ray_injection_ms";
     let mut lines = vec![header.to_string()];
     let mut measured: Vec<(f64, f64, f64)> = Vec::new();
     println!("{header}");
@@ -126,13 +128,15 @@ iterations,solve_ms,threads";
         let bytes = 4 * (2 * (n + 1))
             + 8 * transport.form_factors.entries()
             + 20 * transport.scattering.entries();
+        let inject_start = Instant::now();
         let direct = direct_irradiance(&patches, &lights, &rays);
+        let inject_ms = inject_start.elapsed().as_secs_f32() * 1e3;
         let solve_start = Instant::now();
         let solution = transport.solve(&direct, 1e-3, 200);
         let solve_ms = solve_start.elapsed().as_secs_f32() * 1e3;
         let r = &transport.report;
         let line = format!(
-            "{n},{budget},{precompute:.3},{:.2},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{solve_ms:.2},{threads}",
+            "{n},{budget},{precompute:.3},{:.2},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{solve_ms:.2},{threads},{inject_ms:.2}",
             bytes as f32 / 1e6,
             r.form_factor_entries,
             r.scattering_entries,

@@ -129,7 +129,11 @@ fn panel(world: &mut World) {
                     ui.label(format!("  {name}: {ms:.3} ms"));
                 }
             }
-            for span in ["translucency/iteration", "translucency/gather"] {
+            for span in [
+                "translucency/injection",
+                "translucency/iteration",
+                "translucency/gather",
+            ] {
                 if let Some(ms) = span_time(store, span) {
                     ui.label(format!("  {span}: {ms:.3} ms"));
                 }
@@ -290,6 +294,7 @@ pub fn print_timings(world: &World) {
             [
                 "volumetric/spots_compute",
                 "volumetric/spots",
+                "translucency/injection",
                 "translucency/iteration",
                 "translucency/gather",
             ]

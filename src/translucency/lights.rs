@@ -59,8 +59,8 @@ pub enum PatchLight {
 }
 
 /// Each patch's direct irradiance `E⁰` from `lights`, shadowed by one ray from its centre:
-/// the CPU oracle of the light injection (the seed counts each patch's pixels in the light's
-/// view instead).
+/// `LightInjection::ShadowRays`, and the CPU oracle of the GPU's light-view injection
+/// (`injection/`).
 pub fn direct_irradiance(patches: &Patches, lights: &[PatchLight], rays: &SceneRays) -> Vec<Vec3> {
     direct_light(patches, None, lights, rays).irradiance
 }

@@ -13,10 +13,11 @@
 //!
 //! [`TranslucencyPlugin`] runs it in an app: meshes with [`Translucent`] (and opaque ones with
 //! [`RadiosityReceiver`]) are resampled and their transport precomputed on a background task
-//! ([`TranslucencyStatus`]); when a light changes, the direct irradiance of each patch is
-//! found on the CPU (one shadow ray per patch and light; the seed rasterises patch ids in the
-//! light's view instead) and the iteration runs on the GPU (`iteration/`); cameras with
-//! [`TranslucencyCamera`] gather the patches' light per pixel (`gather/`).
+//! ([`TranslucencyStatus`]); when a light changes, the direct light of each patch is injected
+//! on the GPU from each light's view (`injection/`; or on the CPU by one shadow ray per patch
+//! and light, [`LightInjection::ShadowRays`]) and the iteration runs on the GPU
+//! (`iteration/`); cameras with [`TranslucencyCamera`] gather the patches' light per pixel
+//! (`gather/`).
 //! `docs/translucent.md` says what is measured and what is not built yet.
 
 pub mod cache;
