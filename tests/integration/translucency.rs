@@ -310,7 +310,7 @@ fn the_gpu_light_injection_matches_the_shadow_rays() {
             for (name, lights) in &cases {
                 let ambient = if name.contains("ambient") { Vec3::splat(20.0) } else { Vec3::ZERO };
                 assert!(lights.len() <= MAX_INJECTED_LIGHTS);
-                injection.write_lights(&queue, lights, ambient);
+                injection.write_lights(&device, &queue, lights, ambient);
                 let mut encoder =
                     device.create_command_encoder(&CommandEncoderDescriptor::default());
                 injection.record(&mut encoder);

@@ -241,7 +241,7 @@ pub fn prepare_translucency(
                 wanted,
             )),
         };
-        injection.write_lights(&queue, &lights.lights, lights.ambient);
+        injection.write_lights(&device, &queue, &lights.lights, lights.ambient);
         gpu.lights_generation = *lights_generation;
         gpu.injection_pending = true;
         gpu.iteration_pending = true;

@@ -16,7 +16,7 @@ use bevy::{
     math::Vec3,
     render::{
         render_resource::{
-            BindGroup, BindGroupEntry, BindGroupLayoutEntry, BindingType, Buffer,
+            BindGroup, BindGroupEntry, BindGroupLayout, BindGroupLayoutEntry, BindingType, Buffer,
             BufferBindingType, BufferDescriptor, BufferInitDescriptor, BufferUsages,
             CommandEncoder, ComputePassDescriptor, ComputePipeline, PipelineCompilationOptions,
             PipelineLayoutDescriptor, RawComputePipelineDescriptor, ShaderModuleDescriptor,
@@ -159,8 +159,13 @@ pub fn incidence_table(weight: Option<&IncidenceWeight>) -> Vec<[f32; 4]> {
 pub struct GpuInjection {
     injection: Injection,
     uniform: Buffer,
+    /// Maps for this many lights (grown as lights come; six faces each).
+    map_capacity: u32,
     depth_maps: Buffer,
     bind_group: BindGroup,
+    bind_group_layout: BindGroupLayout,
+    scene: Buffer,
+    vectors: Buffer,
     splat: ComputePipeline,
     inject: ComputePipeline,
 }
@@ -192,7 +197,11 @@ impl GpuInjection {
         let patches_at = scene.len() as u32;
         let mut objects = 0;
         for (i, p) in patches.patches.iter().enumerate() {
-            let single = transport.single_scattering.get(i).copied().unwrap_or(Vec3::ZERO);
+            let single = transport
+                .single_scattering
+                .get(i)
+                .copied()
+                .unwrap_or(Vec3::ZERO);
             let translucent = albedo.get(i).is_some_and(|a| *a == Vec3::ZERO);
             objects = objects.max(p.object as usize + 1);
             scene.push([
@@ -252,12 +261,6 @@ impl GpuInjection {
             contents: bytemuck::cast_slice(&scene),
             usage: BufferUsages::STORAGE,
         });
-        let depth_maps = device.create_buffer(&BufferDescriptor {
-            label: Some("translucency_light_view_maps"),
-            size: Self::map_bytes(resolution, MAX_INJECTED_LIGHTS as u32),
-            usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
         let storage = |binding, read_only| BindGroupLayoutEntry {
             binding,
             visibility: ShaderStages::COMPUTE,
@@ -287,27 +290,16 @@ impl GpuInjection {
             ],
         );
         let (vectors, _) = target.exitance();
-        let bind_group = device.create_bind_group(
-            Some("translucency_injection"),
+        let vectors = vectors.clone();
+        let map_capacity = 1;
+        let depth_maps = Self::create_maps(device, resolution, map_capacity);
+        let bind_group = Self::create_bind_group(
+            device,
             &layout,
-            &[
-                BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                BindGroupEntry {
-                    binding: 1,
-                    resource: scene_buffer.as_entire_binding(),
-                },
-                BindGroupEntry {
-                    binding: 2,
-                    resource: depth_maps.as_entire_binding(),
-                },
-                BindGroupEntry {
-                    binding: 3,
-                    resource: vectors.as_entire_binding(),
-                },
-            ],
+            &uniform,
+            &scene_buffer,
+            &depth_maps,
+            &vectors,
         );
         let module = device.create_and_validate_shader_module(ShaderModuleDescriptor {
             label: Some("translucency_inject"),
@@ -331,11 +323,56 @@ impl GpuInjection {
         Self {
             injection,
             uniform,
+            map_capacity,
             depth_maps,
             bind_group,
+            bind_group_layout: layout,
+            scene: scene_buffer,
+            vectors,
             splat: pipeline("splat"),
             inject: pipeline("inject"),
         }
+    }
+
+    fn create_maps(device: &RenderDevice, resolution: u32, lights: u32) -> Buffer {
+        device.create_buffer(&BufferDescriptor {
+            label: Some("translucency_light_view_maps"),
+            size: Self::map_bytes(resolution, lights),
+            usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    fn create_bind_group(
+        device: &RenderDevice,
+        layout: &BindGroupLayout,
+        uniform: &Buffer,
+        scene: &Buffer,
+        depth_maps: &Buffer,
+        vectors: &Buffer,
+    ) -> BindGroup {
+        device.create_bind_group(
+            Some("translucency_injection"),
+            layout,
+            &[
+                BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                },
+                BindGroupEntry {
+                    binding: 1,
+                    resource: scene.as_entire_binding(),
+                },
+                BindGroupEntry {
+                    binding: 2,
+                    resource: depth_maps.as_entire_binding(),
+                },
+                BindGroupEntry {
+                    binding: 3,
+                    resource: vectors.as_entire_binding(),
+                },
+            ],
+        )
     }
 
     /// Bytes of `lights` lights' maps, six faces each.
@@ -349,9 +386,29 @@ impl GpuInjection {
     }
 
     /// Sets the lights (the first [`MAX_INJECTED_LIGHTS`]) and Bevy's ambient irradiance for
-    /// the next [`record`](Self::record); returns how many lights it took.
-    pub fn write_lights(&mut self, queue: &RenderQueue, lights: &[PatchLight], ambient: Vec3) -> usize {
+    /// the next [`record`](Self::record), growing the maps to hold them (`resolution`² × 24
+    /// bytes a light); returns how many lights it took.
+    pub fn write_lights(
+        &mut self,
+        device: &RenderDevice,
+        queue: &RenderQueue,
+        lights: &[PatchLight],
+        ambient: Vec3,
+    ) -> usize {
         let taken = lights.len().min(MAX_INJECTED_LIGHTS);
+        if taken as u32 > self.map_capacity {
+            self.map_capacity = taken as u32;
+            self.depth_maps =
+                Self::create_maps(device, self.injection.resolution, self.map_capacity);
+            self.bind_group = Self::create_bind_group(
+                device,
+                &self.bind_group_layout,
+                &self.uniform,
+                &self.scene,
+                &self.depth_maps,
+                &self.vectors,
+            );
+        }
         for (slot, light) in self.injection.lights.iter_mut().zip(&lights[..taken]) {
             *slot = InjectedLight::new(light);
         }
