@@ -14,9 +14,10 @@ const DIRECTIONAL: u32 = 0u;
 const POINT: u32 = 1u;
 const SPOT: u32 = 2u;
 // A splat's radius against its sample's disc (samples of ≤ h/2 sides do not tile as discs),
-// and the widest splat in texels.
+// and the widest splat in texels (a sample wider than this leaves gaps between its
+// neighbours' splats: at 512², one of 5 mm radius nearer than 4 cm to a point light).
 const SPLAT_COVER: f32 = 1.5;
-const MAX_SPLAT_TEXELS: f32 = 12.0;
+const MAX_SPLAT_TEXELS: f32 = 32.0;
 
 struct InjectedLight {
     // Directional: unused; point and spot: the light's position.
@@ -273,6 +274,10 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
         } else {
             let d = light.position - x;
             let dist2 = dot(d, d);
+            // A light on the patch itself lights nothing (as the oracle's NaN cosine).
+            if !(dist2 > 1e-20) {
+                continue;
+            }
             to_light = d * inverseSqrt(dist2);
             let cos_i = dot(n, to_light);
             var falloff = 1.0;
