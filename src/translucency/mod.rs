@@ -140,4 +140,5 @@ pub use patches::{
 pub use transport::{
     DirectLight, EnergyTransport, PatchLight, PatchSurface, SceneRays, SparseMatrix,
     TransportReport, TransportSettings, TransportSolution, direct_irradiance, direct_light,
+    patch_albedos,
 };

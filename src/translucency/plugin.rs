@@ -485,14 +485,7 @@ pub(crate) fn run_precompute(
                 (patches, transport)
             });
             transport.incidence = EnergyTransport::incidence_weights(&surfaces, &transport_settings);
-            let albedo = patches
-                .patches
-                .iter()
-                .map(|p| match surfaces[p.object as usize] {
-                    PatchSurface::Opaque { albedo } => albedo,
-                    PatchSurface::Translucent { .. } => Vec3::ZERO,
-                })
-                .collect();
+            let albedo = super::transport::patch_albedos(&patches, &surfaces);
             (TranslucencyScene { patches, transport, rays, albedo, entities }, notes)
         }));
         *status = TranslucencyStatus::Precomputing {

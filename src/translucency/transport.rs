@@ -177,6 +177,19 @@ fn threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
+/// Each patch's albedo: its object's on opaque patches, zero on translucent ones (all their
+/// light is the transport's; the gather and the ambient light tell them apart by it).
+pub fn patch_albedos(patches: &Patches, surfaces: &[PatchSurface]) -> Vec<Vec3> {
+    patches
+        .patches
+        .iter()
+        .map(|p| match surfaces.get(p.object as usize) {
+            Some(PatchSurface::Opaque { albedo }) => *albedo,
+            _ => Vec3::ZERO,
+        })
+        .collect()
+}
+
 /// Runs `f(i)` for `0..n` on every core, interleaved so uneven rows balance; results in order.
 pub(super) fn parallel_rows<R: Send>(n: usize, f: impl Fn(usize) -> R + Sync) -> Vec<R> {
     let t = threads().min(n.max(1));

@@ -13,7 +13,7 @@ use bevy::{
 };
 use bevy_mesostructure::translucency::{
     DiffusionKernel, EnergyTransport, PatchLight, PatchObject, PatchSurface, SceneRays,
-    TranslucentPreset, TransportSettings, direct_light,
+    TranslucentPreset, TransportSettings, direct_light, patch_albedos,
     iteration::{GpuTransport, IterationLimits},
     Patches,
     injection::{GpuInjection, MAX_INJECTED_LIGHTS},
@@ -25,6 +25,15 @@ use crate::harness::*;
 
 fn object(mesh: Mesh, transform: Transform) -> (Vec<Vec3>, Vec<u32>) {
     world_triangles(&mesh, &GlobalTransform::from(transform)).expect("a triangle list")
+}
+
+/// The app's render device and queue.
+fn device_and_queue(app: &App) -> (RenderDevice, RenderQueue) {
+    let render = app.sub_app(RenderApp).world();
+    (
+        render.resource::<RenderDevice>().clone(),
+        render.resource::<RenderQueue>().clone(),
+    )
 }
 
 /// Reads `size` bytes of `buffer` at `offset` back to the CPU.
@@ -106,14 +115,7 @@ fn marble_ball_on_a_floor(
         ..default()
     };
     let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
-    let albedo = patches
-        .patches
-        .iter()
-        .map(|p| match surfaces[p.object as usize] {
-            PatchSurface::Opaque { albedo } => albedo,
-            PatchSurface::Translucent { .. } => Vec3::ZERO,
-        })
-        .collect();
+    let albedo = patch_albedos(&patches, &surfaces);
     (patches, albedo, transport, rays)
 }
 
@@ -123,9 +125,7 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
         return;
     }
     let app = bare_app();
-    let render = app.sub_app(RenderApp).world();
-    let device = render.resource::<RenderDevice>().clone();
-    let queue = render.resource::<RenderQueue>().clone();
+    let (device, queue) = device_and_queue(&app);
 
     let (patches, _, transport, rays) = marble_ball_on_a_floor(DiffusionKernel::Dipole);
     assert!(transport.report.clusters > 0, "the far field takes part");
@@ -230,9 +230,7 @@ fn the_gpu_light_injection_matches_the_shadow_rays() {
         return;
     }
     let app = bare_app();
-    let render = app.sub_app(RenderApp).world();
-    let device = render.resource::<RenderDevice>().clone();
-    let queue = render.resource::<RenderQueue>().clone();
+    let (device, queue) = device_and_queue(&app);
 
     // The scaled dipole weighs each beam by its incidence; the dipole adds single scattering.
     for kernel in [DiffusionKernel::ScaledDipole, DiffusionKernel::Dipole] {

@@ -16,11 +16,9 @@ use bevy::{
     math::Vec3,
     render::{
         render_resource::{
-            BindGroup, BindGroupEntry, BindGroupLayout, BindGroupLayoutEntry, BindingType, Buffer,
-            BufferBindingType, BufferDescriptor, BufferInitDescriptor, BufferUsages,
-            CommandEncoder, ComputePassDescriptor, ComputePipeline, PipelineCompilationOptions,
-            PipelineLayoutDescriptor, RawComputePipelineDescriptor, ShaderModuleDescriptor,
-            ShaderSource, ShaderStages,
+            BindGroup, BindGroupEntries, BindGroupLayout, Buffer, BufferDescriptor,
+            BufferInitDescriptor, BufferUsages, CommandEncoder, ComputePassDescriptor,
+            ComputePipeline, PipelineLayoutDescriptor, ShaderModuleDescriptor, ShaderSource,
         },
         renderer::{RenderDevice, RenderQueue},
     },
@@ -29,7 +27,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{
     diffusion::{IncidenceWeight, diffuse_single_scattering_shape, single_scattering_shape},
-    iteration::GpuTransport,
+    iteration::{GpuTransport, compute_pipeline, packed_buffers_layout},
     patches::Patches,
     transport::{EnergyTransport, PatchLight},
 };
@@ -261,34 +259,7 @@ impl GpuInjection {
             contents: bytemuck::cast_slice(&scene),
             usage: BufferUsages::STORAGE,
         });
-        let storage = |binding, read_only| BindGroupLayoutEntry {
-            binding,
-            visibility: ShaderStages::COMPUTE,
-            ty: BindingType::Buffer {
-                ty: BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let layout = device.create_bind_group_layout(
-            Some("translucency_injection_layout"),
-            &[
-                BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: ShaderStages::COMPUTE,
-                    ty: BindingType::Buffer {
-                        ty: BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                storage(1, true),
-                storage(2, false),
-                storage(3, false),
-            ],
-        );
+        let layout = packed_buffers_layout(device, "translucency_injection_layout");
         let (vectors, _) = target.exitance();
         let vectors = vectors.clone();
         let map_capacity = 1;
@@ -310,16 +281,7 @@ impl GpuInjection {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let pipeline = |entry: &str| {
-            device.create_compute_pipeline(&RawComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: PipelineCompilationOptions::default(),
-                cache: None,
-            })
-        };
+        let pipeline = |entry| compute_pipeline(device, &pipeline_layout, &module, entry);
         Self {
             injection,
             uniform,
@@ -354,24 +316,12 @@ impl GpuInjection {
         device.create_bind_group(
             Some("translucency_injection"),
             layout,
-            &[
-                BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                BindGroupEntry {
-                    binding: 1,
-                    resource: scene.as_entire_binding(),
-                },
-                BindGroupEntry {
-                    binding: 2,
-                    resource: depth_maps.as_entire_binding(),
-                },
-                BindGroupEntry {
-                    binding: 3,
-                    resource: vectors.as_entire_binding(),
-                },
-            ],
+            &BindGroupEntries::sequential((
+                uniform.as_entire_binding(),
+                scene.as_entire_binding(),
+                depth_maps.as_entire_binding(),
+                vectors.as_entire_binding(),
+            )),
         )
     }
 

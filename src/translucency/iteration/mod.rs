@@ -11,11 +11,14 @@ use bevy::{
     math::Vec3,
     render::{
         render_resource::{
-            BindGroup, BindGroupEntry, BindGroupLayoutEntry, BindingType, Buffer,
-            BufferBindingType, BufferDescriptor, BufferInitDescriptor, BufferUsages,
-            CommandEncoder, ComputePassDescriptor, ComputePipeline, PipelineCompilationOptions,
-            PipelineLayoutDescriptor, RawComputePipelineDescriptor, ShaderModuleDescriptor,
-            ShaderSource, ShaderStages,
+            BindGroup, BindGroupEntries, BindGroupLayout, BindGroupLayoutEntries, Buffer,
+            BufferDescriptor, PipelineLayout, ShaderModule,
+            BufferInitDescriptor, BufferUsages, CommandEncoder, ComputePassDescriptor,
+            ComputePipeline, PipelineCompilationOptions, PipelineLayoutDescriptor,
+            RawComputePipelineDescriptor, ShaderModuleDescriptor, ShaderSource, ShaderStages,
+            binding_types::{
+                storage_buffer_read_only_sized, storage_buffer_sized, uniform_buffer_sized,
+            },
         },
         renderer::{RenderDevice, RenderQueue},
     },
@@ -85,6 +88,41 @@ pub struct GpuTransport {
     decide: ComputePipeline,
     restrict: ComputePipeline,
     gather: ComputePipeline,
+}
+
+/// The bind group layout of the translucency's compute passes (the iteration's and the light
+/// injection's): a uniform of sizes and offsets, one read-only storage buffer of packed
+/// arrays, two read-write ones — few buffers whatever a device's per-stage limit.
+pub(super) fn packed_buffers_layout(device: &RenderDevice, label: &'static str) -> BindGroupLayout {
+    device.create_bind_group_layout(
+        Some(label),
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::COMPUTE,
+            (
+                uniform_buffer_sized(false, None),
+                storage_buffer_read_only_sized(false, None),
+                storage_buffer_sized(false, None),
+                storage_buffer_sized(false, None),
+            ),
+        ),
+    )
+}
+
+/// One entry point of `module` as a compute pipeline of `layout`.
+pub(super) fn compute_pipeline(
+    device: &RenderDevice,
+    layout: &PipelineLayout,
+    module: &ShaderModule,
+    entry: &str,
+) -> ComputePipeline {
+    device.create_compute_pipeline(&RawComputePipelineDescriptor {
+        label: Some(entry),
+        layout: Some(layout),
+        module,
+        entry_point: Some(entry),
+        compilation_options: PipelineCompilationOptions::default(),
+        cache: None,
+    })
 }
 
 /// Appends `values` to `words`, returning where they start.
@@ -173,65 +211,25 @@ impl GpuTransport {
             usage: BufferUsages::UNIFORM,
         });
 
-        let storage = |binding, read_only| BindGroupLayoutEntry {
-            binding,
-            visibility: ShaderStages::COMPUTE,
-            ty: BindingType::Buffer {
-                ty: BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let bind_group_layout = device.create_bind_group_layout(
-            Some("translucency_iteration_layout"),
-            &[
-                BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: ShaderStages::COMPUTE,
-                    ty: BindingType::Buffer {
-                        ty: BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                storage(1, true),
-                storage(2, false),
-                storage(3, false),
-            ],
+        let bind_group_layout = packed_buffers_layout(device, "translucency_iteration_layout");
+        let state_layout = device.create_bind_group_layout(
+            Some("translucency_state_layout"),
+            &BindGroupLayoutEntries::single(ShaderStages::COMPUTE, storage_buffer_sized(false, None)),
         );
-        let state_layout = device
-            .create_bind_group_layout(Some("translucency_state_layout"), &[storage(0, false)]);
         let state_bind_group = device.create_bind_group(
             Some("translucency_state"),
             &state_layout,
-            &[BindGroupEntry {
-                binding: 0,
-                resource: state.as_entire_binding(),
-            }],
+            &BindGroupEntries::single(state.as_entire_binding()),
         );
         let bind_group = device.create_bind_group(
             Some("translucency_iteration"),
             &bind_group_layout,
-            &[
-                BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                BindGroupEntry {
-                    binding: 1,
-                    resource: matrices.as_entire_binding(),
-                },
-                BindGroupEntry {
-                    binding: 2,
-                    resource: vectors.as_entire_binding(),
-                },
-                BindGroupEntry {
-                    binding: 3,
-                    resource: partials.as_entire_binding(),
-                },
-            ],
+            &BindGroupEntries::sequential((
+                uniform.as_entire_binding(),
+                matrices.as_entire_binding(),
+                vectors.as_entire_binding(),
+                partials.as_entire_binding(),
+            )),
         );
         let module = device.create_and_validate_shader_module(ShaderModuleDescriptor {
             label: Some("translucency_iterate"),
@@ -248,16 +246,7 @@ impl GpuTransport {
             bind_group_layouts: &[Some(&bind_group_layout), Some(&state_layout)],
             immediate_size: 0,
         });
-        let pipeline = |entry: &str, layout| {
-            device.create_compute_pipeline(&RawComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: PipelineCompilationOptions::default(),
-                cache: None,
-            })
-        };
+        let pipeline = |entry, layout| compute_pipeline(device, layout, &module, entry);
         Self {
             layout,
             vectors,
