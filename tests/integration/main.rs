@@ -10,6 +10,10 @@ mod deformation;
 mod files;
 mod harness;
 mod lighting;
+// The examples' mesh loading (the translucent room's bunny).
+#[path = "../../examples/common/meshes.rs"]
+#[allow(dead_code)]
+mod meshes;
 mod micro_shadows;
 mod stability;
 mod unseen;
