@@ -47,7 +47,9 @@ use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings,
 };
-use translucent_ball::{EYE, FOV_Y, FRONT_LIGHT, RADIUS, plugin_picture, score, scored};
+use translucent_ball::{
+    BallLighting, EYE, FOV_Y, FRONT_LIGHT, RADIUS, plugin_picture, score, scored,
+};
 
 /// The translucency's picture of a ball against Mitsuba's, per patch budget, into a CSV.
 #[derive(clap::Parser)]
@@ -88,6 +90,15 @@ struct Cli {
     /// little above and in front; 0.4,-0.2,1 lights the ball from behind)
     #[arg(long, value_parser = parse_direction, allow_negative_numbers = true)]
     light: Option<Vec3>,
+    /// Light the ball by a uniform environment of radiance 1 (Bevy's ambient light) instead
+    /// of the directional light; the reference is Mitsuba's (scene suffix `uniform`)
+    #[arg(long)]
+    uniform: bool,
+    /// Index of refraction of the ball's boundary (1: index-matched, no Fresnel in either
+    /// renderer). Above 1 it needs `--uniform`: a directional light cannot reach the camera
+    /// through a smooth dielectric in Mitsuba (scene suffix `_eta<value>`)
+    #[arg(long, default_value_t = 1.0, value_parser = parse_eta)]
+    eta: f32,
     /// Picture width = height
     #[arg(long, default_value_t = 96, value_parser = clap::value_parser!(u32).range(8..=1024))]
     size: u32,
@@ -163,6 +174,13 @@ fn parse_direction(s: &str) -> Result<Vec3, String> {
     }
 }
 
+fn parse_eta(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(eta) if (1.0..=3.0).contains(&eta) => Ok(eta),
+        _ => Err(format!("{s:?} is not an index of refraction in 1 – 3")),
+    }
+}
+
 fn fail(message: String) -> ! {
     eprintln!("error: {message}");
     std::process::exit(1);
@@ -177,19 +195,33 @@ fn main() {
         Medium::Ketchup => TranslucentPreset::Ketchup,
         Medium::Apple => TranslucentPreset::Apple,
     };
-    // Index-matched: no Fresnel at the boundary, in either renderer.
+    // Index-matched by default: no Fresnel at the boundary, in either renderer.
     let medium = bevy_mesostructure::translucency::TranslucentMedium {
-        index_of_refraction: 1.0,
+        index_of_refraction: cli.eta,
         ..preset.medium()
     };
+    if cli.eta != 1.0 && !cli.uniform {
+        fail("--eta above 1 needs --uniform: a directional light cannot reach the camera through a smooth dielectric in the reference".into());
+    }
+    if cli.uniform && cli.bevy {
+        fail("--bevy fits Bevy's material under the directional light only (drop --uniform)".into());
+    }
     let light = cli.light.unwrap_or(FRONT_LIGHT.normalize());
-    let lighting = if light.z > 0.3 { "back" } else { "front" };
+    let eta_suffix = if cli.eta != 1.0 { format!("_eta{}", cli.eta) } else { String::new() };
+    let lighting = if cli.uniform {
+        format!("uniform{eta_suffix}")
+    } else if light.z > 0.3 {
+        "back".to_string()
+    } else {
+        "front".to_string()
+    };
     let name = format!("{:?}", cli.medium).to_lowercase();
     let size = cli.size;
     let reference_path = cli.reference.clone().unwrap_or_else(|| {
         let dir = PathBuf::from("out/translucent_accuracy");
         std::fs::create_dir_all(&dir).unwrap_or_else(|e| fail(format!("cannot create {}: {e}", dir.display())));
-        let light_traced = cli.tracer == Tracer::Light;
+        // The light tracer takes a directional light only: a uniform environment is Mitsuba's.
+        let light_traced = cli.tracer == Tracer::Light && !cli.uniform;
         // Named by renderer and version: the first Mitsuba references (in metres, `volpath`)
         // were dark by Mitsuba's ray offsets (tools/translucent_reference.py says why).
         let (tool, renderer, samples) = if light_traced {
@@ -198,9 +230,10 @@ fn main() {
             ("tools/translucent_reference.py", "volpathmis-mm", format!("--spp={}", cli.spp))
         };
         let path = dir.join(format!(
-            "reference_{renderer}_{name}_{size}_{}{}.exr",
+            "reference_{renderer}_{name}_{size}_{}{}{}.exr",
             samples.trim_start_matches("--spp=").trim_start_matches("--photons="),
-            if cli.light.is_some() { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() }
+            if cli.light.is_some() && !cli.uniform { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() },
+            if cli.uniform { format!("_{lighting}") } else { String::new() },
         ));
         if !path.exists() {
             let list = |v: Vec3| format!("{},{},{}", v.x, v.y, v.z);
@@ -214,9 +247,13 @@ fn main() {
                 &format!("--light={}", list(light)),
                 &format!("--fov={}", FOV_Y.to_degrees()),
                 &format!("--size={size}"),
+                &format!("--eta={}", cli.eta),
                 &samples,
                 &format!("--out={}", path.display()),
             ]);
+            if cli.uniform {
+                command.arg("--uniform");
+            }
             eprintln!("rendering the reference: {command:?}");
             let start = Instant::now();
             match command.status() {
@@ -273,7 +310,7 @@ fn main() {
             &settings,
             gather,
             budget,
-            light,
+            if cli.uniform { BallLighting::Uniform } else { BallLighting::Directional(light) },
             size,
         );
         let picture = &result.pixels;

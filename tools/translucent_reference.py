@@ -32,6 +32,15 @@ The example `translucent_accuracy` prints the exact command for its scene:The ex
 Arguments in metres and per millimetre, as the example's scene; radiance per unit irradiance
 of the light (irradiance 1 on a plane facing it), which does not depend on the unit of
 length. Not needed by the crate or its tests.
+
+`--eta 1.3` puts a smooth dielectric boundary round the medium instead (Mitsuba's
+`dielectric`: Fresnel reflection and refraction both ways, total internal reflection). A
+directional light cannot reach the camera through it by any path Mitsuba samples (a delta
+light behind a delta interface), so a dielectric ball is lit by `--uniform`: a uniform
+environment of radiance 1 (Bevy's ambient light) in place of the light. The environment's
+mirror image in the ball's outer surface, `F(cos θ)` times 1 for a convex ball, and the
+environment seen beside the ball are taken out of each pixel (averaged over 8×8 rays a
+pixel), leaving the light that came through the medium.
 """
 
 import argparse
@@ -46,7 +55,16 @@ def main():
     parser.add_argument("--spp", type=int, default=1024, help="samples per pixel")
     parser.add_argument("--integrator", default="volpathmis", choices=["volpathmis", "volpath"],
                         help="volumetric path tracer (volpath only to reproduce old figures)")
+    parser.add_argument("--eta", type=float, default=1.0,
+                        help="index of refraction of the ball (1: index-matched, no boundary)")
+    parser.add_argument("--uniform", action="store_true",
+                        help="a uniform environment of radiance 1 instead of the light")
     args = parser.parse_args()
+    if not 1.0 <= args.eta <= 3.0:
+        parser.error("--eta must lie in 1 – 3")
+    if args.eta != 1.0 and not args.uniform:
+        parser.error("a dielectric ball (--eta > 1) needs --uniform: a directional light "
+                     "cannot reach the camera through a smooth boundary")
     if args.radius <= 0 or args.size <= 0 or args.spp <= 0:
         parser.error("--radius, --size and --spp must be positive")
 
@@ -74,7 +92,8 @@ def main():
         "ball": {
             "type": "sphere",
             "radius": mm * args.radius,
-            "bsdf": {"type": "null"},
+            "bsdf": {"type": "null"} if args.eta == 1.0
+            else {"type": "dielectric", "int_ior": args.eta, "ext_ior": 1.0},
             "interior": {
                 "type": "homogeneous",
                 "albedo": {"type": "rgb", "value": albedo},
@@ -84,11 +103,57 @@ def main():
                 "phase": {"type": "isotropic"},
             },
         },
-        "sun": {"type": "directional", "direction": args.light, "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}},
+        **({"environment": {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}
+           if args.uniform else
+           {"sun": {"type": "directional", "direction": args.light,
+                    "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}),
     })
     image = mi.render(scene)
+    if args.uniform:
+        import numpy as np
+        image = np.array(image, dtype=np.float64)
+        image -= environment_seen(args)[:, :, None]
+        image = mi.Bitmap(image.astype(np.float32))
     mi.Bitmap(image).write(args.out)
     print(f"wrote {args.out}")
+
+
+def fresnel(cos_i, eta):
+    """Unpolarised Fresnel reflectance from outside onto index `eta` (numpy arrays)."""
+    import numpy as np
+    cos_t = np.sqrt(np.maximum(1.0 - (1.0 - cos_i * cos_i) / (eta * eta), 0.0))
+    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    return 0.5 * (rs * rs + rp * rp)
+
+
+def environment_seen(args):
+    """Per pixel, how much of the uniform environment the camera sees other than through the
+    medium: directly beside the ball (1), and mirrored in its outer surface (Fresnel's
+    reflectance; 0 when index-matched), averaged over 8×8 rays a pixel (the camera looks at
+    the ball's centre, so the picture is symmetric and its axes' orientation does not
+    matter)."""
+    import numpy as np
+    sub = 8
+    n = args.size * sub
+    tan = np.tan(np.radians(args.fov) / 2.0)
+    u = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    sx, sy = np.meshgrid(u * tan, -u * tan)
+    eye = np.array(args.eye, dtype=np.float64)
+    forward = -eye / np.linalg.norm(eye)
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    d = forward + sx[..., None] * right + sy[..., None] * up
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    b = d @ eye
+    disc = b * b - (eye @ eye - args.radius ** 2)
+    hit = disc > 0.0
+    t = -b - np.sqrt(np.where(hit, disc, 0.0))
+    normal = (eye + t[..., None] * d) / args.radius
+    cos_i = np.clip(-(d * normal).sum(-1), 0.0, 1.0)
+    reflected = np.where(hit, fresnel(cos_i, args.eta), 1.0)
+    return reflected.reshape(args.size, sub, args.size, sub).mean(axis=(1, 3))
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 //! The translucency accuracy scene, shared by `examples/translucent_accuracy.rs` and the
 //! integration test that holds the plugin to a light-traced reference: a ball of radius 1 cm
-//! (Bevy's ico sphere, 20 480 triangles) of one medium with an index-matched boundary, lit by
-//! one directional light of irradiance 1, seen from 4 cm; the plugin's picture computed on the
+//! (Bevy's ico sphere, 20 480 triangles) of one medium, index-matched or behind a dielectric
+//! boundary, lit by one directional light of irradiance 1 or a uniform environment of
+//! radiance 1, seen from 4 cm; the plugin's picture computed on the
 //! CPU by the same patches, transport, iteration and gather as the passes, and its score
 //! against a reference picture.
 #![allow(dead_code)] // The example reads every field; the test only the picture and its score.
@@ -59,15 +60,25 @@ pub struct BallPicture {
     pub iterations: u32,
 }
 
-/// The plugin's picture of a ball of `medium` lit by a directional light travelling along
-/// `light` (unit), at `budget` patches, `size`² pixels.
+/// How the ball is lit.
+#[derive(Clone, Copy, Debug)]
+pub enum BallLighting {
+    /// A directional light of irradiance 1 travelling along this (unit) direction.
+    Directional(Vec3),
+    /// A uniform environment of radiance 1: Bevy's ambient light, irradiance π on every
+    /// translucent patch, as the plugin injects it.
+    Uniform,
+}
+
+/// The plugin's picture of a ball of `medium` lit by `lighting`, at `budget` patches,
+/// `size`² pixels.
 pub fn plugin_picture(
     medium: TranslucentMedium,
     oriented_dipole: bool,
     settings: &TransportSettings,
     gather: GatherMethod,
     budget: u32,
-    light: Vec3,
+    lighting: BallLighting,
     size: u32,
 ) -> BallPicture {
     let (positions, indices) = world_triangles(
@@ -84,16 +95,25 @@ pub fn plugin_picture(
         world_units_per_mm: 0.001,
         oriented_dipole,
     }];
-    let lights = [PatchLight::Directional {
-        direction: light,
-        illuminance: Vec3::ONE,
-    }];
+    let (lights, ambient) = match lighting {
+        BallLighting::Directional(direction) => (
+            vec![PatchLight::Directional {
+                direction,
+                illuminance: Vec3::ONE,
+            }],
+            Vec3::ZERO,
+        ),
+        BallLighting::Uniform => (Vec::new(), Vec3::splat(std::f32::consts::PI)),
+    };
     let start = Instant::now();
     let patches = resample_into_patches(&views, budget as usize);
     let rays = SceneRays::new(&views);
     let transport = EnergyTransport::build(&patches, &surfaces, &rays, settings);
     let precompute_s = start.elapsed().as_secs_f32();
-    let direct = direct_light(&patches, Some(&transport), &lights, &rays);
+    let mut direct = direct_light(&patches, Some(&transport), &lights, &rays);
+    for e in &mut direct.irradiance {
+        *e += ambient;
+    }
     let solution = transport.solve_with(&direct, 1e-4, 256);
     let albedo = vec![Vec3::ZERO; patches.patches.len()];
     let pixels = (0..size * size)

@@ -463,15 +463,36 @@ impl EnergyTransport {
                         area: s.area,
                     })
                     .collect();
-                let finite = super::random_walk::exit_shares(
-                    &medium,
-                    units_per_mm as f32,
-                    &entries,
-                    rays,
-                    super::random_walk::WALKS_PER_CHANNEL,
-                    object as u64,
-                )
-                .map_or(Vec3::ONE, |(object_share, slab_share)| {
+                let walk = |medium: &super::medium::TranslucentMedium| {
+                    super::random_walk::exit_shares(
+                        medium,
+                        units_per_mm as f32,
+                        &entries,
+                        rays,
+                        super::random_walk::WALKS_PER_CHANNEL,
+                        object as u64,
+                    )
+                };
+                // Chiang et al.'s `A` (the scaled dipole's and Burley's total) is an
+                // index-matched slab's: over an index-matched slab's share, the walks' share
+                // (Fresnel reflecting them back inside the boundary) carries the boundary's
+                // internal reflection as well as the shape (over the slab's own share it
+                // carried the shape alone, and a skin ball at η 1.3 under uniform light came
+                // out 1.28–1.70× too bright against a path tracer; `docs/translucent.md`).
+                // Jensen's dipole holds its boundary already (`A = (1 + F_dr)/(1 − F_dr)`).
+                let index_matched_slab = if medium.index_of_refraction > 1.0
+                    && settings.kernel != super::diffusion::DiffusionKernel::Dipole
+                {
+                    walk(&super::medium::TranslucentMedium {
+                        index_of_refraction: 1.0,
+                        ..medium
+                    })
+                    .map(|(_, slab)| slab)
+                } else {
+                    None
+                };
+                let finite = walk(&medium).map_or(Vec3::ONE, |(object_share, slab_share)| {
+                    let slab_share = index_matched_slab.unwrap_or(slab_share);
                     Vec3::select(
                         slab_share.cmpgt(Vec3::ZERO),
                         object_share / slab_share.max(Vec3::splat(1e-9)),
