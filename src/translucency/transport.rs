@@ -70,7 +70,10 @@ pub struct TransportSettings {
     pub far_field_ratio: f32,
     /// Scale each translucent object's columns from the semi-infinite slab's total `W∞` by
     /// what random walks find leaves the object's own shape over what leaves a slab
-    /// (`random_walk`; 3 × 4096 walks an object at build time: +0.03–0.2 s for a 1 cm ball).
+    /// (`random_walk`; 3 × 4096 walks an object at build time: +0.03–0.2 s for a 1 cm ball,
+    /// twice behind a dielectric boundary: there the slab is index-matched, as Chiang et al.'s
+    /// `A` is, so the walks also carry the boundary's internal reflection — a skin ball at
+    /// η 1.3 in uniform light was 1.3–1.7× too bright without).
     /// On by default: a 1 cm skin ball gives off 1.19× / 1.13× / 1.10× a slab's share, and
     /// against a light-traced reference the walks take skin from 0.137 to 0.076 and marble
     /// from 0.073 to 0.045 in relative L1 (`docs/translucent.md`).
