@@ -95,8 +95,9 @@ struct Cli {
     #[arg(long)]
     uniform: bool,
     /// Index of refraction of the ball's boundary (1: index-matched, no Fresnel in either
-    /// renderer). Above 1 it needs `--uniform`: a directional light cannot reach the camera
-    /// through a smooth dielectric in Mitsuba (scene suffix `_eta<value>`)
+    /// renderer). Above 1 under the directional light the reference is the light tracer's (a
+    /// directional light cannot reach the camera through a smooth dielectric in Mitsuba);
+    /// scene suffix `_eta<value>`
     #[arg(long, default_value_t = 1.0, value_parser = parse_eta)]
     eta: f32,
     /// Picture width = height
@@ -200,8 +201,8 @@ fn main() {
         index_of_refraction: cli.eta,
         ..preset.medium()
     };
-    if cli.eta != 1.0 && !cli.uniform {
-        fail("--eta above 1 needs --uniform: a directional light cannot reach the camera through a smooth dielectric in the reference".into());
+    if cli.eta != 1.0 && !cli.uniform && cli.tracer == Tracer::Mitsuba && cli.reference.is_none() {
+        fail("--eta above 1 under the directional light needs --tracer light: in Mitsuba a directional light cannot reach the camera through a smooth dielectric".into());
     }
     if cli.uniform && cli.bevy {
         fail("--bevy fits Bevy's material under the directional light only (drop --uniform)".into());
@@ -211,9 +212,9 @@ fn main() {
     let lighting = if cli.uniform {
         format!("uniform{eta_suffix}")
     } else if light.z > 0.3 {
-        "back".to_string()
+        format!("back{eta_suffix}")
     } else {
-        "front".to_string()
+        format!("front{eta_suffix}")
     };
     let name = format!("{:?}", cli.medium).to_lowercase();
     let size = cli.size;
@@ -233,7 +234,7 @@ fn main() {
             "reference_{renderer}_{name}_{size}_{}{}{}.exr",
             samples.trim_start_matches("--spp=").trim_start_matches("--photons="),
             if cli.light.is_some() && !cli.uniform { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() },
-            if cli.uniform { format!("_{lighting}") } else { String::new() },
+            if cli.uniform || cli.eta != 1.0 { format!("_{lighting}") } else { String::new() },
         ));
         if !path.exists() {
             let list = |v: Vec3| format!("{},{},{}", v.x, v.y, v.z);

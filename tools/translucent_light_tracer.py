@@ -18,6 +18,20 @@ media (it renders the ball black). This tool runs the walks the other way, from 
   boundary on the way to the eye, 1/r², and the pinhole's importance 1/(a cos³θ) for a pixel
   of area a on the image plane at distance 1), into the pixel the eye sees it through.
 
+`--eta 1.3` puts a smooth dielectric boundary round the medium (as Mitsuba's `dielectric`):
+- photons enter by Fresnel's transmittance at their incidence and refract;
+- at the boundary from inside they reflect back in with Fresnel's probability (always past
+  the critical angle), else leave;
+- the connection to the eye leaves by refraction: the exit point by Fermat's principle (the
+  least optical length `η|s − x| + |eye − s|` over the cap the eye sees, a golden-section
+  search in the plane of the centre, the point and the eye; Snell's law checked to 1e-4),
+  Fresnel's transmittance out, and in place of 1/r² the solid angle per area at the eye
+  `dω_x/dA_eye = dΩ_eye/(η² dA_x)` (étendue), `dA_x` from two neighbouring rays traced in
+  from the eye. With η = 1 this connection equals the straight one to 1e-5 (checked).
+`--uniform` lights the ball by a uniform environment of radiance 1 instead (photons start
+uniformly over the sphere, cosine-distributed inward): against Mitsuba's reference of the
+same scene it checks the dielectric machinery end to end.
+
 The estimator is the adjoint of `volpath`'s: same scene, same units (radiance per unit
 irradiance), so front-lit pictures of the two agree to the path tracer's noise (checked:
 run both, compare). Every contribution is bounded (T ≤ 1, r ≥ the eye's distance to the
@@ -46,6 +60,102 @@ def normalize(v):
     return v / np.linalg.norm(v)
 
 
+def dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
+
+
+def fresnel(cos_i, eta):
+    """Unpolarised Fresnel reflectance for light meeting a boundary at incidence cosine
+    `cos_i` from a side of index 1 onto index `eta` (eta < 1: from inside; 1 past the critical
+    angle)."""
+    sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta)
+    cos_t = np.sqrt(np.maximum(1.0 - sin_t2, 0.0))
+    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    return np.where(sin_t2 >= 1.0, 1.0, 0.5 * (rs * rs + rp * rp))
+
+
+def refract(w, n, eta):
+    """`w` (unit, against the unit normal `n`: w·n < 0) into a medium `eta` times denser."""
+    cos_i = -dot(w, n)
+    sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta)
+    cos_t = np.sqrt(np.maximum(1.0 - sin_t2, 0.0))
+    return w / eta + ((cos_i / eta) - cos_t)[:, None] * n
+
+
+def refracted_connection(x, eye, radius, eta, sigma_t):
+    """For points `x` inside a ball of index `eta`, the path to the eye through the boundary
+    by Fermat's principle (the least optical length over the cap the eye sees, golden-section
+    search in the plane of the centre, the point and the eye): where it leaves, the
+    medium's transmittance to there times Fresnel's transmittance out, and the solid angle
+    per area at the eye `dω_x/dA_eye = dΩ_eye/(η² dA_x)` (étendue), `dA_x` from two
+    neighbouring rays traced from the eye. Returns (exit points, factor, valid)."""
+    e = np.linalg.norm(eye)
+    axis = eye / e
+    along = x @ axis
+    across = x - along[:, None] * axis
+    a_len = np.linalg.norm(across, axis=1)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    fallback = np.cross(axis, helper)
+    fallback /= np.linalg.norm(fallback)
+    side = np.where(a_len[:, None] > 1e-12 * radius, across / np.maximum(a_len, 1e-300)[:, None], fallback)
+    limit = math.acos(radius / e)
+
+    def optical(phi):
+        s = radius * (np.cos(phi)[:, None] * axis + np.sin(phi)[:, None] * side)
+        return eta * np.linalg.norm(s - x, axis=1) + np.linalg.norm(eye - s, axis=1)
+
+    lo = np.full(len(x), -limit)
+    hi = np.full(len(x), limit)
+    golden = (math.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(40):
+        c = hi - golden * (hi - lo)
+        d = lo + golden * (hi - lo)
+        left = optical(c) < optical(d)
+        hi = np.where(left, d, hi)
+        lo = np.where(left, lo, c)
+    phi = 0.5 * (lo + hi)
+    s = radius * (np.cos(phi)[:, None] * axis + np.sin(phi)[:, None] * side)
+    n = s / radius
+    inside = s - x
+    inside_len = np.linalg.norm(inside, axis=1)
+    w_in = inside / inside_len[:, None]
+    out = eye - s
+    w_out = out / np.linalg.norm(out, axis=1)[:, None]
+    cos_in, cos_out = dot(w_in, n), dot(w_out, n)
+    # Snell holds at a stationary point: tangential components η w_in = w_out.
+    tangent_in = w_in - cos_in[:, None] * n
+    tangent_out = w_out - cos_out[:, None] * n
+    snell = np.linalg.norm(eta * tangent_in - tangent_out, axis=1)
+    valid = (snell < 1e-4) & (cos_in > 0) & (cos_out > 0) & (phi > -limit + 1e-9) & (phi < limit - 1e-9)
+    transmitted = 1.0 - fresnel(cos_out, eta)
+    # dA_x: the cross-section at x of the tube of rays the eye sends through a small solid
+    # angle about -w_out (refracted in at the ball), perpendicular to w_in.
+    delta = 1e-4
+    u = np.cross(w_out, np.array([0.0, 1.0, 0.0]))
+    u = np.where(np.linalg.norm(u, axis=1)[:, None] > 1e-6, u, np.cross(w_out, np.array([1.0, 0.0, 0.0])))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    v = np.cross(w_out, u)
+    offsets = []
+    for du, dv in ((delta, 0.0), (0.0, delta)):
+        ray = -w_out + du * u + dv * v
+        ray /= np.linalg.norm(ray, axis=1)[:, None]
+        b = ray @ eye
+        cc = eye @ eye - radius * radius
+        t = -b - np.sqrt(np.maximum(b * b - cc, 0.0))
+        hit = eye + t[:, None] * ray
+        refracted = refract(ray, hit / radius, eta)
+        # Where it crosses the plane through x perpendicular to the central ray inside.
+        along = dot(refracted, w_in)
+        k = dot(x - hit, w_in) / np.where(np.abs(along) > 1e-12, along, -1e-12)
+        offsets.append(hit + k[:, None] * refracted - x)
+    area = np.linalg.norm(np.cross(offsets[0], offsets[1]), axis=1)
+    solid_angle = delta * delta
+    per_area = solid_angle / np.maximum(area, 1e-300) / (eta * eta)
+    factor = np.exp(-sigma_t * inside_len) * transmitted * per_area
+    return s, factor, valid & (area > 0)
+
+
 def exit_distance(x, w, radius):
     """Distance from x (inside the ball) along unit w to the sphere."""
     b = np.einsum("ij,ij->i", x, w)
@@ -56,7 +166,7 @@ def exit_distance(x, w, radius):
 def trace_channel(sigma_t, albedo, args, camera, rng, batch):
     """One channel's picture from `batch` photons (the caller splits the total)."""
     eye, forward, right, up, tan_half = camera
-    size, radius = args.size, args.radius
+    size, radius, eta = args.size, args.radius, args.eta
     light = normalize(np.array(args.light))
     helper = np.array([0.0, 1.0, 0.0]) if abs(light[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
     lu = normalize(np.cross(light, helper))
@@ -73,28 +183,70 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
     c = np.einsum("ij,ij->i", origin, origin) - radius * radius
     x = origin + (-b - np.sqrt(np.maximum(b * b - c, 0.0)))[:, None] * light
     w = np.tile(light, (batch, 1))
+    if args.uniform:
+        # A uniform environment of radiance 1: irradiance π on every point of the ball,
+        # 4π²R² in all; photons start uniformly over the sphere, cosine-distributed inward.
+        power = 4.0 * math.pi**2 * radius * radius / batch
+        cz = 2.0 * rng.random(batch) - 1.0
+        a = 2.0 * math.pi * rng.random(batch)
+        sz = np.sqrt(np.maximum(0.0, 1.0 - cz * cz))
+        n = np.stack([sz * np.cos(a), sz * np.sin(a), cz], axis=1)
+        x = radius * n
+        h = np.where(np.abs(n[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+        t1 = np.cross(n, h)
+        t1 /= np.linalg.norm(t1, axis=1)[:, None]
+        t2 = np.cross(n, t1)
+        r = np.sqrt(rng.random(batch))
+        a = 2.0 * math.pi * rng.random(batch)
+        w = ((r * np.cos(a))[:, None] * t1 + (r * np.sin(a))[:, None] * t2
+             - np.sqrt(np.maximum(0.0, 1.0 - r * r))[:, None] * n)
     weight = np.full(batch, power)
+    if eta != 1.0:
+        # In through the boundary: Fresnel's share reflected away, the rest refracted.
+        n = x / radius
+        weight = weight * (1.0 - fresnel(-dot(w, n), eta))
+        w = refract(w, n, eta)
+        x = x - 1e-9 * radius * n
     while len(x):
         flight = -np.log(1.0 - rng.random(len(x))) / sigma_t
-        inside = flight < exit_distance(x, w, radius)
+        to_boundary = exit_distance(x, w, radius)
+        inside = flight < to_boundary
+        if eta != 1.0:
+            # At the boundary from inside: Fresnel reflection back in (total past the
+            # critical angle), else out.
+            at = x[~inside] + to_boundary[~inside][:, None] * w[~inside]
+            n = at / radius
+            cos_i = dot(w[~inside], n)
+            back = rng.random(len(at)) < fresnel(cos_i, 1.0 / eta)
+            bounced_x = at[back] - 1e-9 * radius * n[back]
+            bounced_w = w[~inside][back] - 2.0 * cos_i[back][:, None] * n[back]
+            bounced_weight = weight[~inside][back]
         x, w, weight, flight = x[inside], w[inside], weight[inside], flight[inside]
         if not len(x):
+            if eta != 1.0 and len(bounced_x):
+                x, w, weight = bounced_x, bounced_w, bounced_weight
+                continue
             break
         x = x + flight[:, None] * w
         weight = weight * albedo
         # Next-event estimation toward the eye.
-        to_eye = eye - x
-        r2 = np.einsum("ij,ij->i", to_eye, to_eye)
-        w_eye = to_eye / np.sqrt(r2)[:, None]
-        transmittance = np.exp(-sigma_t * exit_distance(x, w_eye, radius))
+        if eta == 1.0:
+            to_eye = eye - x
+            r2 = np.einsum("ij,ij->i", to_eye, to_eye)
+            w_eye = to_eye / np.sqrt(r2)[:, None]
+            transmittance = np.exp(-sigma_t * exit_distance(x, w_eye, radius)) / r2
+            connected = np.ones(len(x), dtype=bool)
+        else:
+            s, transmittance, connected = refracted_connection(x, eye, radius, eta, sigma_t)
+            w_eye = (eye - s) / np.linalg.norm(eye - s, axis=1)[:, None]
         d = -w_eye
         cos_theta = d @ forward
         sx = (d @ right) / cos_theta / tan_half
         sy = (d @ up) / cos_theta / tan_half
         px = np.floor((sx + 1.0) * 0.5 * size).astype(np.int64)
         py = np.floor((1.0 - sy) * 0.5 * size).astype(np.int64)
-        seen = (px >= 0) & (px < size) & (py >= 0) & (py < size) & (cos_theta > 0)
-        contribution = weight * transmittance / (4.0 * math.pi * r2 * pixel_area * cos_theta**3)
+        seen = (px >= 0) & (px < size) & (py >= 0) & (py < size) & (cos_theta > 0) & connected
+        contribution = weight * transmittance / (4.0 * math.pi * pixel_area * cos_theta**3)
         image += np.bincount((py * size + px)[seen], weights=contribution[seen], minlength=size * size)
         # Isotropic scattering.
         cz = 2.0 * rng.random(len(x)) - 1.0
@@ -106,6 +258,10 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
         survive = ~low | (rng.random(len(x)) < 0.5)
         weight = np.where(low, weight * 2.0, weight)
         x, w, weight = x[survive], w[survive], weight[survive]
+        if eta != 1.0 and len(bounced_x):
+            x = np.concatenate([x, bounced_x])
+            w = np.concatenate([w, bounced_w])
+            weight = np.concatenate([weight, bounced_weight])
     return image.reshape(size, size)
 
 
@@ -115,7 +271,13 @@ def main():
     parser.add_argument("--photons", type=int, default=2_000_000, help="photons per channel")
     parser.add_argument("--batch", type=int, default=250_000, help="photons walked at once")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--eta", type=float, default=1.0,
+                        help="index of refraction of the ball (1: index-matched)")
+    parser.add_argument("--uniform", action="store_true",
+                        help="a uniform environment of radiance 1 instead of the light")
     args = parser.parse_args()
+    if not 1.0 <= args.eta <= 3.0:
+        parser.error("--eta must lie in 1 – 3")
     if args.radius <= 0 or args.size <= 0 or args.photons < 2 or args.batch <= 0:
         parser.error("--radius, --size and --batch must be positive, --photons at least 2")
     if not all(a >= 0 and s > 0 for a, s in zip(args.sigma_a, args.sigma_s)):
