@@ -107,13 +107,21 @@ def refracted_connection(x, eye, radius, eta, sigma_t):
 
     lo = np.full(len(x), -limit)
     hi = np.full(len(x), limit)
+    # Golden-section search, one new evaluation a step (the other interior point is kept):
+    # 36 steps leave 1.6 × 0.618³⁶ ≈ 5e-8 rad, Snell's residual far below the check's 1e-4.
     golden = (math.sqrt(5.0) - 1.0) / 2.0
-    for _ in range(40):
-        c = hi - golden * (hi - lo)
-        d = lo + golden * (hi - lo)
-        left = optical(c) < optical(d)
+    c = hi - golden * (hi - lo)
+    d = lo + golden * (hi - lo)
+    fc, fd = optical(c), optical(d)
+    for _ in range(36):
+        left = fc < fd
         hi = np.where(left, d, hi)
         lo = np.where(left, lo, c)
+        # Left: the new d is the old c; right: the new c is the old d.
+        new = np.where(left, hi - golden * (hi - lo), lo + golden * (hi - lo))
+        f_new = optical(new)
+        c, d = np.where(left, new, d), np.where(left, c, new)
+        fc, fd = np.where(left, f_new, fd), np.where(left, fc, f_new)
     phi = 0.5 * (lo + hi)
     s = radius * (np.cos(phi)[:, None] * axis + np.sin(phi)[:, None] * side)
     n = s / radius
