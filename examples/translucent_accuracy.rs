@@ -13,7 +13,8 @@
 //! cargo run --example translucent_accuracy -- [--medium skin1] [--budgets 250,500,1000,2000]
 //!     [--kernel scaled-dipole|burley|dipole] [--gather interpolation|photons]
 //!     [--object-exit-share true|false] [--beam-incidence true|false]
-//!     [--oriented-dipole true|false]
+//!     [--oriented-dipole true|false] [--shape-diffusion true|false]
+//!     [--deep-exit-law true|false]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
@@ -82,6 +83,14 @@ struct Cli {
     /// (`Translucent::oriented_dipole`; method suffix `_oriented` when on)
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
     oriented_dipole: bool,
+    /// Solve the diffusion in the ball's own shape (`TransportSettings::shape_diffusion`;
+    /// method suffix `_flat` when off)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    shape_diffusion: bool,
+    /// Let light from elsewhere leave translucent patches in the deep field's law
+    /// (`TransportSettings::deep_exit_law`; method suffix `_lambert` when off)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    deep_exit_law: bool,
     /// How the pixels take the patches' light: interpolated radiance (the plugin's default)
     /// or the seed's photons (density estimation)
     #[arg(long, value_enum, default_value_t = Gather::Interpolation)]
@@ -119,8 +128,9 @@ struct Cli {
     /// CSV to append rows to (header written if the file is new)
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Draw every row of `--out` into this PNG: relative L1 against patches per scene and
-    /// kernel, Bevy's best fit as a dashed level
+    /// Draw the main rows of `--out` into this PNG: relative L1 against patches for the
+    /// skin1 and marble balls (defaults, the shape with Lambert's exit, the flat profile),
+    /// Bevy's best fit as a dashed level
     #[arg(long, requires = "out")]
     chart: Option<PathBuf>,
     /// Also fit Bevy's own `diffuse_transmission` material to the reference (renders on the
@@ -284,6 +294,8 @@ fn main() {
         },
         object_exit_share: cli.object_exit_share,
         beam_incidence: cli.beam_incidence,
+        shape_diffusion: cli.shape_diffusion,
+        deep_exit_law: cli.deep_exit_law,
         diffusion_energy_kept: cli.energy_kept,
         ..default()
     };
@@ -294,13 +306,15 @@ fn main() {
     let slab = if cli.object_exit_share { "" } else { "_slab" };
     let diffuse = if cli.beam_incidence { "" } else { "_diffuse" };
     let oriented = if cli.oriented_dipole { "_oriented" } else { "" };
+    let flat = if cli.shape_diffusion { "" } else { "_flat" };
+    let lambert = if cli.deep_exit_law { "" } else { "_lambert" };
     let kept = if cli.energy_kept == TransportSettings::default().diffusion_energy_kept {
         String::new()
     } else {
         format!("_kept{}", cli.energy_kept)
     };
     let method =
-        format!("patches_{:?}{gather_name}{slab}{diffuse}{oriented}{kept}", cli.kernel)
+        format!("patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}", cli.kernel)
             .to_lowercase();
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
@@ -406,8 +420,22 @@ fn main() {
     }
 }
 
-/// Relative L1 against patch count (log) for every scene and method in the CSV `csv`.
+/// Relative L1 against patch count (log) in the CSV `csv`: the index-matched skin1 and marble
+/// balls, today's defaults, the shape's solve with Lambert's exit, the flat profile (the
+/// defaults before) and Bevy's best fit (every other row stays in the CSV and the docs' tables).
 fn draw_chart(csv: &std::path::Path, path: &std::path::Path) {
+    const SCENES: [&str; 4] = [
+        "ball_skin1_r10mm_front",
+        "ball_marble_r10mm_front",
+        "ball_skin1_r10mm_back",
+        "ball_marble_r10mm_back",
+    ];
+    const METHODS: [&str; 4] = [
+        "patches_scaleddipole",
+        "patches_scaleddipole_lambert",
+        "patches_scaleddipole_flat_lambert",
+        "bevy_diffuse_transmission",
+    ];
     use plotters::prelude::*;
     let text = std::fs::read_to_string(csv)
         .unwrap_or_else(|e| fail(format!("cannot read {}: {e}", csv.display())));
@@ -422,6 +450,9 @@ fn draw_chart(csv: &std::path::Path, path: &std::path::Path) {
         ) else {
             continue;
         };
+        if !SCENES.contains(scene) || !METHODS.contains(method) {
+            continue;
+        }
         let key = format!("{scene} {method}");
         match f.get(3).and_then(|v| v.parse::<f64>().ok()) {
             Some(patches) => match series.iter_mut().find(|s| s.0 == key) {

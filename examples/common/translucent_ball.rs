@@ -116,6 +116,7 @@ pub fn plugin_picture(
     }
     let solution = transport.solve_with(&direct, 1e-4, 256);
     let albedo = vec![Vec3::ZERO; patches.patches.len()];
+    let exit_laws = transport.exit_laws(&patches, &surfaces, settings);
     let pixels = (0..size * size)
         .map(|i| {
             ball_hit(i % size, i / size, size)
@@ -124,8 +125,10 @@ pub fn plugin_picture(
                         gather,
                         &patches,
                         &albedo,
+                        &exit_laws,
                         &direct.irradiance,
                         &solution.exitance,
+                        EYE,
                         hit,
                         n,
                     )

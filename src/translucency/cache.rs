@@ -16,7 +16,7 @@ use super::{
     transport::{EnergyTransport, PatchSurface, SparseMatrix, TransportReport, TransportSettings},
 };
 
-const MAGIC: &[u8; 8] = b"BMSTRN02";
+const MAGIC: &[u8; 8] = b"BMSTRN03";
 
 /// FNV-1a, 64 bits: the cache's key and the plugin's change signatures.
 #[derive(Clone, Copy)]
@@ -56,6 +56,7 @@ pub fn scene_key(
             settings.far_field_ratio,
             settings.cluster_size as f32,
             settings.object_exit_share as u32 as f32,
+            settings.shape_diffusion as u32 as f32,
         ]);
     for (positions, indices, surface) in objects {
         h = h.f32s(positions.iter().flat_map(|p| p.to_array()));
@@ -224,6 +225,8 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
             r.clusters as u32,
             r.scattering_entries as u32,
             r.rays as u32,
+            r.shape_solved_objects as u32,
+            r.shape_too_large_objects as u32,
         ])?;
         w.f32s(
             [
@@ -317,7 +320,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
     let areas = r.f32s()?;
     let counts = r.u32s()?;
     let figures = r.f32s()?;
-    if single_scattering.len() != n || areas.len() != n || counts.len() != 4 || figures.len() != 9 {
+    if single_scattering.len() != n || areas.len() != n || counts.len() != 6 || figures.len() != 9 {
         return Err(invalid("transport vectors"));
     }
     let patches = Patches {
@@ -349,6 +352,8 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
             clusters: counts[1] as usize,
             scattering_entries: counts[2] as usize,
             rays: counts[3] as usize,
+            shape_solved_objects: counts[4] as usize,
+            shape_too_large_objects: counts[5] as usize,
             dropped_form_factor_mean: figures[0],
             dropped_form_factor_max: figures[1],
             diffusion_kept_mean: Vec3::new(figures[2], figures[3], figures[4]),

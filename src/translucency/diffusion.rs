@@ -66,6 +66,10 @@ enum Channel {
         sigma_tr: f64,
         z_real: f64,
         z_virtual: f64,
+        /// `D = 1/(3σt′)`, mm.
+        diffusion: f64,
+        /// `A = (1 + F_dr)/(1 − F_dr)`.
+        boundary: f64,
     },
     Burley {
         albedo: f64,
@@ -82,6 +86,7 @@ impl Channel {
                 sigma_tr,
                 z_real,
                 z_virtual,
+                ..
             } => {
                 let source = |z: f64| {
                     let d = (r * r + z * z).sqrt();
@@ -110,24 +115,32 @@ impl Channel {
         exit: bevy::math::DVec3,
         exit_normal: bevy::math::DVec3,
     ) -> Option<f64> {
-        let Channel::Dipole {
-            half_albedo,
-            sigma_tr,
-            z_real,
-            z_virtual,
-        } = *self
-        else {
-            return None;
-        };
-        // `(x − s)·n (σ d + 1) e^(−σ d) / d³`, the term of one source at `s`.
-        let term = |source: bevy::math::DVec3| {
-            let to_exit = exit - source;
-            let d = to_exit.length().max(1e-9);
-            to_exit.dot(exit_normal) * (sigma_tr * d + 1.0) * (-sigma_tr * d).exp() / (d * d * d)
-        };
-        let real = term(entry - z_real * entry_normal);
-        let virtual_ = term(entry + z_virtual * entry_normal);
-        Some((half_albedo / (2.0 * PI) * (real - virtual_)).max(0.0))
+        let (_, flux) = self
+            .dipole()?
+            .fields(entry, entry_normal, exit, exit_normal);
+        Some(flux.max(0.0))
+    }
+
+    /// The dipole's sources, `None` for Burley's profile.
+    fn dipole(&self) -> Option<super::shape_diffusion::DipoleChannel> {
+        match *self {
+            Channel::Dipole {
+                half_albedo,
+                sigma_tr,
+                z_real,
+                z_virtual,
+                diffusion,
+                boundary,
+            } => Some(super::shape_diffusion::DipoleChannel {
+                half_albedo,
+                sigma_tr,
+                z_real,
+                z_virtual,
+                diffusion,
+                boundary,
+            }),
+            Channel::Burley { .. } => None,
+        }
     }
 
     fn within(&self, radius: f64) -> f64 {
@@ -138,6 +151,7 @@ impl Channel {
                 sigma_tr,
                 z_real,
                 z_virtual,
+                ..
             } => {
                 let part = |z: f64| {
                     let d = (radius * radius + z * z).sqrt();
@@ -159,6 +173,7 @@ impl Channel {
                 sigma_tr,
                 z_real,
                 z_virtual,
+                ..
             } => half_albedo * ((-sigma_tr * z_real).exp() + (-sigma_tr * z_virtual).exp()),
             Channel::Burley { albedo, .. } => albedo,
         }
@@ -226,6 +241,48 @@ pub fn surface_albedo(alpha: f64) -> f64 {
         }
     }
     0.5 * (lo + hi)
+}
+
+/// The angular law of light that reaches a surface from deep inside a medium of
+/// single-scattering albedo `alpha` (the diffusion field's asymptotic mode), in one colour
+/// channel: its exit radiance against a Lambertian one of the same exitance,
+/// `s(μ) = H(μ)/(1 − ν μ)/N` with Chandrasekhar's `H` ([`chandrasekhar_h`]), `ν = √(3(1 − α))`
+/// the mode's decay per mean free path (at most 0.9), `N` making `2∫ s μ dμ = 1`.
+/// Limb-darkened: for no absorption it is the emergent law of the Milne problem, `√3/4 H(μ)`
+/// (`s(1) = 1.26`, `s(0) = 0.43`). Random walks through slabs 6–15 mean free paths thick
+/// (`tools/slab_walks.py`, 4·10⁵ a case, albedos 0.999, 0.96, 0.85) leave in this law within
+/// 5 % at exit cosines 0.1–1 and 0.78–1.21 in the noisy grazing bin below, where Lambert's
+/// law is 0.36–1.44 of theirs (`docs/translucent.md`).
+/// Its weight: the share `g = 1 − √(3(1 − α))` of light arriving from elsewhere that is in
+/// that mode — all of it for no absorption, none where a mean free path is a diffusion length
+/// (skin's blue). Returns `(α, ν, 1/N, g)`, what [`deep_exit_shape`] and `gather.wgsl` read.
+pub fn deep_exit_law(alpha: f64) -> [f32; 4] {
+    let alpha = alpha.clamp(0.0, 1.0);
+    let decay = (3.0 * (1.0 - alpha)).sqrt();
+    let nu = decay.min(0.9);
+    let unnormalised = [alpha as f32, nu as f32, 1.0, 0.0];
+    // 2 ∫ f(μ) μ dμ by the midpoint rule (f is smooth).
+    let n = 512;
+    let norm = 2.0
+        * (0..n)
+            .map(|k| {
+                let mu = (k as f64 + 0.5) / n as f64;
+                deep_exit_shape(unnormalised, mu as f32) as f64 * mu
+            })
+            .sum::<f64>()
+        / n as f64;
+    [
+        alpha as f32,
+        nu as f32,
+        (1.0 / norm) as f32,
+        (1.0 - decay).max(0.0) as f32,
+    ]
+}
+
+/// `s(μ)` of a [`deep_exit_law`] at exit cosine `mu` (the same arithmetic as `gather.wgsl`).
+pub fn deep_exit_shape(law: [f32; 4], mu: f32) -> f32 {
+    let mu = mu.clamp(0.0, 1.0);
+    chandrasekhar_h(law[0] as f64, mu as f64) as f32 / (1.0 - law[1] * mu) * law[2]
 }
 
 /// `1 − μ₀ ln(1 + 1/μ₀)`: the single-scattered exitance per unit irradiance and `α/2`, for a
@@ -334,8 +391,19 @@ pub struct DiffusionProfile {
 }
 
 impl DiffusionProfile {
-    /// The profile of `medium` (assumed valid: see [`TranslucentMedium::invalid_reason`]).
+    /// The profile of `medium` (assumed valid: see [`TranslucentMedium::invalid_reason`]),
+    /// the dipole's real source one reduced mean free path deep (Jensen's).
     pub fn new(medium: &TranslucentMedium, kernel: DiffusionKernel) -> Self {
+        Self::with_source_depth(medium, kernel, 1.0)
+    }
+
+    /// [`new`](Self::new) with the dipole's real source `depth` reduced mean free paths deep
+    /// (`z_r = depth/σt′`; the virtual one `4AD` above it). Burley's profile has no sources.
+    pub fn with_source_depth(
+        medium: &TranslucentMedium,
+        kernel: DiffusionKernel,
+        depth: f64,
+    ) -> Self {
         let eta = medium.index_of_refraction as f64;
         let f_dr = jensen_internal_diffuse_reflectance(eta);
         let a_boundary = (1.0 + f_dr) / (1.0 - f_dr);
@@ -344,12 +412,15 @@ impl DiffusionProfile {
             let sigma_a = medium.absorption[c] as f64;
             let sigma_t = sigma_a + medium.reduced_scattering[c] as f64;
             let alpha = albedos[c];
-            let z_real = 1.0 / sigma_t;
+            let diffusion = 1.0 / (3.0 * sigma_t);
+            let z_real = depth / sigma_t;
             let dipole = |half_albedo| Channel::Dipole {
                 half_albedo,
                 sigma_tr: (3.0 * sigma_a * sigma_t).sqrt(),
                 z_real,
-                z_virtual: z_real * (1.0 + 4.0 * a_boundary / 3.0),
+                z_virtual: z_real + 4.0 * a_boundary * diffusion,
+                diffusion,
+                boundary: a_boundary,
             };
             match kernel {
                 DiffusionKernel::Dipole => dipole(alpha / 2.0),
@@ -380,6 +451,13 @@ impl DiffusionProfile {
                 DiffusionKernel::Burley | DiffusionKernel::ScaledDipole => [0.0; 3],
             },
         }
+    }
+
+    /// The dipole of each channel (`None` for Burley's profile, which has no sources): what
+    /// [`shape_diffusion`](super::shape_diffusion) solves the object's shape with.
+    pub fn dipole_channels(&self) -> Option<[super::shape_diffusion::DipoleChannel; 3]> {
+        let [r, g, b] = self.channels.map(|c| c.dipole());
+        Some([r?, g?, b?])
     }
 
     /// `R_d(r)`, mm⁻² (exitance per unit flux entering at distance `r` mm).

@@ -32,6 +32,7 @@ pub mod patches;
 mod plugin;
 pub mod random_walk;
 mod rays;
+pub mod shape_diffusion;
 mod sparse;
 pub mod transport;
 

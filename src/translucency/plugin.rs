@@ -42,6 +42,12 @@ pub struct Translucent {
     /// of skin lit from behind goes from 0.61 to 0.31 relative L1 against a light-traced
     /// reference. Leave it off for objects not much larger than their diffusion length (a
     /// 1 cm ball of marble or apple comes out 1.6× too bright with it; `docs/translucent.md`).
+    /// It matters only where the object keeps the flat profile
+    /// ([`TransportSettings::shape_diffusion`](super::transport::TransportSettings::shape_diffusion)
+    /// off, or an object of more than
+    /// [`MAX_SHAPE_PATCHES`](super::shape_diffusion::MAX_SHAPE_PATCHES) patches): solved in
+    /// its shape, an object takes the oriented flux anyway, with a correction for the light
+    /// its surface lets out on the way (back-lit, skin 0.42 and marble 0.15).
     pub oriented_dipole: bool,
 }
 
@@ -194,6 +200,8 @@ pub struct TranslucencyScene {
     pub rays: SceneRays,
     /// Albedo per patch (zero on translucent patches: all their light is the transport's).
     pub albedo: Vec<Vec3>,
+    /// How each patch's light leaves it ([`ExitLaw`](super::transport::ExitLaw)).
+    pub exit_laws: Vec<super::transport::ExitLaw>,
     /// The entity of each object (`Patch::object` indexes it).
     pub entities: Vec<Entity>,
 }
@@ -327,6 +335,8 @@ pub(crate) fn run_precompute(
             settings.transport.cluster_size as f32,
             settings.transport.kernel as u32 as f32,
             settings.transport.object_exit_share as u32 as f32,
+            settings.transport.shape_diffusion as u32 as f32,
+            settings.transport.deep_exit_law as u32 as f32,
         ]),
     ];
     for (entity, mesh, material, transform, translucent, _) in &list {
@@ -486,7 +496,8 @@ pub(crate) fn run_precompute(
             });
             transport.incidence = EnergyTransport::incidence_weights(&surfaces, &transport_settings);
             let albedo = super::transport::patch_albedos(&patches, &surfaces);
-            (TranslucencyScene { patches, transport, rays, albedo, entities }, notes)
+            let exit_laws = transport.exit_laws(&patches, &surfaces, &transport_settings);
+            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, entities }, notes)
         }));
         *status = TranslucencyStatus::Precomputing {
             since: Instant::now(),

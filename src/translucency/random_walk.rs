@@ -51,22 +51,50 @@ pub fn exit_shares(
     walks: usize,
     seed: u64,
 ) -> Option<(Vec3, Vec3)> {
-    let object = exit_share(medium, world_units_per_mm, entries, walks, seed, |x, d| {
-        rays.first_hit(x, d)
-    })?
-    .left;
-    // The slab: the plane z = 0 above the medium, entered at the origin; downwards the
-    // medium never ends.
+    Some((
+        object_exit_share(medium, world_units_per_mm, entries, rays, walks, seed)?,
+        slab_exit_share(medium, world_units_per_mm, walks, seed)?,
+    ))
+}
+
+/// The object half of [`exit_shares`] alone (the same walks, the same numbers).
+pub fn object_exit_share(
+    medium: &TranslucentMedium,
+    world_units_per_mm: f32,
+    entries: &[EntryPoint],
+    rays: &SceneRays,
+    walks: usize,
+    seed: u64,
+) -> Option<Vec3> {
+    Some(
+        exit_share(medium, world_units_per_mm, entries, walks, seed, |x, d| {
+            rays.first_hit(x, d)
+        })?
+        .left,
+    )
+}
+
+/// The slab half of [`exit_shares`] alone (the same walks, the same numbers): the share of the
+/// light entering a semi-infinite slab that leaves it again, per channel.
+pub fn slab_exit_share(
+    medium: &TranslucentMedium,
+    world_units_per_mm: f32,
+    walks: usize,
+    seed: u64,
+) -> Option<Vec3> {
+    // The plane z = 0 above the medium, entered at the origin; downwards the medium never
+    // ends.
     let flat = [EntryPoint {
         position: Vec3::ZERO,
         normal: Vec3::Z,
         area: 1.0,
     }];
-    let slab = exit_share(medium, world_units_per_mm, &flat, walks, seed, |x, d| {
-        Some(slab_hit(x, d, f32::INFINITY))
-    })?
-    .left;
-    Some((object, slab))
+    Some(
+        exit_share(medium, world_units_per_mm, &flat, walks, seed, |x, d| {
+            Some(slab_hit(x, d, f32::INFINITY))
+        })?
+        .left,
+    )
 }
 
 /// The shares of the light entering a slab `thickness_mm` thick (diffusely, through its top

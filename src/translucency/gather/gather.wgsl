@@ -4,7 +4,8 @@
 // normals agree with its own — interpolating their outgoing radiance (the default), or, with
 // PHOTON_DENSITY, summing their power as photons under a kernel of unit integral
 // (`GatherMethod`). Translucent patches give their whole exitance B/π (their mesh's material
-// has no diffuse), opaque patches the light they bounce, (B − ρE⁰)/π = ρ(E − E⁰)/π (their
+// has no diffuse), the part that came from elsewhere in the deep field's limb-darkened law
+// (`ExitLaw`), opaque patches the light they bounce, (B − ρE⁰)/π = ρ(E − E⁰)/π (their
 // direct light is Bevy's). Added to the lit view, times the view's exposure as Bevy's
 // lighting is: by additive blending (`gather`, a fullscreen fragment pass), or, where the
 // view's main images take storage writes, by a compute pass writing lit + gathered into the
@@ -30,6 +31,12 @@ struct GatherPatch {
     // (normal, area)
     normal: vec4<f32>,
     albedo: vec4<f32>,
+    // `ExitLaw` (transport.rs): what a unit irradiance on the patch gives back in all, and per
+    // channel the deep field's law (α, ν, 1/N, g); g = 0: Lambert's.
+    local_albedo: vec4<f32>,
+    law_r: vec4<f32>,
+    law_g: vec4<f32>,
+    law_b: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -46,6 +53,28 @@ fn bucket(cell: vec3<i32>, mask: u32) -> u32 {
     return ((c.x * 73856093u) ^ (c.y * 19349663u) ^ (c.z * 83492791u)) & mask;
 }
 
+// `chandrasekhar_h` (diffusion.rs): Hapke's closed form of H(μ) for albedo `alpha`.
+fn chandrasekhar_h(alpha: f32, mu_in: f32) -> f32 {
+    let mu = clamp(mu_in, 1e-6, 1.0);
+    let gamma = sqrt(1.0 - alpha);
+    let r0 = (1.0 - gamma) / (1.0 + gamma);
+    return 1.0 / (1.0 - alpha * mu * (r0 + 0.5 * (1.0 - 2.0 * r0 * mu) * log((1.0 + mu) / mu)));
+}
+
+// `deep_exit_shape` (diffusion.rs): the deep field's exit radiance over Lambert's at cosine mu.
+fn deep_exit_shape(law: vec4<f32>, mu: f32) -> f32 {
+    return chandrasekhar_h(law.x, mu) / (1.0 - law.y * mu) * law.z;
+}
+
+// `ExitLaw::factor` (transport.rs) in one channel: 1 + D (s(μ) − 1), D = g·clamp(1 − A E⁰/B).
+fn exit_factor(law: vec4<f32>, local_albedo: f32, b: f32, e0: f32, mu: f32) -> f32 {
+    if law.w <= 0.0 || b <= 0.0 {
+        return 1.0;
+    }
+    let deep = law.w * clamp(1.0 - local_albedo * e0 / b, 0.0, 1.0);
+    return 1.0 + deep * (deep_exit_shape(law, mu) - 1.0);
+}
+
 // The light the patches give the pixel `p` (centre `position`), times the exposure; `w` = 0
 // where no patch reaches it (or nothing was drawn there).
 fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
@@ -58,6 +87,8 @@ fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
     let world = view.world_from_clip * ndc;
     let x = world.xyz / world.w;
     let n = normalize(textureLoad(normal_prepass, p, 0).xyz * 2.0 - 1.0);
+    // The exit cosine towards the camera.
+    let mu = clamp(dot(n, normalize(view.world_position - x)), 0.0, 1.0);
 
     var sum = vec3(0.0);
     var weights = 0.0;
@@ -108,7 +139,12 @@ fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
                         }
                         let b_i = vectors[params.exitance + i].rgb;
                         let e0 = vectors[params.direct + i].rgb;
-                        sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) / 3.14159265358979;
+                        let law = vec3(
+                            exit_factor(record.law_r, record.local_albedo.r, b_i.r, e0.r, mu),
+                            exit_factor(record.law_g, record.local_albedo.g, b_i.g, e0.g, mu),
+                            exit_factor(record.law_b, record.local_albedo.b, b_i.b, e0.b, mu),
+                        );
+                        sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) * law / 3.14159265358979;
                         weights += w;
                     }
                 }

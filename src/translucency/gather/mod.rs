@@ -17,9 +17,10 @@ use bevy::{
 use bytemuck::{Pod, Zeroable};
 
 use super::{
-    injection::{GpuInjection, LIGHT_VIEW_RESOLUTIONS},
+    injection::GpuInjection,
     iteration::{GpuTransport, IterationLimits},
     plugin::{GatherMethod, TranslucencyFrame, TranslucencyScene},
+    transport::ExitLaw,
 };
 
 /// Some patches in a hashed grid of cells as wide as their widest reach: a pixel looks in
@@ -113,7 +114,8 @@ pub const MAX_GRID_LEVELS: usize = 8;
 
 /// The radiance the gather gives a point `x` with normal `n` (before the view's exposure) by
 /// `method` ([`GatherMethod`]): the patches within their reach `R`, weighted by
-/// `(1 − d²/R²)²` and by `smoothstep(0.3, 0.9, n·n_i)`, each giving `(B_i − ρ_i E⁰_i) / π` —
+/// `(1 − d²/R²)²` and by `smoothstep(0.3, 0.9, n·n_i)`, each giving `(B_i − ρ_i E⁰_i) / π`
+/// times its [`ExitLaw`] at the cosine towards `eye` —
 /// interpolated, or as photons of that exitance times the patch's area under a kernel of
 /// unit integral; `None` where no patch is near. The CPU twin of `gather.wgsl` (brute force
 /// instead of the hashed grid), the oracle of its tests.
@@ -121,11 +123,14 @@ pub fn gathered_radiance(
     method: GatherMethod,
     patches: &super::patches::Patches,
     albedo: &[Vec3],
+    exit_laws: &[ExitLaw],
     direct: &[Vec3],
     exitance: &[Vec3],
+    eye: Vec3,
     x: Vec3,
     n: Vec3,
 ) -> Option<Vec3> {
+    let mu = n.dot((eye - x).normalize_or_zero());
     let (mut sum, mut weights) = (Vec3::ZERO, 0.0);
     for (i, p) in patches.patches.iter().enumerate() {
         let d2 = p.surface_point.distance_squared(x);
@@ -141,7 +146,10 @@ pub fn gathered_radiance(
                 // K(d) = 3/(πR²)(1 − d²/R²)², times the photon's area: Φ = M·A.
                 w *= 3.0 / (std::f32::consts::PI * r2) * p.area;
             }
-            sum += w * (exitance[i] - albedo[i] * direct[i]).max(Vec3::ZERO) / std::f32::consts::PI;
+            let law = exit_laws.get(i).copied().unwrap_or_default();
+            let leaving = (exitance[i] - albedo[i] * direct[i]).max(Vec3::ZERO)
+                * law.factor(exitance[i], direct[i], mu);
+            sum += w * leaving / std::f32::consts::PI;
             weights += w;
         }
     }
@@ -226,10 +234,8 @@ pub fn prepare_translucency(
     if let Some((lights_generation, lights)) = &frame.lights
         && *lights_generation != gpu.lights_generation
     {
-        let wanted = lights.resolution.clamp(
-            *LIGHT_VIEW_RESOLUTIONS.start(),
-            *LIGHT_VIEW_RESOLUTIONS.end(),
-        );
+        // `inject_direct_light` clamped the resolution to what `GpuInjection` takes.
+        let wanted = lights.resolution;
         let injection = match &mut gpu.injection {
             Some(injection) if injection.resolution() == wanted => injection,
             slot => slot.insert(GpuInjection::new(
@@ -260,13 +266,18 @@ fn gather_buffers(
         .collect();
     let centres: Vec<Vec3> = patches.patches.iter().map(|p| p.surface_point).collect();
     let grids = PatchGrid::levels(&centres, &reaches);
-    let records: Vec<[f32; 12]> = patches
+    // `GatherPatch` in gather.wgsl: (surface point, reach), (normal, area), (albedo, 0),
+    // (the exit law's local albedo, 0), its law per channel.
+    let records: Vec<[f32; 28]> = patches
         .patches
         .iter()
+        .enumerate()
         .zip(&scene.albedo)
         .zip(&reaches)
-        .map(|((p, a), reach)| {
-            [
+        .map(|(((i, p), a), reach)| {
+            let law = scene.exit_laws.get(i).copied().unwrap_or_default();
+            let mut record = [0.0; 28];
+            record[..12].copy_from_slice(&[
                 p.surface_point.x,
                 p.surface_point.y,
                 p.surface_point.z,
@@ -279,7 +290,12 @@ fn gather_buffers(
                 a.y,
                 a.z,
                 0.0,
-            ]
+            ]);
+            record[12..15].copy_from_slice(&law.local_albedo.to_array());
+            for (c, channel) in law.channels.iter().enumerate() {
+                record[16 + 4 * c..20 + 4 * c].copy_from_slice(&channel.to_array());
+            }
+            record
         })
         .collect();
     // Per grid: cell size, bucket mask, where its offsets and its members start; then the
