@@ -10,7 +10,8 @@
 //!
 //! ```text
 //! cargo run --example translucent -- [--frames N] [--out DIR] [--size WxH] [--headless]
-//!     [--patches N] [--injection light-view|shadow-rays]
+//!     [--patches N] [--injection light-view|shadow-rays] [--shape-diffusion true|false]
+//!     [--deep-exit-law true|false]
 //! ```
 
 #[path = "common/mod.rs"]
@@ -23,7 +24,7 @@ mod meshes;
 use bevy::{camera::Exposure, camera::Hdr, prelude::*};
 use bevy_mesostructure::translucency::{
     LightInjection, RadiosityReceiver, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings, Translucent,
-    TranslucentPreset,
+    TranslucentPreset, TransportSettings,
 };
 
 /// A marble bunny and a skin sphere lit through; a window with the tuning panel, or headless
@@ -39,6 +40,12 @@ struct Cli {
     /// How the lights reach the patches: the GPU's light-view maps or the CPU's shadow rays
     #[arg(long, value_enum, default_value_t = Injection::LightView)]
     injection: Injection,
+    /// Solve each object's diffusion in its shape (`TransportSettings::shape_diffusion`)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    shape_diffusion: bool,
+    /// Light from deep inside leaves limb-darkened (`TransportSettings::deep_exit_law`)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    deep_exit_law: bool,
 }
 
 /// `--injection`: [`LightInjection`]'s two ways.
@@ -95,6 +102,11 @@ fn main() {
             light_injection: match cli.injection {
                 Injection::LightView => LightInjection::default(),
                 Injection::ShadowRays => LightInjection::ShadowRays,
+            },
+            transport: TransportSettings {
+                shape_diffusion: cli.shape_diffusion,
+                deep_exit_law: cli.deep_exit_law,
+                ..default()
             },
             ..default()
         })

@@ -28,7 +28,10 @@ media (it renders the ball black). This tool runs the walks the other way, from 
   Fresnel's transmittance out, and in place of 1/r² the solid angle per area at the eye
   `dω_x/dA_eye = dΩ_eye/(η² dA_x)` (étendue), `dA_x` from two neighbouring rays traced in
   from the eye. With η = 1 this connection equals the straight one to 1e-5 (checked).
-`--uniform` lights the ball by a uniform environment of radiance 1 instead (photons start
+`--part single|grazing-entry` renders one part of the picture: single scattering alone (each
+photon's first collision; index-matched only — behind a dielectric the photons reflected at
+the boundary before their first collision are left out), or the light of the photons that
+entered at a grazing angle (incidence cosine below 0.3). `--uniform` lights the ball by a uniform environment of radiance 1 instead (photons start
 uniformly over the sphere, cosine-distributed inward): against Mitsuba's reference of the
 same scene it checks the dielectric machinery end to end.
 
@@ -209,13 +212,19 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
         w = ((r * np.cos(a))[:, None] * t1 + (r * np.sin(a))[:, None] * t2
              - np.sqrt(np.maximum(0.0, 1.0 - r * r))[:, None] * n)
     weight = np.full(batch, power)
+    if args.part == "grazing-entry":
+        # Only the photons that enter at a grazing angle (incidence cosine below 0.3).
+        weight = weight * (-dot(w, x / radius) < 0.3)
     if eta != 1.0:
         # In through the boundary: Fresnel's share reflected away, the rest refracted.
         n = x / radius
         weight = weight * (1.0 - fresnel(-dot(w, n), eta))
         w = refract(w, n, eta)
         x = x - 1e-9 * radius * n
+    collisions = 0
     while len(x):
+        if args.part == "single" and collisions == 1:
+            break
         flight = -np.log(1.0 - rng.random(len(x))) / sigma_t
         to_boundary = exit_distance(x, w, radius)
         inside = flight < to_boundary
@@ -237,15 +246,27 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
             break
         x = x + flight[:, None] * w
         weight = weight * albedo
-        # Next-event estimation toward the eye.
+        collisions += 1
+        # Next-event estimation toward the eye: at every collision, or (--connect-fraction f)
+        # at a random share of them, weighted by its inverse (unbiased; the refracted
+        # connection's search is most of the cost behind a dielectric): f in the half of the
+        # ball away from the eye, rising to 1 at the point nearest it, where the light that
+        # reaches the camera is.
+        if args.connect_fraction >= 1.0:
+            xc, wc = x, weight
+        else:
+            towards = np.clip(x @ (eye / np.linalg.norm(eye)) / radius, 0.0, 1.0)
+            chance = args.connect_fraction + (1.0 - args.connect_fraction) * towards
+            pick = rng.random(len(x)) < chance
+            xc, wc = x[pick], weight[pick] / chance[pick]
         if eta == 1.0:
-            to_eye = eye - x
+            to_eye = eye - xc
             r2 = np.einsum("ij,ij->i", to_eye, to_eye)
             w_eye = to_eye / np.sqrt(r2)[:, None]
-            transmittance = np.exp(-sigma_t * exit_distance(x, w_eye, radius)) / r2
-            connected = np.ones(len(x), dtype=bool)
+            transmittance = np.exp(-sigma_t * exit_distance(xc, w_eye, radius)) / r2
+            connected = np.ones(len(xc), dtype=bool)
         else:
-            s, transmittance, connected = refracted_connection(x, eye, radius, eta, sigma_t)
+            s, transmittance, connected = refracted_connection(xc, eye, radius, eta, sigma_t)
             w_eye = (eye - s) / np.linalg.norm(eye - s, axis=1)[:, None]
         d = -w_eye
         cos_theta = d @ forward
@@ -254,7 +275,7 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
         px = np.floor((sx + 1.0) * 0.5 * size).astype(np.int64)
         py = np.floor((1.0 - sy) * 0.5 * size).astype(np.int64)
         seen = (px >= 0) & (px < size) & (py >= 0) & (py < size) & (cos_theta > 0) & connected
-        contribution = weight * transmittance / (4.0 * math.pi * pixel_area * cos_theta**3)
+        contribution = wc * transmittance / (4.0 * math.pi * pixel_area * cos_theta**3)
         image += np.bincount((py * size + px)[seen], weights=contribution[seen], minlength=size * size)
         # Isotropic scattering.
         cz = 2.0 * rng.random(len(x)) - 1.0
@@ -281,9 +302,19 @@ def main():
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--eta", type=float, default=1.0,
                         help="index of refraction of the ball (1: index-matched)")
+    parser.add_argument("--connect-fraction", type=float, default=1.0,
+                        help="connect to the eye at this random share of the collisions in "
+                             "the half of the ball away from the eye, rising to all of them "
+                             "nearest it, weighted by its inverse (0 < f <= 1: less cost per "
+                             "photon, for media whose photons collide hundreds of times)")
+    parser.add_argument("--part", choices=["all", "single", "grazing-entry"], default="all",
+                        help="render only single scattering (each photon's first collision) or "
+                             "only the photons entering at incidence cosines below 0.3")
     parser.add_argument("--uniform", action="store_true",
                         help="a uniform environment of radiance 1 instead of the light")
     args = parser.parse_args()
+    if not 0.0 < args.connect_fraction <= 1.0:
+        parser.error("--connect-fraction must lie in (0, 1]")
     if not 1.0 <= args.eta <= 3.0:
         parser.error("--eta must lie in 1 – 3")
     if args.radius <= 0 or args.size <= 0 or args.photons < 2 or args.batch <= 0:

@@ -34,7 +34,7 @@
 use bevy::prelude::*;
 use std::f64::consts::PI;
 
-use super::medium::TranslucentMedium;
+use super::{medium::TranslucentMedium, shape_diffusion::DipoleChannel};
 
 /// Which diffusion profile carries light under a translucent surface.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Reflect, Default)]
@@ -52,7 +52,8 @@ pub enum DiffusionKernel {
     /// reach of diffusion theory. The default: against a light-traced reference of a 1 cm
     /// ball (960 patches, the other defaults; `docs/translucent.md`) 0.045 (marble) and 0.076
     /// (skin) in relative L1 lit from the front, where Burley's are 0.051 and 0.089 and the
-    /// dipole's 0.18; lit from behind 0.28 and 0.61, where Burley's are 0.93 and 0.75.
+    /// dipole's 0.18; lit from behind (under the flat profile) 0.28 and 0.61, where Burley's
+    /// are 0.93 and 0.75.
     #[default]
     ScaledDipole,
 }
@@ -60,17 +61,7 @@ pub enum DiffusionKernel {
 /// One colour channel's profile.
 #[derive(Clone, Copy, Debug)]
 enum Channel {
-    Dipole {
-        /// α′ / 2.
-        half_albedo: f64,
-        sigma_tr: f64,
-        z_real: f64,
-        z_virtual: f64,
-        /// `D = 1/(3σt′)`, mm.
-        diffusion: f64,
-        /// `A = (1 + F_dr)/(1 − F_dr)`.
-        boundary: f64,
-    },
+    Dipole(DipoleChannel),
     Burley {
         albedo: f64,
         /// Shape `s`, mm⁻¹.
@@ -81,19 +72,7 @@ enum Channel {
 impl Channel {
     fn reflectance(&self, r: f64) -> f64 {
         match *self {
-            Channel::Dipole {
-                half_albedo,
-                sigma_tr,
-                z_real,
-                z_virtual,
-                ..
-            } => {
-                let source = |z: f64| {
-                    let d = (r * r + z * z).sqrt();
-                    z * (sigma_tr * d + 1.0) * (-sigma_tr * d).exp() / (d * d * d)
-                };
-                half_albedo / (2.0 * PI) * (source(z_real) + source(z_virtual))
-            }
+            Channel::Dipole(dipole) => dipole.reflectance(r),
             Channel::Burley { albedo, s } => {
                 let r = r.max(1e-9);
                 albedo * s * ((-s * r).exp() + (-s * r / 3.0).exp()) / (8.0 * PI * r)
@@ -122,23 +101,9 @@ impl Channel {
     }
 
     /// The dipole's sources, `None` for Burley's profile.
-    fn dipole(&self) -> Option<super::shape_diffusion::DipoleChannel> {
+    fn dipole(&self) -> Option<DipoleChannel> {
         match *self {
-            Channel::Dipole {
-                half_albedo,
-                sigma_tr,
-                z_real,
-                z_virtual,
-                diffusion,
-                boundary,
-            } => Some(super::shape_diffusion::DipoleChannel {
-                half_albedo,
-                sigma_tr,
-                z_real,
-                z_virtual,
-                diffusion,
-                boundary,
-            }),
+            Channel::Dipole(dipole) => Some(dipole),
             Channel::Burley { .. } => None,
         }
     }
@@ -146,19 +111,7 @@ impl Channel {
     fn within(&self, radius: f64) -> f64 {
         let radius = radius.max(0.0);
         match *self {
-            Channel::Dipole {
-                half_albedo,
-                sigma_tr,
-                z_real,
-                z_virtual,
-                ..
-            } => {
-                let part = |z: f64| {
-                    let d = (radius * radius + z * z).sqrt();
-                    (-sigma_tr * z).exp() - z * (-sigma_tr * d).exp() / d
-                };
-                half_albedo * (part(z_real) + part(z_virtual))
-            }
+            Channel::Dipole(dipole) => dipole.within(radius),
             Channel::Burley { albedo, s } => {
                 albedo / 4.0
                     * ((1.0 - (-s * radius).exp()) + 3.0 * (1.0 - (-s * radius / 3.0).exp()))
@@ -168,13 +121,7 @@ impl Channel {
 
     fn total(&self) -> f64 {
         match *self {
-            Channel::Dipole {
-                half_albedo,
-                sigma_tr,
-                z_real,
-                z_virtual,
-                ..
-            } => half_albedo * ((-sigma_tr * z_real).exp() + (-sigma_tr * z_virtual).exp()),
+            Channel::Dipole(dipole) => dipole.total(),
             Channel::Burley { albedo, .. } => albedo,
         }
     }
@@ -244,19 +191,29 @@ pub fn surface_albedo(alpha: f64) -> f64 {
 }
 
 /// The angular law of light that reaches a surface from deep inside a medium of
-/// single-scattering albedo `alpha` (the diffusion field's asymptotic mode), in one colour
-/// channel: its exit radiance against a Lambertian one of the same exitance,
-/// `s(μ) = H(μ)/(1 − ν μ)/N` with Chandrasekhar's `H` ([`chandrasekhar_h`]), `ν = √(3(1 − α))`
-/// the mode's decay per mean free path (at most 0.9), `N` making `2∫ s μ dμ = 1`.
-/// Limb-darkened: for no absorption it is the emergent law of the Milne problem, `√3/4 H(μ)`
-/// (`s(1) = 1.26`, `s(0) = 0.43`). Random walks through slabs 6–15 mean free paths thick
-/// (`tools/slab_walks.py`, 4·10⁵ a case, albedos 0.999, 0.96, 0.85) leave in this law within
-/// 5 % at exit cosines 0.1–1 and 0.78–1.21 in the noisy grazing bin below, where Lambert's
-/// law is 0.36–1.44 of theirs (`docs/translucent.md`).
+/// single-scattering albedo `alpha` behind a boundary of index `eta` (the diffusion field's
+/// asymptotic mode), in one colour channel: its exit radiance against a Lambertian one of the
+/// same exitance.
+///
+/// - Index-matched: `s(μ) = H(μ)/(1 − ν μ)/N` with Chandrasekhar's `H` ([`chandrasekhar_h`]),
+///   `ν = √(3(1 − α))` the mode's decay per mean free path (at most 0.9), `N` making
+///   `2∫ s μ dμ = 1`. Limb-darkened: for no absorption it is the emergent law of the Milne
+///   problem, `√3/4 H(μ)` (`s(1) = 1.26`, `s(0) = 0.43`). Random walks through slabs 6–15 mean
+///   free paths thick (`tools/slab_walks.py`, 4·10⁵ a case, albedos 0.999, 0.96, 0.85) leave in
+///   this law within 5 % at exit cosines 0.1–1 and 0.78–1.21 in the noisy grazing bin below,
+///   where Lambert's law is 0.36–1.44 of theirs (`docs/translucent.md`).
+/// - Behind a dielectric (`eta` > 1): the boundary reflects part of the light back in, which
+///   flattens the radiance inside — in diffusion theory its anisotropy goes as `1/A`,
+///   `A = (1 + F_dr)/(1 − F_dr)` — and lets out `1 − F(μ)` of what meets it at the refracted
+///   cosine `μ_i`: `s(μ) = (1 − F(μ)) (1 + (H(μ_i)/(1 − ν μ_i) − 1)/A)/N`, the law above at
+///   `eta` 1. Against light-traced balls behind η 1.3 it beats both Lambert's law and the
+///   index-matched law (`docs/translucent.md`).
+///
 /// Its weight: the share `g = 1 − √(3(1 − α))` of light arriving from elsewhere that is in
 /// that mode — all of it for no absorption, none where a mean free path is a diffusion length
-/// (skin's blue). Returns `(α, ν, 1/N, g)`, what [`deep_exit_shape`] and `gather.wgsl` read.
-pub fn deep_exit_law(alpha: f64) -> [f32; 4] {
+/// (skin's blue). Returns `(α, ν, 1/N, g)`, what [`deep_exit_shape`] and `gather.wgsl` read
+/// with the same `eta`.
+pub fn deep_exit_law(alpha: f64, eta: f64) -> [f32; 4] {
     let alpha = alpha.clamp(0.0, 1.0);
     let decay = (3.0 * (1.0 - alpha)).sqrt();
     let nu = decay.min(0.9);
@@ -267,7 +224,7 @@ pub fn deep_exit_law(alpha: f64) -> [f32; 4] {
         * (0..n)
             .map(|k| {
                 let mu = (k as f64 + 0.5) / n as f64;
-                deep_exit_shape(unnormalised, mu as f32) as f64 * mu
+                deep_exit_shape(unnormalised, eta as f32, mu as f32) as f64 * mu
             })
             .sum::<f64>()
         / n as f64;
@@ -279,10 +236,16 @@ pub fn deep_exit_law(alpha: f64) -> [f32; 4] {
     ]
 }
 
-/// `s(μ)` of a [`deep_exit_law`] at exit cosine `mu` (the same arithmetic as `gather.wgsl`).
-pub fn deep_exit_shape(law: [f32; 4], mu: f32) -> f32 {
-    let mu = mu.clamp(0.0, 1.0);
-    chandrasekhar_h(law[0] as f64, mu as f64) as f32 / (1.0 - law[1] * mu) * law[2]
+/// `s(μ)` of a [`deep_exit_law`] behind a boundary of index `eta` at exit cosine `mu` (the
+/// same arithmetic as `gather.wgsl`).
+pub fn deep_exit_shape(law: [f32; 4], eta: f32, mu: f32) -> f32 {
+    let eta = f64::from(if eta.is_finite() { eta } else { 1.0 }).clamp(1.0, 3.0);
+    let mu = mu.clamp(0.0, 1.0) as f64;
+    let inside = (1.0 - (1.0 - mu * mu) / (eta * eta)).max(0.0).sqrt();
+    let f_dr = jensen_internal_diffuse_reflectance(eta);
+    let boundary = (1.0 + f_dr) / (1.0 - f_dr);
+    let mode = chandrasekhar_h(law[0] as f64, inside) / (1.0 - law[1] as f64 * inside);
+    ((1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary) * law[2] as f64) as f32
 }
 
 /// `1 − μ₀ ln(1 + 1/μ₀)`: the single-scattered exitance per unit irradiance and `α/2`, for a
@@ -414,13 +377,15 @@ impl DiffusionProfile {
             let alpha = albedos[c];
             let diffusion = 1.0 / (3.0 * sigma_t);
             let z_real = depth / sigma_t;
-            let dipole = |half_albedo| Channel::Dipole {
-                half_albedo,
-                sigma_tr: (3.0 * sigma_a * sigma_t).sqrt(),
-                z_real,
-                z_virtual: z_real + 4.0 * a_boundary * diffusion,
-                diffusion,
-                boundary: a_boundary,
+            let dipole = |half_albedo| {
+                Channel::Dipole(DipoleChannel {
+                    half_albedo,
+                    sigma_tr: (3.0 * sigma_a * sigma_t).sqrt(),
+                    z_real,
+                    z_virtual: z_real + 4.0 * a_boundary * diffusion,
+                    diffusion,
+                    boundary: a_boundary,
+                })
             };
             match kernel {
                 DiffusionKernel::Dipole => dipole(alpha / 2.0),
@@ -455,7 +420,7 @@ impl DiffusionProfile {
 
     /// The dipole of each channel (`None` for Burley's profile, which has no sources): what
     /// [`shape_diffusion`](super::shape_diffusion) solves the object's shape with.
-    pub fn dipole_channels(&self) -> Option<[super::shape_diffusion::DipoleChannel; 3]> {
+    pub fn dipole_channels(&self) -> Option<[DipoleChannel; 3]> {
         let [r, g, b] = self.channels.map(|c| c.dipole());
         Some([r?, g?, b?])
     }

@@ -37,27 +37,11 @@ pub struct EntryPoint {
 }
 
 /// The share of the light entering an object (past its boundary, spread diffusely: cosine
-/// distributed about the inward normal) that leaves it again, per colour channel, for
-/// `walks` walks a channel starting at `entries` drawn by area; and the same under a flat
-/// boundary of infinite extent (a semi-infinite slab), from the same random numbers.
-/// `world_units_per_mm` scales the medium's coefficients (mm⁻¹) to the scene. Deterministic
-/// for a given `seed`. `None` where the medium or the scale is invalid or there is no entry
-/// point.
-pub fn exit_shares(
-    medium: &TranslucentMedium,
-    world_units_per_mm: f32,
-    entries: &[EntryPoint],
-    rays: &SceneRays,
-    walks: usize,
-    seed: u64,
-) -> Option<(Vec3, Vec3)> {
-    Some((
-        object_exit_share(medium, world_units_per_mm, entries, rays, walks, seed)?,
-        slab_exit_share(medium, world_units_per_mm, walks, seed)?,
-    ))
-}
-
-/// The object half of [`exit_shares`] alone (the same walks, the same numbers).
+/// distributed about the inward normal) that leaves it again, per colour channel, for `walks`
+/// walks a channel starting at `entries` drawn by area. `world_units_per_mm` scales the
+/// medium's coefficients (mm⁻¹) to the scene. Deterministic for a given `seed`, and with the
+/// same seed [`slab_exit_share`] walks the same random numbers under a flat boundary. `None`
+/// where the medium or the scale is invalid or there is no entry point.
 pub fn object_exit_share(
     medium: &TranslucentMedium,
     world_units_per_mm: f32,
@@ -74,8 +58,8 @@ pub fn object_exit_share(
     )
 }
 
-/// The slab half of [`exit_shares`] alone (the same walks, the same numbers): the share of the
-/// light entering a semi-infinite slab that leaves it again, per channel.
+/// [`object_exit_share`] under a flat boundary of infinite extent: the share of the light
+/// entering a semi-infinite slab that leaves it again, per channel.
 pub fn slab_exit_share(
     medium: &TranslucentMedium,
     world_units_per_mm: f32,
@@ -168,8 +152,9 @@ struct Exits {
     other_face: Vec3,
 }
 
-/// [`exit_shares`] for one boundary: `first_hit(x, d)` the distance to it along the unit `d`
-/// and its unit normal (either side), `None` where a ray leaves the medium for good.
+/// [`object_exit_share`] and [`slab_exit_share`] for one boundary: `first_hit(x, d)` the
+/// distance to it along the unit `d` and its unit normal (either side), `None` where a ray
+/// leaves the medium for good.
 fn exit_share(
     medium: &TranslucentMedium,
     world_units_per_mm: f32,

@@ -111,6 +111,31 @@ impl DipoleChannel {
         )
     }
 
+    /// Jensen's `R_d(r)`, mm⁻²: the exitance at distance `r` on the entry's own plane per
+    /// unit flux, `α′/(4π) Σ_{z ∈ {z_r, z_v}} z (σtr d + 1) e^(−σtr d) / d³`, `d = √(r² + z²)`.
+    pub fn reflectance(&self, r: f64) -> f64 {
+        let source = |z: f64| {
+            let d = (r * r + z * z).sqrt();
+            z * (self.sigma_tr * d + 1.0) * (-self.sigma_tr * d).exp() / (d * d * d)
+        };
+        self.half_albedo / (2.0 * PI) * (source(self.z_real) + source(self.z_virtual))
+    }
+
+    /// `W(R) = ∫₀^R 2π r R_d(r) dr`, closed form: `α′/2 Σ z (e^(−σtr z)/z − e^(−σtr d)/d)`.
+    pub fn within(&self, radius: f64) -> f64 {
+        let part = |z: f64| {
+            let d = (radius * radius + z * z).sqrt();
+            (-self.sigma_tr * z).exp() - z * (-self.sigma_tr * d).exp() / d
+        };
+        self.half_albedo * (part(self.z_real) + part(self.z_virtual))
+    }
+
+    /// `W(∞) = α′/2 (e^(−σtr z_r) + e^(−σtr z_v))`: the slab's total diffuse reflectance.
+    pub fn total(&self) -> f64 {
+        self.half_albedo
+            * ((-self.sigma_tr * self.z_real).exp() + (-self.sigma_tr * self.z_virtual).exp())
+    }
+
     /// [`fields`](Self::fields) on the entry's own plane at distance `r`: `(φ(r), R_d(r))`.
     fn plane_fields(&self, r: f64) -> (f64, f64) {
         self.fields(DVec3::ZERO, DVec3::Z, DVec3::new(r, 0.0, 0.0), DVec3::Z)

@@ -68,6 +68,8 @@ pub struct ExitLaw {
     /// Per channel, [`deep_exit_law`](super::diffusion::deep_exit_law):
     /// `(α, ν, 1/N, g)`.
     pub channels: [Vec4; 3],
+    /// The boundary's index of refraction (1: index-matched).
+    pub eta: f32,
 }
 
 impl ExitLaw {
@@ -82,7 +84,7 @@ impl ExitLaw {
                 return 1.0;
             }
             let deep = law[3] * (1.0 - self.local_albedo[c] * e0[c] / b[c]).clamp(0.0, 1.0);
-            1.0 + deep * (super::diffusion::deep_exit_shape(law, mu) - 1.0)
+            1.0 + deep * (super::diffusion::deep_exit_shape(law, self.eta, mu) - 1.0)
         }))
     }
 }
@@ -125,11 +127,12 @@ pub struct TransportSettings {
     /// plus a boundary-element correction for the light its surface lets out on the way)
     /// instead of taking the flat profile between every pair of patches. Columns keep their
     /// totals (the slab's, times the object's walks); only where the light leaves moves. For
-    /// objects of up to [`MAX_SHAPE_PATCHES`](super::shape_diffusion::MAX_SHAPE_PATCHES)
+    /// objects of up to [`MAX_SHAPE_PATCHES`]
     /// patches with a dipole kernel; larger ones keep the flat profile (one dense system of
-    /// their side per channel, `O(N³)`). On by default: lit from behind, a 1 cm skin ball goes
-    /// from 0.61 to 0.32 in relative L1 against a light-traced reference, marble from 0.28 to
-    /// 0.27; from the front both stay within 0.01 (`docs/translucent.md`).
+    /// their side per channel, `O(N³)`: 1.4 s at 960 patches on 2 cores). On by default: lit
+    /// from behind, a 1 cm skin ball goes from 0.612 to 0.420 in relative L1 against a
+    /// light-traced reference, marble from 0.277 to 0.153 (with [`deep_exit_law`](Self::deep_exit_law)
+    /// 0.431 and 0.078); from the front both stay within 0.002 (`docs/translucent.md`).
     pub shape_diffusion: bool,
     /// Let the light a translucent patch received from elsewhere leave it in the deep field's
     /// limb-darkened law ([`ExitLaw`], [`deep_exit_law`](super::diffusion::deep_exit_law))
@@ -193,7 +196,7 @@ pub struct TransportReport {
     /// ([`TransportSettings::shape_diffusion`]).
     pub shape_solved_objects: usize,
     /// Translucent objects that kept the flat profile because they have more than
-    /// [`MAX_SHAPE_PATCHES`](super::shape_diffusion::MAX_SHAPE_PATCHES) patches.
+    /// [`MAX_SHAPE_PATCHES`] patches.
     pub shape_too_large_objects: usize,
     /// Wall-clock seconds to build.
     pub seconds: f32,
@@ -438,18 +441,38 @@ impl EnergyTransport {
                 list.push(i);
             }
         }
-        // Which translucent objects are solved in their shape (`shape_diffusion`).
+        // The translucent objects solved in their shape (`shape_diffusion`): the correction
+        // per channel (row exit, column entry, local indices), its sources where diffuse
+        // light's sit (`SHAPE_SOURCE_DEPTH`). Too large, or (never seen) a singular system: the
+        // flat profile.
+        let valid_medium = |s: &PatchSurface| match *s {
+            PatchSurface::Translucent {
+                medium,
+                world_units_per_mm,
+                ..
+            } if medium.invalid_reason().is_none()
+                && world_units_per_mm.is_finite()
+                && world_units_per_mm > 0.0 =>
+            {
+                Some((medium, world_units_per_mm as f64))
+            }
+            _ => None,
+        };
         let mut shape_too_large_objects = 0;
-        let solved_in_shape: Vec<bool> = surfaces
+        let shape_corrections: Vec<Option<[Vec<f64>; 3]>> = surfaces
             .iter()
             .enumerate()
             .map(|(object, s)| {
-                if !settings.shape_diffusion
-                    || settings.kernel == DiffusionKernel::Burley
-                    || !matches!(s, PatchSurface::Translucent { .. })
-                {
-                    return false;
+                let (medium, units_per_mm) = valid_medium(s)?;
+                if !settings.shape_diffusion {
+                    return None;
                 }
+                let channels = DiffusionProfile::with_source_depth(
+                    &medium,
+                    settings.kernel,
+                    SHAPE_SOURCE_DEPTH,
+                )
+                .dipole_channels()?;
                 let count = members[object].len();
                 if count > MAX_SHAPE_PATCHES {
                     shape_too_large_objects += 1;
@@ -458,52 +481,8 @@ impl EnergyTransport {
                          {MAX_SHAPE_PATCHES} whose diffusion is solved in their shape; it keeps \
                          the flat profile"
                     );
-                    return false;
+                    return None;
                 }
-                true
-            })
-            .collect();
-
-        // K: per translucent object, the profile between its patches; albedo on opaque ones.
-        // Solved in its shape, an object's pairs are all kept (the correction carries light
-        // across it) and its sources sit where diffuse light's do (`SHAPE_SOURCE_DEPTH`).
-        let profiles: Vec<Option<(DiffusionProfile, f64, f64)>> = surfaces
-            .iter()
-            .zip(&solved_in_shape)
-            .map(|(s, &solved)| match *s {
-                PatchSurface::Translucent {
-                    medium,
-                    world_units_per_mm,
-                    ..
-                } if medium.invalid_reason().is_none()
-                    && world_units_per_mm.is_finite()
-                    && world_units_per_mm > 0.0 =>
-                {
-                    if solved {
-                        let profile = DiffusionProfile::with_source_depth(
-                            &medium,
-                            settings.kernel,
-                            SHAPE_SOURCE_DEPTH,
-                        );
-                        return Some((profile, world_units_per_mm as f64, f64::INFINITY));
-                    }
-                    let profile = DiffusionProfile::new(&medium, settings.kernel);
-                    let reach_mm = profile
-                        .radius_holding(settings.diffusion_energy_kept.clamp(0.5, 1.0) as f64);
-                    Some((profile, world_units_per_mm as f64, reach_mm))
-                }
-                _ => None,
-            })
-            .collect();
-        // The correction per channel of each object solved in its shape (row exit, column
-        // entry, local indices).
-        let shape_corrections: Vec<Option<[Vec<f64>; 3]>> = profiles
-            .iter()
-            .zip(&solved_in_shape)
-            .enumerate()
-            .map(|(object, (profile, &solved))| {
-                let (profile, units_per_mm, _) = (*profile)?;
-                let channels = profile.dipole_channels().filter(|_| solved)?;
                 let mm = 1.0 / units_per_mm;
                 let shape: Vec<ShapePatch> = members[object]
                     .iter()
@@ -514,7 +493,37 @@ impl EnergyTransport {
                     })
                     .collect();
                 let [r, g, b] = channels.map(|c| boundary_correction(&shape, c));
-                Some([r?, g?, b?])
+                let solved = r.zip(g).zip(b).map(|((r, g), b)| [r, g, b]);
+                if solved.is_none() {
+                    warn!(
+                        "translucency: object {object}'s diffusion could not be solved in its \
+                         shape (a singular system); it keeps the flat profile"
+                    );
+                }
+                solved
+            })
+            .collect();
+
+        // K: per translucent object, the profile between its patches; albedo on opaque ones.
+        // Solved in its shape, an object's pairs are all kept (the correction carries light
+        // across it) and its sources sit at `SHAPE_SOURCE_DEPTH`.
+        let profiles: Vec<Option<(DiffusionProfile, f64, f64)>> = surfaces
+            .iter()
+            .zip(&shape_corrections)
+            .map(|(s, correction)| {
+                let (medium, units_per_mm) = valid_medium(s)?;
+                if correction.is_some() {
+                    let profile = DiffusionProfile::with_source_depth(
+                        &medium,
+                        settings.kernel,
+                        SHAPE_SOURCE_DEPTH,
+                    );
+                    return Some((profile, units_per_mm, f64::INFINITY));
+                }
+                let profile = DiffusionProfile::new(&medium, settings.kernel);
+                let reach_mm =
+                    profile.radius_holding(settings.diffusion_energy_kept.clamp(0.5, 1.0) as f64);
+                Some((profile, units_per_mm, reach_mm))
             })
             .collect();
         let shape_solved_objects = shape_corrections.iter().flatten().count();
@@ -789,10 +798,13 @@ impl EnergyTransport {
                         && q.area > 0.0 =>
                 {
                     let albedo = medium.single_scattering_albedo();
+                    let eta = medium.index_of_refraction;
                     ExitLaw {
                         local_albedo: *total / q.area,
-                        channels: albedo
-                            .map(|a| Vec4::from_array(super::diffusion::deep_exit_law(a))),
+                        channels: albedo.map(|a| {
+                            Vec4::from_array(super::diffusion::deep_exit_law(a, eta as f64))
+                        }),
+                        eta,
                     }
                 }
                 _ => ExitLaw::default(),

@@ -190,14 +190,14 @@ pub fn screenshot(app: &mut App, target: &Handle<Image>) -> Image {
             *s.lock().unwrap() = Some(ev.image.clone());
         });
     // (Usually 2–3 frames; with every test rendering at once on two cores a screenshot has
-    // taken more than 10.)
-    for _ in 0..60 {
+    // taken more than 10, and more than 60 with two other processes busy on those cores.)
+    for _ in 0..240 {
         run(app, 1);
         if let Some(image) = slot.lock().unwrap().take() {
             return image;
         }
     }
-    panic!("no screenshot after 60 frames");
+    panic!("no screenshot after 240 frames");
 }
 
 /// Keys of the one-time warnings given so far, main and render world together.

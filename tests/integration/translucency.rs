@@ -1053,7 +1053,7 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
         // at a grazing angle and goes on towards the camera before it scatters, which sources
         // under the entry point do not carry.
         (TranslucentPreset::Skin1, "skin1", "back", back, 1.0, true, true, false, 0.4313, [0.598, 0.252, 0.215]),
-        (TranslucentPreset::Marble, "marble", "back", back, 1.0, true, true, false, 0.0775, [1.050, 1.061, 1.095]),
+        (TranslucentPreset::Marble, "marble", "back", back, 1.0, true, true, false, 0.0775, [1.050, 1.061, 1.096]),
         // Each step from the defaults before: solved in the shape with Lambert's exit, and
         // the flat profile with it (the defaults before), alone and with the oriented dipole.
         (TranslucentPreset::Skin1, "skin1", "back", back, 1.0, true, false, false, 0.4198, [0.613, 0.278, 0.217]),
@@ -1065,11 +1065,18 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
         // Behind the presets' dielectric boundary, in Bevy's ambient light: the walks carry
         // the boundary's internal reflection (1.28–1.70× too bright before).
         (TranslucentPreset::Skin1, "skin1", "uniform_eta1.3", uniform, 1.3, true, true, false, 0.0277, [0.980, 1.000, 0.995]),
-        (TranslucentPreset::Marble, "marble", "uniform_eta1.3", uniform, 1.3, true, true, false, 0.0564, [1.008, 0.992, 0.989]),
+        (TranslucentPreset::Marble, "marble", "uniform_eta1.3", uniform, 1.3, true, true, false, 0.0565, [1.008, 0.992, 0.989]),
         // Behind the dielectric boundary under the directional light (the light tracer's
-        // refracted connection to the eye).
-        (TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, true, true, false, 0.0734, [0.958, 0.972, 0.975]),
-        (TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, true, true, false, 0.4831, [0.531, 0.190, 0.148]),
+        // refracted connection to the eye; marble's connected at a share of its collisions,
+        // noise 0.050 front, 0.057 back): the exit law with the boundary's Fresnel and
+        // internal reflection; marble from behind, solved with Lambert's exit and the
+        // defaults before.
+        (TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, true, true, false, 0.0741, [0.957, 0.972, 0.975]),
+        (TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, true, true, false, 0.4725, [0.541, 0.200, 0.149]),
+        (TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, true, true, false, 0.0746, [0.962, 0.961, 0.954]),
+        (TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, true, true, false, 0.0828, [0.967, 0.955, 0.953]),
+        (TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, true, false, false, 0.0882, [0.954, 0.945, 0.949]),
+        (TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, false, false, false, 0.3563, [0.715, 0.586, 0.515]),
     ];
     for (preset, name, lighting, how, eta, shape_diffusion, deep_exit_law, oriented_dipole, rel_l1, ratio) in cases {
         let medium = bevy_mesostructure::translucency::TranslucentMedium {

@@ -31,8 +31,8 @@ struct GatherPatch {
     // (normal, area)
     normal: vec4<f32>,
     albedo: vec4<f32>,
-    // `ExitLaw` (transport.rs): what a unit irradiance on the patch gives back in all, and per
-    // channel the deep field's law (α, ν, 1/N, g); g = 0: Lambert's.
+    // `ExitLaw` (transport.rs): what a unit irradiance on the patch gives back in all and the
+    // boundary's η, and per channel the deep field's law (α, ν, 1/N, g); g = 0: Lambert's.
     local_albedo: vec4<f32>,
     law_r: vec4<f32>,
     law_g: vec4<f32>,
@@ -61,18 +61,37 @@ fn chandrasekhar_h(alpha: f32, mu_in: f32) -> f32 {
     return 1.0 / (1.0 - alpha * mu * (r0 + 0.5 * (1.0 - 2.0 * r0 * mu) * log((1.0 + mu) / mu)));
 }
 
-// `deep_exit_shape` (diffusion.rs): the deep field's exit radiance over Lambert's at cosine mu.
-fn deep_exit_shape(law: vec4<f32>, mu: f32) -> f32 {
-    return chandrasekhar_h(law.x, mu) / (1.0 - law.y * mu) * law.z;
+// `fresnel_reflectance` (diffusion.rs): unpolarised, light arriving at cos_i onto index eta.
+fn fresnel_reflectance(cos_i: f32, eta: f32) -> f32 {
+    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
+    if sin_t2 >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = sqrt(1.0 - sin_t2);
+    let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    return 0.5 * (rs * rs + rp * rp);
+}
+
+// `deep_exit_shape` (diffusion.rs): the deep field's exit radiance over Lambert's at cosine mu
+// behind a boundary of index eta: (1 − F(μ)) (1 + (H(μ_i)/(1 − ν μ_i) − 1)/A) / N.
+fn deep_exit_shape(law: vec4<f32>, eta_in: f32, mu_in: f32) -> f32 {
+    let eta = clamp(eta_in, 1.0, 3.0);
+    let mu = clamp(mu_in, 0.0, 1.0);
+    let inside = sqrt(max(1.0 - (1.0 - mu * mu) / (eta * eta), 0.0));
+    let f_dr = -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta;
+    let boundary = (1.0 + f_dr) / (1.0 - f_dr);
+    let mode = chandrasekhar_h(law.x, inside) / (1.0 - law.y * inside);
+    return (1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary) * law.z;
 }
 
 // `ExitLaw::factor` (transport.rs) in one channel: 1 + D (s(μ) − 1), D = g·clamp(1 − A E⁰/B).
-fn exit_factor(law: vec4<f32>, local_albedo: f32, b: f32, e0: f32, mu: f32) -> f32 {
+fn exit_factor(law: vec4<f32>, local_albedo: f32, eta: f32, b: f32, e0: f32, mu: f32) -> f32 {
     if law.w <= 0.0 || b <= 0.0 {
         return 1.0;
     }
     let deep = law.w * clamp(1.0 - local_albedo * e0 / b, 0.0, 1.0);
-    return 1.0 + deep * (deep_exit_shape(law, mu) - 1.0);
+    return 1.0 + deep * (deep_exit_shape(law, eta, mu) - 1.0);
 }
 
 // The light the patches give the pixel `p` (centre `position`), times the exposure; `w` = 0
@@ -139,10 +158,11 @@ fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
                         }
                         let b_i = vectors[params.exitance + i].rgb;
                         let e0 = vectors[params.direct + i].rgb;
+                        let eta = record.local_albedo.w;
                         let law = vec3(
-                            exit_factor(record.law_r, record.local_albedo.r, b_i.r, e0.r, mu),
-                            exit_factor(record.law_g, record.local_albedo.g, b_i.g, e0.g, mu),
-                            exit_factor(record.law_b, record.local_albedo.b, b_i.b, e0.b, mu),
+                            exit_factor(record.law_r, record.local_albedo.r, eta, b_i.r, e0.r, mu),
+                            exit_factor(record.law_g, record.local_albedo.g, eta, b_i.g, e0.g, mu),
+                            exit_factor(record.law_b, record.local_albedo.b, eta, b_i.b, e0.b, mu),
                         );
                         sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) * law / 3.14159265358979;
                         weights += w;

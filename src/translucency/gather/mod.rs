@@ -267,7 +267,7 @@ fn gather_buffers(
     let centres: Vec<Vec3> = patches.patches.iter().map(|p| p.surface_point).collect();
     let grids = PatchGrid::levels(&centres, &reaches);
     // `GatherPatch` in gather.wgsl: (surface point, reach), (normal, area), (albedo, 0),
-    // (the exit law's local albedo, 0), its law per channel.
+    // (the exit law's local albedo, η), its law per channel.
     let records: Vec<[f32; 28]> = patches
         .patches
         .iter()
@@ -292,6 +292,7 @@ fn gather_buffers(
                 0.0,
             ]);
             record[12..15].copy_from_slice(&law.local_albedo.to_array());
+            record[15] = law.eta;
             for (c, channel) in law.channels.iter().enumerate() {
                 record[16 + 4 * c..20 + 4 * c].copy_from_slice(&channel.to_array());
             }
