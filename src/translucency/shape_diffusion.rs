@@ -34,6 +34,8 @@
 use bevy::math::DVec3;
 use std::f64::consts::PI;
 
+use super::transport::parallel_rows;
+
 /// The most patches an object may have for its diffusion to be solved in its shape: a dense
 /// system of this side per channel (3 × 2 × 32 MB at 2048) and `O(N³)` work.
 pub const MAX_SHAPE_PATCHES: usize = 2048;
@@ -157,7 +159,7 @@ pub fn boundary_correction(patches: &[ShapePatch], channel: DipoleChannel) -> Op
     let rho = |p: &ShapePatch| (p.area / PI).sqrt();
 
     // b: the dipole's residual on the real surface less its residual on its own plane.
-    let residual_rows = parallel_chunks(n, |i| {
+    let residual_rows = parallel_rows(n, |i| {
         let x = &patches[i];
         (0..n)
             .map(|k| {
@@ -173,13 +175,15 @@ pub fn boundary_correction(patches: &[ShapePatch], channel: DipoleChannel) -> Op
     });
     let b: Vec<f64> = residual_rows.into_iter().flatten().collect();
 
-    // S + K (off the diagonal), and the self terms.
-    let system_rows = parallel_chunks(n, |i| {
+    // Row by row: the system `½ I + S + K` (the self terms over the patch's disc), and the
+    // right-hand sides, one column per entry patch, `(½ I + K) b`.
+    let rows = parallel_rows(n, |i| {
         let x = &patches[i];
-        let mut single = vec![0.0; n];
-        let mut double = vec![0.0; n];
+        let rho_i = rho(x);
+        let mut system = vec![0.0; n];
+        let mut half_plus_double = vec![0.0; n];
         let (mut curvature, mut neighbours) = (0.0, 0);
-        let reach = 3.0 * rho(x);
+        let reach = 3.0 * rho_i;
         for (j, y) in patches.iter().enumerate() {
             if j == i {
                 continue;
@@ -187,17 +191,18 @@ pub fn boundary_correction(patches: &[ShapePatch], channel: DipoleChannel) -> Op
             let to_y = y.centre - x.centre;
             let r = to_y.length().max(1e-9);
             let e = (-sigma * r).exp();
-            single[j] = y.area * e / (4.0 * PI * d * r) / (2.0 * a);
-            double[j] =
+            let single = y.area * e / (4.0 * PI * d * r) / (2.0 * a);
+            let double =
                 -y.area * (1.0 + sigma * r) * e / (4.0 * PI * r * r) * to_y.dot(y.normal) / r;
+            system[j] = single + double;
+            half_plus_double[j] = double;
             if r < reach {
                 // Normal curvature towards y; their mean over directions is H.
                 curvature += -2.0 * to_y.dot(x.normal) / (r * r);
                 neighbours += 1;
             }
         }
-        let rho_i = rho(x);
-        single[i] = if sigma * rho_i > 1e-9 {
+        let single = if sigma * rho_i > 1e-9 {
             -(-sigma * rho_i).exp_m1() / (2.0 * d * sigma) / (2.0 * a)
         } else {
             rho_i / (2.0 * d) / (2.0 * a)
@@ -207,33 +212,27 @@ pub fn boundary_correction(patches: &[ShapePatch], channel: DipoleChannel) -> Op
         } else {
             0.0
         };
-        double[i] = (-rho_i * mean_curvature / 4.0).clamp(-0.25, 0.25);
-        (single, double)
-    });
-    let mut system = vec![0.0; n * n];
-    let mut half_plus_double = vec![0.0; n * n];
-    for (i, (single, double)) in system_rows.into_iter().enumerate() {
-        for j in 0..n {
-            let half = if i == j { 0.5 } else { 0.0 };
-            system[i * n + j] = half + single[j] + double[j];
-            half_plus_double[i * n + j] = half + double[j];
-        }
-    }
-    // The right-hand sides, one column per entry patch: (½ I + K) b.
-    let rhs_rows = parallel_chunks(n, |i| {
-        let row = &half_plus_double[i * n..(i + 1) * n];
-        let mut out = vec![0.0; n];
-        for (j, &m) in row.iter().enumerate() {
+        let double = (-rho_i * mean_curvature / 4.0).clamp(-0.25, 0.25);
+        system[i] = 0.5 + single + double;
+        half_plus_double[i] = 0.5 + double;
+        let mut rhs = vec![0.0; n];
+        for (j, &m) in half_plus_double.iter().enumerate() {
             if m != 0.0 {
-                let b_row = &b[j * n..(j + 1) * n];
-                for (o, &v) in out.iter_mut().zip(b_row) {
+                for (o, &v) in rhs.iter_mut().zip(&b[j * n..(j + 1) * n]) {
                     *o += m * v;
                 }
             }
         }
-        out
+        (system, rhs)
     });
-    let mut u: Vec<f64> = rhs_rows.into_iter().flatten().collect();
+    let (mut system, mut u): (Vec<f64>, Vec<f64>) = rows.into_iter().fold(
+        (Vec::with_capacity(n * n), Vec::with_capacity(n * n)),
+        |(mut m, mut r), (row, rhs)| {
+            m.extend(row);
+            r.extend(rhs);
+            (m, r)
+        },
+    );
     solve_in_place(&mut system, n, &mut u)?;
     for (i, p) in patches.iter().enumerate() {
         for v in &mut u[i * n..(i + 1) * n] {
@@ -355,11 +354,6 @@ pub fn solve_in_place(matrix: &mut [f64], n: usize, rhs: &mut [f64]) -> Option<(
         }
     }
     Some(())
-}
-
-/// `f(i)` for `0..n` on every core, in order.
-fn parallel_chunks<R: Send>(n: usize, f: impl Fn(usize) -> R + Sync) -> Vec<R> {
-    super::transport::parallel_rows(n, f)
 }
 
 #[cfg(test)]

@@ -58,6 +58,21 @@ impl<T: Copy> SparseMatrix<T> {
         self.row(i).find(|&(c, _)| c == j).map(|(_, v)| v)
     }
 
+    /// `Σ_i w_i M_ij` for each of `columns` columns: the column sums with each row weighted
+    /// (by its patch's area: the flux a column's unit exitance gives off in all).
+    pub fn weighted_column_sums(&self, row_weights: &[f32], columns: usize) -> Vec<T>
+    where
+        T: Mul<f32, Output = T> + Default + AddAssign,
+    {
+        let mut sums = vec![T::default(); columns];
+        for (i, &w) in row_weights.iter().enumerate().take(self.rows()) {
+            for (j, v) in self.row(i) {
+                sums[j] += v * w;
+            }
+        }
+        sums
+    }
+
     /// `y = M x`.
     pub fn mul_vec<V>(&self, x: &[V]) -> Vec<V>
     where

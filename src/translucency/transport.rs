@@ -443,10 +443,10 @@ impl EnergyTransport {
                 list.push(i);
             }
         }
-        // The translucent objects solved in their shape (`shape_diffusion`): the correction
-        // per channel (row exit, column entry, local indices), its sources where diffuse
-        // light's sit (`SHAPE_SOURCE_DEPTH`). Too large, or (never seen) a singular system: the
-        // flat profile.
+        // The translucent objects solved in their shape (`shape_diffusion`): their profile,
+        // its sources where diffuse light's sit (`SHAPE_SOURCE_DEPTH`), and the correction per
+        // channel (row exit, column entry, local indices). Too large, or (never seen) a
+        // singular system: the flat profile.
         let valid_medium = |s: &PatchSurface| match *s {
             PatchSurface::Translucent {
                 medium,
@@ -461,7 +461,7 @@ impl EnergyTransport {
             _ => None,
         };
         let mut shape_too_large_objects = 0;
-        let shape_corrections: Vec<Option<[Vec<f64>; 3]>> = surfaces
+        let shape_solutions: Vec<Option<(DiffusionProfile, [Vec<f64>; 3])>> = surfaces
             .iter()
             .enumerate()
             .map(|(object, s)| {
@@ -469,12 +469,12 @@ impl EnergyTransport {
                 if !settings.shape_diffusion {
                     return None;
                 }
-                let channels = DiffusionProfile::with_source_depth(
+                let profile = DiffusionProfile::with_source_depth(
                     &medium,
                     settings.kernel,
                     SHAPE_SOURCE_DEPTH,
-                )
-                .dipole_channels()?;
+                );
+                let channels = profile.dipole_channels()?;
                 let count = members[object].len();
                 if count > MAX_SHAPE_PATCHES {
                     shape_too_large_objects += 1;
@@ -495,7 +495,7 @@ impl EnergyTransport {
                     })
                     .collect();
                 let [r, g, b] = channels.map(|c| boundary_correction(&shape, c));
-                let solved = r.zip(g).zip(b).map(|((r, g), b)| [r, g, b]);
+                let solved = r.zip(g).zip(b).map(|((r, g), b)| (profile, [r, g, b]));
                 if solved.is_none() {
                     warn!(
                         "translucency: object {object}'s diffusion could not be solved in its \
@@ -511,16 +511,11 @@ impl EnergyTransport {
         // across it) and its sources sit at `SHAPE_SOURCE_DEPTH`.
         let profiles: Vec<Option<(DiffusionProfile, f64, f64)>> = surfaces
             .iter()
-            .zip(&shape_corrections)
-            .map(|(s, correction)| {
+            .zip(&shape_solutions)
+            .map(|(s, solution)| {
                 let (medium, units_per_mm) = valid_medium(s)?;
-                if correction.is_some() {
-                    let profile = DiffusionProfile::with_source_depth(
-                        &medium,
-                        settings.kernel,
-                        SHAPE_SOURCE_DEPTH,
-                    );
-                    return Some((profile, units_per_mm, f64::INFINITY));
+                if let Some((profile, _)) = solution {
+                    return Some((*profile, units_per_mm, f64::INFINITY));
                 }
                 let profile = DiffusionProfile::new(&medium, settings.kernel);
                 let reach_mm =
@@ -528,7 +523,7 @@ impl EnergyTransport {
                 Some((profile, units_per_mm, reach_mm))
             })
             .collect();
-        let shape_solved_objects = shape_corrections.iter().flatten().count();
+        let shape_solved_objects = shape_solutions.iter().flatten().count();
 
         // Each row's entries: the column and `K_ij` (an object with `oriented_dipole` or solved
         // in its shape: the oriented dipole, the flat share times the pair's orientation
@@ -546,14 +541,16 @@ impl EnergyTransport {
                     let mm = 1.0 / units_per_mm;
                     let area_i_mm2 = pi.area as f64 * mm * mm;
                     let t_in = profile.entrance_transmittance;
-                    let correction = shape_corrections
+                    let correction = shape_solutions
                         .get(pi.object as usize)
-                        .and_then(Option::as_ref);
-                    let (li, count) = (local_index[i], members[pi.object as usize].len());
-                    p.iter()
+                        .and_then(Option::as_ref)
+                        .map(|(_, correction)| correction);
+                    let own = &members[pi.object as usize];
+                    let row_start = local_index[i] * own.len();
+                    own.iter()
                         .enumerate()
-                        .filter(|(_, pj)| pj.object == pi.object)
-                        .filter_map(|(j, pj)| {
+                        .filter_map(|(lj, &j)| {
+                            let pj = &p[j];
                             let r_mm = pi.centre.distance(pj.centre) as f64 * mm;
                             (r_mm <= reach_mm).then(|| {
                                 let share = profile.patch_transfer(r_mm, area_i_mm2);
@@ -569,9 +566,8 @@ impl EnergyTransport {
                                 } else {
                                     [1.0; 3]
                                 };
-                                let beyond = |c: usize| {
-                                    correction.map_or(0.0, |u| u[c][li * count + local_index[j]])
-                                };
+                                let beyond =
+                                    |c: usize| correction.map_or(0.0, |u| u[c][row_start + lj]);
                                 // Exitance is never negative; the correction's collocation
                                 // can undershoot where the dipole alone is near zero.
                                 let value = Vec3::new(
@@ -670,12 +666,8 @@ impl EnergyTransport {
         // source's own disc where the profile is narrower than a patch (measured up to +28 %
         // on a 5 cm marble ball in 34 mm patches); the columns are rescaled to W∞, and what
         // they held before is reported.
-        let mut column_sums = vec![Vec3::ZERO; n];
-        for (i, pi) in p.iter().enumerate() {
-            for (j, k) in scattering.row(i) {
-                column_sums[j] += k * pi.area;
-            }
-        }
+        let areas: Vec<f32> = p.iter().map(|q| q.area).collect();
+        let column_sums = scattering.weighted_column_sums(&areas, n);
         let (mut kept_sum, mut kept_count) = (Vec3::ZERO, 0);
         let mut walked_sum = Vec3::ZERO;
         let mut column_scale = vec![Vec3::ONE; n];
@@ -785,30 +777,31 @@ impl EnergyTransport {
         settings: &TransportSettings,
     ) -> Vec<ExitLaw> {
         let p = &patches.patches;
-        let mut column_totals = vec![Vec3::ZERO; p.len()];
-        for (i, q) in p.iter().enumerate() {
-            for (j, k) in self.scattering.row(i) {
-                column_totals[j] += k * q.area;
-            }
-        }
+        let column_totals = self.scattering.weighted_column_sums(&self.areas, p.len());
+        // The law is the medium's: once per object, not per patch.
+        let laws: Vec<Option<([Vec4; 3], f32)>> = surfaces
+            .iter()
+            .map(|s| match s {
+                PatchSurface::Translucent { medium, .. }
+                    if settings.deep_exit_law && medium.invalid_reason().is_none() =>
+                {
+                    let eta = medium.index_of_refraction;
+                    let channels = medium
+                        .single_scattering_albedo()
+                        .map(|a| Vec4::from_array(super::diffusion::deep_exit_law(a, eta as f64)));
+                    Some((channels, eta))
+                }
+                _ => None,
+            })
+            .collect();
         p.iter()
             .zip(&column_totals)
-            .map(|(q, total)| match surfaces.get(q.object as usize) {
-                Some(PatchSurface::Translucent { medium, .. })
-                    if settings.deep_exit_law
-                        && medium.invalid_reason().is_none()
-                        && q.area > 0.0 =>
-                {
-                    let albedo = medium.single_scattering_albedo();
-                    let eta = medium.index_of_refraction;
-                    ExitLaw {
-                        local_albedo: *total / q.area,
-                        channels: albedo.map(|a| {
-                            Vec4::from_array(super::diffusion::deep_exit_law(a, eta as f64))
-                        }),
-                        eta,
-                    }
-                }
+            .map(|(q, total)| match laws.get(q.object as usize) {
+                Some(&Some((channels, eta))) if q.area > 0.0 => ExitLaw {
+                    local_albedo: *total / q.area,
+                    channels,
+                    eta,
+                },
                 _ => ExitLaw::default(),
             })
             .collect()
