@@ -1,6 +1,8 @@
 //! Accuracy of the translucency transport against a path tracer: a ball of one of Jensen's
 //! media (radius 1 cm, an index-matched boundary so that the picture is the light diffused
-//! out of the medium alone) lit by one directional light, seen from 4 cm. The plugin's picture
+//! out of the medium alone) lit by one directional light, seen from 4 cm, or (`--shape
+//! bunny`) the Stanford bunny 4 cm long — thin ears, creases, flat flanks — seen from above
+//! and aside, against Mitsuba rendering the very same triangles. The plugin's picture
 //! is computed on the CPU with the same patches, transport, iteration and gather as the GPU
 //! passes (`translucency::gather::gathered_radiance`, the oracle the GPU tests hold the passes
 //! to: within 0.24/255 mean of it); the reference is a light tracer of the same scene
@@ -10,7 +12,8 @@
 //! `numpy` and `mitsuba`, or reads one with `--reference`.
 //!
 //! ```text
-//! cargo run --example translucent_accuracy -- [--medium skin1] [--budgets 250,500,1000,2000]
+//! cargo run --example translucent_accuracy -- [--shape ball|bunny] [--medium skin1]
+//!     [--budgets 250,500,1000,2000]
 //!     [--kernel scaled-dipole|burley|dipole] [--gather interpolation|photons]
 //!     [--object-exit-share true|false] [--beam-incidence true|false]
 //!     [--oriented-dipole true|false] [--shape-diffusion true|false]
@@ -33,8 +36,12 @@ mod chart;
 #[path = "common/headless.rs"]
 mod headless;
 
-#[path = "common/translucent_ball.rs"]
-mod translucent_ball;
+// Only `read_obj`, `obj_mesh` and `asset_path` are used here.
+#[allow(dead_code)]
+#[path = "common/meshes.rs"]
+mod meshes;
+#[path = "common/translucent_accuracy_scene.rs"]
+mod translucent_accuracy_scene;
 
 use std::{
     io::Write,
@@ -48,14 +55,19 @@ use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings,
 };
-use translucent_ball::{
-    BallLighting, EYE, FOV_Y, FRONT_LIGHT, RADIUS, plugin_picture, score, scored,
+use translucent_accuracy_scene::{
+    BUNNY_LENGTH, FOV_Y, FRONT_LIGHT, RADIUS, SceneLighting, Shape, ShapeView, plugin_picture, score,
 };
 
-/// The translucency's picture of a ball against Mitsuba's, per patch budget, into a CSV.
+/// The translucency's picture of a ball or the bunny against a path tracer's, per patch
+/// budget, into a CSV.
 #[derive(clap::Parser)]
 #[command(long_about = None)]
 struct Cli {
+    /// The object: the 1 cm ball, or the Stanford bunny 4 cm long (its reference is
+    /// Mitsuba's, index-matched: the light tracer traces the ball only)
+    #[arg(long, value_enum, default_value_t = ShapeArg::Ball)]
+    shape: ShapeArg,
     /// Jensen's medium
     #[arg(long, value_enum, default_value_t = Medium::Skin1)]
     medium: Medium,
@@ -149,6 +161,12 @@ enum Medium {
     Apple,
 }
 
+#[derive(Clone, Copy, clap::ValueEnum, Debug, PartialEq)]
+enum ShapeArg {
+    Ball,
+    Bunny,
+}
+
 #[derive(Clone, Copy, clap::ValueEnum, Debug)]
 enum Gather {
     Interpolation,
@@ -214,6 +232,13 @@ fn main() {
     if cli.eta != 1.0 && !cli.uniform && cli.tracer == Tracer::Mitsuba && cli.reference.is_none() {
         fail("--eta above 1 under the directional light needs --tracer light: in Mitsuba a directional light cannot reach the camera through a smooth dielectric".into());
     }
+    let shape = match cli.shape {
+        ShapeArg::Ball => Shape::Ball,
+        ShapeArg::Bunny => Shape::Bunny,
+    };
+    if shape == Shape::Bunny && (cli.eta != 1.0 || cli.uniform) {
+        fail("the bunny is index-matched under the directional light only (its reference is Mitsuba's; drop --eta and --uniform)".into());
+    }
     if cli.uniform && cli.bevy {
         fail("--bevy fits Bevy's material under the directional light only (drop --uniform)".into());
     }
@@ -232,7 +257,8 @@ fn main() {
         let dir = PathBuf::from("out/translucent_accuracy");
         std::fs::create_dir_all(&dir).unwrap_or_else(|e| fail(format!("cannot create {}: {e}", dir.display())));
         // The light tracer takes a directional light only: a uniform environment is Mitsuba's.
-        let light_traced = cli.tracer == Tracer::Light && !cli.uniform;
+        // The light tracer traces the ball only.
+        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && shape == Shape::Ball;
         // Named by renderer and version: the first Mitsuba references (in metres, `volpath`)
         // were dark by Mitsuba's ray offsets (tools/translucent_reference.py says why).
         let (tool, renderer, samples) = if light_traced {
@@ -241,20 +267,31 @@ fn main() {
             ("tools/translucent_reference.py", "volpathmis-mm", format!("--spp={}", cli.spp))
         };
         let path = dir.join(format!(
-            "reference_{renderer}_{name}_{size}_{}{}{}.exr",
+            "reference_{renderer}_{}{name}_{size}_{}{}{}.exr",
+            if shape == Shape::Ball { String::new() } else { format!("{}_", shape.scene_name()) },
             samples.trim_start_matches("--spp=").trim_start_matches("--photons="),
             if cli.light.is_some() && !cli.uniform { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() },
             if cli.uniform || cli.eta != 1.0 { format!("_{lighting}") } else { String::new() },
         ));
         if !path.exists() {
             let list = |v: Vec3| format!("{},{},{}", v.x, v.y, v.z);
+            // The ball is Mitsuba's own sphere; another shape, the very triangles the
+            // plugin's patches come from.
+            let object = match shape {
+                Shape::Ball => format!("--radius={RADIUS}"),
+                _ => {
+                    let obj = dir.join(format!("{}_{}.obj", shape.scene_name(), shape.size_name()));
+                    write_obj(&obj, shape).unwrap_or_else(|e| fail(format!("cannot write {}: {e}", obj.display())));
+                    format!("--mesh={}", obj.display())
+                }
+            };
             let mut command = Command::new("python3");
             command.args([
                 tool,
                 &format!("--sigma-a={}", list(medium.absorption)),
                 &format!("--sigma-s={}", list(medium.reduced_scattering)),
-                &format!("--radius={RADIUS}"),
-                &format!("--eye={}", list(EYE)),
+                &object,
+                &format!("--eye={}", list(shape.eye())),
                 &format!("--light={}", list(light)),
                 &format!("--fov={}", FOV_Y.to_degrees()),
                 &format!("--size={size}"),
@@ -316,20 +353,21 @@ fn main() {
     let method =
         format!("patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}", cli.kernel)
             .to_lowercase();
+    let view = ShapeView::new(shape, size);
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
     for &budget in &cli.budgets {
         let result = plugin_picture(
+            &view,
             medium,
             cli.oriented_dipole,
             &settings,
             gather,
             budget,
-            if cli.uniform { BallLighting::Uniform } else { BallLighting::Directional(light) },
-            size,
+            if cli.uniform { SceneLighting::Uniform } else { SceneLighting::Directional(light) },
         );
         let picture = &result.pixels;
-        let scores = score(picture, &reference, size);
+        let scores = score(picture, &reference, &view);
         let rel_l1 = scores.rel_l1;
         // FLIP on both scaled by the reference's brightest pixel (sRGB-encoded, 8 bits).
         let peak = reference
@@ -367,7 +405,9 @@ fn main() {
             scores.ratio[0], scores.ratio[1], scores.ratio[2], result.iterations
         );
         rows.push(format!(
-            "ball_{name}_r10mm_{lighting},{method},{budget},{n},{size},{size},,{precompute:.3},{:.3},{rel_l1:.4},{flip:.4},cpu oracle of the GPU passes",
+            "{}_{name}_{}_{lighting},{method},{budget},{n},{size},{size},,{precompute:.3},{:.3},{rel_l1:.4},{flip:.4},cpu oracle of the GPU passes",
+            shape.scene_name(),
+            shape.size_name(),
             bytes as f32 / 1e6
         ));
         // The picture for a look (linear EXR).
@@ -375,7 +415,10 @@ fn main() {
             image::Rgb(picture[(y * size + x) as usize].to_array())
         });
         let path = PathBuf::from("out/translucent_accuracy")
-            .join(format!("plugin_{name}_{method}_{budget}.exr"));
+            .join(format!(
+                "plugin_{}_{name}_{lighting}_{method}_{budget}.exr",
+                shape.scene_name()
+            ));
         if let Err(e) = std::fs::create_dir_all("out/translucent_accuracy")
             .and_then(|_| exr.save(&path).map_err(std::io::Error::other))
         {
@@ -383,12 +426,14 @@ fn main() {
         }
     }
     if cli.bevy {
-        let (best, transmission, thickness, colour) = bevy_best_fit(&reference, size, light);
+        let (best, transmission, thickness, colour) = bevy_best_fit(&reference, &view, light);
         eprintln!(
             "{name} Bevy diffuse_transmission best fit: rel L1 {best:.4} at transmission {transmission}, thickness {thickness} m, base colour {colour:?}"
         );
         rows.push(format!(
-            "ball_{name}_r10mm_{lighting},bevy_diffuse_transmission,transmission {transmission} thickness {thickness} base {:.3} {:.3} {:.3},,{size},{size},,,,{best:.4},,Bevy 0.19.1 on the software driver, best of a grid",
+            "{}_{name}_{}_{lighting},bevy_diffuse_transmission,transmission {transmission} thickness {thickness} base {:.3} {:.3} {:.3},,{size},{size},,,,{best:.4},,Bevy 0.19.1 on the software driver, best of a grid",
+            shape.scene_name(),
+            shape.size_name(),
             colour[0], colour[1], colour[2]
         ));
     }
@@ -546,9 +591,11 @@ fn draw_chart(csv: &std::path::Path, path: &std::path::Path) {
 /// returns the best relative L1 with its transmission, thickness and colour.
 fn bevy_best_fit(
     reference: &image::Rgb32FImage,
-    size: u32,
+    view: &ShapeView,
     light: Vec3,
 ) -> (f64, f32, f32, [f32; 3]) {
+    let size = view.size;
+    let scored = |x: u32, y: u32, _: u32| view.scored[(y * size + x) as usize];
     use bevy::{
         camera::{Exposure, RenderTarget},
         core_pipeline::tonemapping::Tonemapping,
@@ -589,14 +636,17 @@ fn bevy_best_fit(
         Msaa::Off,
         Tonemapping::None,
         exposure,
-        Transform::from_translation(EYE).looking_at(Vec3::ZERO, Vec3::Y),
+        Transform::from_translation(view.shape.eye()).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    let mesh = app.world_mut().resource_mut::<Assets<Mesh>>().add(
-        Sphere::new(RADIUS)
-            .mesh()
-            .ico(5)
-            .expect("a valid subdivision"),
-    );
+    // The shape as a game would load it: the ico sphere, or the bunny's OBJ with smooth
+    // normals and UVs (as the `translucent` example's; a mesh without UVs rendered black
+    // here), scaled as the accuracy scene scales it.
+    let shape_mesh = match view.shape {
+        Shape::Ball => Sphere::new(RADIUS).mesh().ico(5).expect("a valid subdivision"),
+        Shape::Bunny => meshes::obj_mesh(&meshes::asset_path("meshes/bunny.obj"), 1.0)
+            .scaled_by(Vec3::splat(BUNNY_LENGTH / 1.6)),
+    };
+    let mesh = app.world_mut().resource_mut::<Assets<Mesh>>().add(shape_mesh);
     let material = app
         .world_mut()
         .resource_mut::<Assets<StandardMaterial>>()
@@ -691,4 +741,17 @@ fn bevy_best_fit(
         }
     }
     best
+}
+
+/// Writes `shape`'s triangles as an OBJ in metres, for the reference renderer.
+fn write_obj(path: &std::path::Path, shape: Shape) -> std::io::Result<()> {
+    let (positions, indices) = shape.triangles();
+    let mut text = String::new();
+    for p in &positions {
+        text += &format!("v {} {} {}\n", p.x, p.y, p.z);
+    }
+    for t in indices.chunks_exact(3) {
+        text += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    std::fs::write(path, text)
 }

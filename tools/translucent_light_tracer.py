@@ -313,6 +313,9 @@ def main():
     parser.add_argument("--uniform", action="store_true",
                         help="a uniform environment of radiance 1 instead of the light")
     args = parser.parse_args()
+    if args.mesh is not None:
+        parser.error("the light tracer traces the ball only (--radius); a mesh is Mitsuba's "
+                     "(translucent_reference.py)")
     if not 0.0 < args.connect_fraction <= 1.0:
         parser.error("--connect-fraction must lie in (0, 1]")
     if not 1.0 <= args.eta <= 3.0:

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Path-traced reference of a translucent ball for the translucency accuracy example.
+"""Path-traced reference of a translucent ball (or closed mesh) for the translucency accuracy example.
 
 Mitsuba 3 (`pip install mitsuba`, version 3.9.1 used) renders a homogeneous scattering medium
 inside a sphere whose boundary is index-matched (a `null` BSDF: no Fresnel reflection or
@@ -33,6 +33,11 @@ Arguments in metres and per millimetre, as the example's scene; radiance per uni
 of the light (irradiance 1 on a plane facing it), which does not depend on the unit of
 length. Not needed by the crate or its tests.
 
+`--mesh FILE.obj` (metres, closed) renders that mesh's medium instead of the ball: the
+accuracy example writes the very triangles its patches come from (`--shape bunny`);
+index-matched under the directional light only. `--seed` picks the sampler's seed: two
+renders of different seeds averaged make a reference, and half their difference is its noise.
+
 `--eta 1.3` puts a smooth dielectric boundary round the medium instead (Mitsuba's
 `dielectric`: Fresnel reflection and refraction both ways, total internal reflection). A
 directional light cannot reach the camera through it by any path Mitsuba samples (a delta
@@ -59,13 +64,18 @@ def main():
                         help="index of refraction of the ball (1: index-matched, no boundary)")
     parser.add_argument("--uniform", action="store_true",
                         help="a uniform environment of radiance 1 instead of the light")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="the sampler's seed (two renders of different seeds give the noise)")
     args = parser.parse_args()
+    if args.mesh is not None and (args.eta != 1.0 or args.uniform):
+        parser.error("--mesh is index-matched under the directional light only (the environment's "
+                     "reflection is taken out for the ball alone)")
     if not 1.0 <= args.eta <= 3.0:
         parser.error("--eta must lie in 1 – 3")
     if args.eta != 1.0 and not args.uniform:
         parser.error("a dielectric ball (--eta > 1) needs --uniform: a directional light "
                      "cannot reach the camera through a smooth boundary")
-    if args.radius <= 0 or args.size <= 0 or args.spp <= 0:
+    if (args.radius is not None and args.radius <= 0) or args.size <= 0 or args.spp <= 0:
         parser.error("--radius, --size and --spp must be positive")
 
     import mitsuba as mi
@@ -87,11 +97,12 @@ def main():
             "to_world": mi.ScalarTransform4f().look_at(origin=[mm * v for v in args.eye], target=[0, 0, 0], up=[0, 1, 0]),
             "film": {"type": "hdrfilm", "width": args.size, "height": args.size,
                      "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-            "sampler": {"type": "independent", "sample_count": args.spp},
+            "sampler": {"type": "independent", "sample_count": args.spp, "seed": args.seed},
         },
         "ball": {
-            "type": "sphere",
-            "radius": mm * args.radius,
+            **({"type": "sphere", "radius": mm * args.radius} if args.mesh is None else
+               {"type": "obj", "filename": args.mesh, "face_normals": True,
+                "to_world": mi.ScalarTransform4f().scale(mm)}),
             "bsdf": {"type": "null"} if args.eta == 1.0
             else {"type": "dielectric", "int_ior": args.eta, "ext_ior": 1.0},
             "interior": {

@@ -1,6 +1,7 @@
 """The translucency accuracy scene's command-line arguments, shared by the two reference
 renderers (translucent_reference.py: Mitsuba; translucent_light_tracer.py: numpy): a ball of a
-homogeneous medium at the origin, a perspective camera looking at it, one directional light.
+homogeneous medium at the origin (or, Mitsuba only, a closed triangle mesh about it: `--mesh`),
+a perspective camera looking at it, one directional light.
 """
 
 import argparse
@@ -21,7 +22,10 @@ def add_scene_arguments(parser):
     """The medium, the ball, the camera, the light and the picture's size."""
     parser.add_argument("--sigma-a", type=triple, required=True, help="absorption per mm, r,g,b")
     parser.add_argument("--sigma-s", type=triple, required=True, help="scattering per mm (g = 0), r,g,b")
-    parser.add_argument("--radius", type=float, required=True, help="ball radius, metres")
+    shape = parser.add_mutually_exclusive_group(required=True)
+    shape.add_argument("--radius", type=float, help="ball radius, metres")
+    shape.add_argument("--mesh", help="a closed triangle mesh in place of the ball (OBJ, metres; "
+                                      "translucent_reference.py only)")
     parser.add_argument("--eye", type=triple, required=True, help="camera position (looks at the origin, +Y up)")
     parser.add_argument("--light", type=triple, required=True, help="direction the light travels")
     parser.add_argument("--fov", type=float, default=45.0, help="vertical field of view, degrees")

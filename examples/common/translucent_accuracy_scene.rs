@@ -1,0 +1,322 @@
+//! The translucency accuracy scenes, shared by `examples/translucent_accuracy.rs` and the
+//! integration test that holds the plugin to path-traced references: one object of one
+//! medium, index-matched or behind a dielectric boundary, lit by one directional light of
+//! irradiance 1 or a uniform environment of radiance 1 — a ball of radius 1 cm (Bevy's ico
+//! sphere, 20 480 triangles) seen from 4 cm, or the Stanford bunny 4 cm long seen from above
+//! and aside (`Shape`) — the plugin's picture computed on the CPU by the same patches,
+//! transport, iteration and gather as the passes, and its score against a reference picture.
+#![allow(dead_code)] // The example reads every field; the test only the picture and its score.
+
+use std::time::Instant;
+
+use bevy::prelude::*;
+use bevy_mesostructure::translucency::{
+    EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface, SceneRays,
+    TranslucentMedium, TransportSettings, direct_light, gather::gathered_radiance,
+    patches::world_triangles, resample_into_patches,
+};
+
+/// The ball's radius, metres.
+pub const RADIUS: f32 = 0.01;
+/// Where the camera looking at the ball stands.
+pub const EYE: Vec3 = Vec3::new(0.0, 0.0, 0.04);
+/// Where the camera looking at the bunny stands: above it, to one side.
+pub const BUNNY_EYE: Vec3 = Vec3::new(0.025, 0.03, 0.055);
+/// The bunny's longest side, metres.
+pub const BUNNY_LENGTH: f32 = 0.04;
+/// The default light: from the right, slightly above and in front.
+pub const FRONT_LIGHT: Vec3 = Vec3::new(-1.0, -0.2, -0.3);
+/// Lit from behind, a little from the left and above.
+pub const BACK_LIGHT: Vec3 = Vec3::new(0.4, -0.2, 1.0);
+pub const FOV_Y: f32 = std::f32::consts::FRAC_PI_4;
+
+/// The object of an accuracy scene, centred on the origin; the camera looks at the origin.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Shape {
+    /// A ball of radius 1 cm (ico sphere, 20 480 triangles), seen from 4 cm.
+    Ball,
+    /// The Stanford bunny (`assets/meshes/bunny.obj`, 3 674 triangles) 4 cm long: thin ears,
+    /// concave creases and flat flanks, seen from above and aside.
+    Bunny,
+}
+
+impl Shape {
+    /// The object's world-space triangles, metres.
+    pub fn triangles(self) -> (Vec<Vec3>, Vec<u32>) {
+        match self {
+            Shape::Ball => world_triangles(
+                &Sphere::new(RADIUS).mesh().ico(5).expect("a valid subdivision"),
+                &GlobalTransform::IDENTITY,
+            )
+            .expect("a triangle list"),
+            Shape::Bunny => {
+                let (positions, indices) =
+                    crate::meshes::read_obj(&crate::meshes::asset_path("meshes/bunny.obj"));
+                // The file's longest side is 1.6, centred (assets/meshes/README.md).
+                let scale = BUNNY_LENGTH / 1.6;
+                (positions.into_iter().map(|v| v * scale).collect(), indices)
+            }
+        }
+    }
+
+    /// Where the camera stands.
+    pub fn eye(self) -> Vec3 {
+        match self {
+            Shape::Ball => EYE,
+            Shape::Bunny => BUNNY_EYE,
+        }
+    }
+
+    /// The scene's name in `docs/translucent.csv`.
+    pub fn scene_name(self) -> &'static str {
+        match self {
+            Shape::Ball => "ball",
+            Shape::Bunny => "bunny",
+        }
+    }
+
+    /// The object's size in a scene name (`ball_skin1_r10mm_front`).
+    pub fn size_name(self) -> &'static str {
+        match self {
+            Shape::Ball => "r10mm",
+            Shape::Bunny => "4cm",
+        }
+    }
+}
+
+/// The camera ray through the centre of pixel `(x, y)` of `size`²: unit direction.
+pub fn camera_ray(eye: Vec3, x: u32, y: u32, size: u32) -> Vec3 {
+    let tan = (FOV_Y / 2.0).tan();
+    let forward = (-eye).normalize();
+    let right = forward.cross(Vec3::Y).normalize();
+    let up = right.cross(forward);
+    let sx = (2.0 * (x as f32 + 0.5) / size as f32 - 1.0) * tan;
+    let sy = (1.0 - 2.0 * (y as f32 + 0.5) / size as f32) * tan;
+    (forward + right * sx + up * sy).normalize()
+}
+
+/// Where a pixel's camera ray meets the object.
+#[derive(Clone, Copy, Debug)]
+pub struct PixelHit {
+    /// The ray's unit direction.
+    pub direction: Vec3,
+    /// The point met.
+    pub point: Vec3,
+    /// The surface's unit normal there, facing the camera.
+    pub normal: Vec3,
+    /// The distance from the eye.
+    pub distance: f32,
+}
+
+/// What the camera sees of a shape at `size`² pixels, and which pixels are scored.
+pub struct ShapeView {
+    pub shape: Shape,
+    pub size: u32,
+    /// Per pixel, row by row.
+    pub hits: Vec<Option<PixelHit>>,
+    /// Per pixel: on the object, facing the camera at a cosine of 0.3 or more, and (the
+    /// bunny) with its four neighbours on the same surface (within 3 mm of its distance): the
+    /// reference integrates each pixel's area and the plugin's picture takes its centre, so
+    /// pixels astride a silhouette are left out.
+    pub scored: Vec<bool>,
+}
+
+impl ShapeView {
+    /// The view of `shape`: the ball's hits in closed form, the bunny's by rays.
+    pub fn new(shape: Shape, size: u32) -> Self {
+        let eye = shape.eye();
+        let hits: Vec<Option<PixelHit>> = match shape {
+            Shape::Ball => (0..size * size)
+                .map(|i| {
+                    let d = camera_ray(eye, i % size, i / size, size);
+                    let b = eye.dot(d);
+                    let disc = b * b - (eye.length_squared() - RADIUS * RADIUS);
+                    (disc > 0.0).then(|| {
+                        let distance = -b - disc.sqrt();
+                        let point = eye + d * distance;
+                        PixelHit {
+                            direction: d,
+                            point,
+                            normal: point.normalize(),
+                            distance,
+                        }
+                    })
+                })
+                .collect(),
+            Shape::Bunny => {
+                let (positions, indices) = shape.triangles();
+                let rays = SceneRays::new(&[PatchObject {
+                    positions: &positions,
+                    indices: &indices,
+                }]);
+                (0..size * size)
+                    .map(|i| {
+                        let d = camera_ray(eye, i % size, i / size, size);
+                        rays.first_hit(eye, d).map(|(distance, n)| PixelHit {
+                            direction: d,
+                            point: eye + d * distance,
+                            normal: if n.dot(d) > 0.0 { -n } else { n },
+                            distance,
+                        })
+                    })
+                    .collect()
+            }
+        };
+        let at = |x: i64, y: i64| -> Option<PixelHit> {
+            if x < 0 || y < 0 || x >= size as i64 || y >= size as i64 {
+                return None;
+            }
+            hits[(y * size as i64 + x) as usize]
+        };
+        let scored = (0..size * size)
+            .map(|i| {
+                let (x, y) = ((i % size) as i64, (i / size) as i64);
+                let Some(hit) = hits[i as usize] else {
+                    return false;
+                };
+                if hit.normal.dot(-hit.direction) < 0.3 {
+                    return false;
+                }
+                shape == Shape::Ball
+                    || [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().all(|&(dx, dy)| {
+                        at(x + dx, y + dy).is_some_and(|n| (n.distance - hit.distance).abs() < 0.003)
+                    })
+            })
+            .collect();
+        Self {
+            shape,
+            size,
+            hits,
+            scored,
+        }
+    }
+}
+
+/// The plugin's picture of a shape and what it cost.
+pub struct ShapePicture {
+    /// Linear radiance per pixel, row by row.
+    pub pixels: Vec<Vec3>,
+    pub patches: usize,
+    /// Patches and transport, seconds.
+    pub precompute_s: f32,
+    /// The sparse matrices' bytes.
+    pub memory_bytes: usize,
+    pub iterations: u32,
+}
+
+/// How the object is lit.
+#[derive(Clone, Copy, Debug)]
+pub enum SceneLighting {
+    /// A directional light of irradiance 1 travelling along this (unit) direction.
+    Directional(Vec3),
+    /// A uniform environment of radiance 1: Bevy's ambient light, irradiance π on every
+    /// translucent patch, as the plugin injects it.
+    Uniform,
+}
+
+/// The plugin's picture of `view`'s shape of `medium` lit by `lighting`, at `budget`
+/// patches.
+pub fn plugin_picture(
+    view: &ShapeView,
+    medium: TranslucentMedium,
+    oriented_dipole: bool,
+    settings: &TransportSettings,
+    gather: GatherMethod,
+    budget: u32,
+    lighting: SceneLighting,
+) -> ShapePicture {
+    let (positions, indices) = view.shape.triangles();
+    let views = [PatchObject {
+        positions: &positions,
+        indices: &indices,
+    }];
+    let surfaces = [PatchSurface::Translucent {
+        medium,
+        world_units_per_mm: 0.001,
+        oriented_dipole,
+    }];
+    let (lights, ambient) = match lighting {
+        SceneLighting::Directional(direction) => (
+            vec![PatchLight::Directional {
+                direction,
+                illuminance: Vec3::ONE,
+            }],
+            Vec3::ZERO,
+        ),
+        SceneLighting::Uniform => (Vec::new(), Vec3::splat(std::f32::consts::PI)),
+    };
+    let start = Instant::now();
+    let patches = resample_into_patches(&views, budget as usize);
+    let rays = SceneRays::new(&views);
+    let transport = EnergyTransport::build(&patches, &surfaces, &rays, settings);
+    let precompute_s = start.elapsed().as_secs_f32();
+    let mut direct = direct_light(&patches, Some(&transport), &lights, &rays);
+    for e in &mut direct.irradiance {
+        *e += ambient;
+    }
+    let solution = transport.solve_with(&direct, 1e-4, 256);
+    let albedo = vec![Vec3::ZERO; patches.patches.len()];
+    let exit_laws = transport.exit_laws(&patches, &surfaces, settings);
+    let eye = view.shape.eye();
+    let pixels = view
+        .hits
+        .iter()
+        .map(|hit| {
+            hit.and_then(|hit| {
+                gathered_radiance(
+                    gather,
+                    &patches,
+                    &albedo,
+                    &exit_laws,
+                    &direct.irradiance,
+                    &solution.exitance,
+                    eye,
+                    hit.point,
+                    hit.normal,
+                )
+            })
+            .unwrap_or(Vec3::ZERO)
+        })
+        .collect();
+    let n = patches.patches.len();
+    ShapePicture {
+        pixels,
+        patches: n,
+        precompute_s,
+        memory_bytes: 8 * (2 * (n + 1))
+            + 8 * transport.form_factors.entries()
+            + 16 * transport.scattering.entries(),
+        iterations: solution.iterations,
+    }
+}
+
+/// A picture against the reference over the scored pixels.
+pub struct ShapeScore {
+    /// `Σ|plugin − reference| / Σ reference`, all channels.
+    pub rel_l1: f64,
+    /// Mean plugin / mean reference per channel (a scale error shows here first).
+    pub ratio: [f64; 3],
+}
+
+/// Scores `pixels` against `reference` over `view`'s scored pixels (both `view.size`²,
+/// linear).
+pub fn score(pixels: &[Vec3], reference: &image::Rgb32FImage, view: &ShapeView) -> ShapeScore {
+    let (mut difference, mut total) = (0.0f64, 0.0f64);
+    let mut sums = [[0.0f64; 2]; 3];
+    let size = view.size;
+    for i in (0..view.scored.len()).filter(|&i| view.scored[i]) {
+        let (x, y) = (i as u32 % size, i as u32 / size);
+        let ours = pixels[i];
+        let theirs = reference.get_pixel(x, y).0;
+        for c in 0..3 {
+            difference += (ours[c] - theirs[c]).abs() as f64;
+            total += theirs[c] as f64;
+            sums[c][0] += ours[c] as f64;
+            sums[c][1] += theirs[c] as f64;
+        }
+    }
+    ShapeScore {
+        rel_l1: difference / total.max(1e-30),
+        ratio: sums.map(|[a, b]| a / b.max(1e-30)),
+    }
+}
