@@ -1138,12 +1138,10 @@ fn holds_as_documented(
         "{label} {lighting}: relative L1 {:.4}, documented {rel_l1}",
         measured.rel_l1
     );
-    for c in 0..3 {
+    for (c, (&ours, &documented)) in measured.ratio.iter().zip(&ratio).enumerate() {
         assert!(
-            (measured.ratio[c] - ratio[c]).abs() < 0.01,
-            "{label} {lighting}: channel {c} mean ratio {:.3}, documented {}",
-            measured.ratio[c],
-            ratio[c]
+            (ours - documented).abs() < 0.01,
+            "{label} {lighting}: channel {c} mean ratio {ours:.3}, documented {documented}"
         );
     }
 }
