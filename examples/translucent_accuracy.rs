@@ -253,6 +253,7 @@ fn main() {
     };
     let name = format!("{:?}", cli.medium).to_lowercase();
     let size = cli.size;
+    let view = ShapeView::new(shape, size);
     let reference_path = cli.reference.clone().unwrap_or_else(|| {
         let dir = PathBuf::from("out/translucent_accuracy");
         std::fs::create_dir_all(&dir).unwrap_or_else(|e| fail(format!("cannot create {}: {e}", dir.display())));
@@ -281,7 +282,7 @@ fn main() {
                 Shape::Ball => format!("--radius={RADIUS}"),
                 _ => {
                     let obj = dir.join(format!("{}_{}.obj", shape.scene_name(), shape.size_name()));
-                    write_obj(&obj, shape).unwrap_or_else(|e| fail(format!("cannot write {}: {e}", obj.display())));
+                    write_obj(&obj, &view).unwrap_or_else(|e| fail(format!("cannot write {}: {e}", obj.display())));
                     format!("--mesh={}", obj.display())
                 }
             };
@@ -353,7 +354,6 @@ fn main() {
     let method =
         format!("patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}", cli.kernel)
             .to_lowercase();
-    let view = ShapeView::new(shape, size);
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
     for &budget in &cli.budgets {
@@ -743,14 +743,13 @@ fn bevy_best_fit(
     best
 }
 
-/// Writes `shape`'s triangles as an OBJ in metres, for the reference renderer.
-fn write_obj(path: &std::path::Path, shape: Shape) -> std::io::Result<()> {
-    let (positions, indices) = shape.triangles();
+/// Writes `view`'s triangles as an OBJ in metres, for the reference renderer.
+fn write_obj(path: &std::path::Path, view: &ShapeView) -> std::io::Result<()> {
     let mut text = String::new();
-    for p in &positions {
+    for p in &view.positions {
         text += &format!("v {} {} {}\n", p.x, p.y, p.z);
     }
-    for t in indices.chunks_exact(3) {
+    for t in view.indices.chunks_exact(3) {
         text += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
     }
     std::fs::write(path, text)

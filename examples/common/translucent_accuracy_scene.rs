@@ -112,6 +112,10 @@ pub struct PixelHit {
 pub struct ShapeView {
     pub shape: Shape,
     pub size: u32,
+    /// The object's world-space triangles (`Shape::triangles`), read once for the view, the
+    /// plugin's patches and the reference's OBJ.
+    pub positions: Vec<Vec3>,
+    pub indices: Vec<u32>,
     /// Per pixel, row by row.
     pub hits: Vec<Option<PixelHit>>,
     /// Per pixel: on the object, facing the camera at a cosine of 0.3 or more, and (the
@@ -125,6 +129,7 @@ impl ShapeView {
     /// The view of `shape`: the ball's hits in closed form, the bunny's by rays.
     pub fn new(shape: Shape, size: u32) -> Self {
         let eye = shape.eye();
+        let (positions, indices) = shape.triangles();
         let hits: Vec<Option<PixelHit>> = match shape {
             Shape::Ball => (0..size * size)
                 .map(|i| {
@@ -144,7 +149,6 @@ impl ShapeView {
                 })
                 .collect(),
             Shape::Bunny => {
-                let (positions, indices) = shape.triangles();
                 let rays = SceneRays::new(&[PatchObject {
                     positions: &positions,
                     indices: &indices,
@@ -186,6 +190,8 @@ impl ShapeView {
         Self {
             shape,
             size,
+            positions,
+            indices,
             hits,
             scored,
         }
@@ -225,10 +231,9 @@ pub fn plugin_picture(
     budget: u32,
     lighting: SceneLighting,
 ) -> ShapePicture {
-    let (positions, indices) = view.shape.triangles();
     let views = [PatchObject {
-        positions: &positions,
-        indices: &indices,
+        positions: &view.positions,
+        indices: &view.indices,
     }];
     let surfaces = [PatchSurface::Translucent {
         medium,
