@@ -1,6 +1,6 @@
-//! The form factors' kernels and far-field clusters of the transport (`transport.rs`): the
-//! disc kernel between two patches, its sum over nearby patches' samples, and the two levels of
-//! clusters a distant row links to as one entry.
+//! The form factors' kernels and far-field clusters of the transport
+//! (`transport/form_factors.rs`): the disc kernel between two patches, its sum over nearby
+//! patches' samples, and the two levels of clusters a distant row links to as one entry.
 
 use bevy::prelude::*;
 

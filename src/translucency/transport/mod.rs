@@ -1,0 +1,457 @@
+//! Seed 001's energy transport between patches: the scattering operator `K` (dipole transfer
+//! inside each translucent object, albedo on opaque patches) and the form factors `F` between
+//! all patches that see each other, both stored sparse (CSR); per frame, the direct irradiance
+//! `E⁰` of the lights and the iteration of `B ← K E⁰ + K F B` (the seed's `L = (S F)^N S L`)
+//! until the energy still moving falls below a threshold.
+//!
+//! Units: `E` irradiance and `B` exitance per patch, per RGB channel, in the lights' units per
+//! world unit² (lux for Bevy's lights); the outgoing radiance of a patch is `B / π`.
+//!
+//! - **`F`**: `F_ij = V_ij cos θ_i cos θ_j A_j / (π r² + (A_i + A_j)/2)`, the disc
+//!   approximation of the point-to-patch form factor (Wallace et al. 1989) with the two areas
+//!   averaged, so that reciprocity `A_i F_ij = A_j F_ji` holds exactly and nearby patches stay
+//!   bounded; `V_ij` one ray between the patches' centres (offset along their normals).
+//!   Pairs whose larger `F` is below [`TransportSettings::form_factor_cutoff`] are dropped
+//!   without a ray; [`TransportReport`] gives what that drops.
+//! - **`K`** on translucent objects: flux `(1 − F_dr,ext) E_j A_j` enters at patch `j`; the
+//!   share leaving through patch `i` is [`DiffusionProfile::patch_transfer`](super::diffusion::DiffusionProfile::patch_transfer), so
+//!   `K_ij = (1 − F_dr,ext) P_ij A_j / A_i`, for pairs of the same object closer than the
+//!   radius that holds [`TransportSettings::diffusion_energy_kept`] of the profile's energy.
+//!   On opaque patches `K_ii = albedo`.
+//!
+//! The two stages of the build are `form_factors.rs` (`F`, with the kernels and far-field
+//! clusters of `far_field.rs`) and `scattering.rs` (`K`: the profiles, the shape's solve, the
+//! object's walks, the columns' totals); the lights' direct part, re-exported here, is in
+//! `lights.rs`.
+
+mod form_factors;
+mod scattering;
+
+use std::time::Instant;
+
+pub use super::lights::{DirectLight, PatchLight, direct_irradiance, direct_light};
+use super::{diffusion::DiffusionKernel, medium::TranslucentMedium, patches::Patches};
+pub use super::{rays::SceneRays, sparse::SparseMatrix};
+use bevy::prelude::*;
+
+/// What an object's surface does with the light that reaches it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PatchSurface {
+    /// Light enters and diffuses through the object's medium.
+    Translucent {
+        /// The medium.
+        medium: TranslucentMedium,
+        /// World units per millimetre (0.001 for a scene in metres).
+        world_units_per_mm: f32,
+        /// Take the dipole's flux along the exit patch's own normal
+        /// ([`Translucent::oriented_dipole`](super::plugin::Translucent::oriented_dipole)).
+        oriented_dipole: bool,
+    },
+    /// Lambertian, with this albedo per channel (0–1).
+    Opaque {
+        /// Diffuse albedo per channel.
+        albedo: Vec3,
+    },
+}
+
+/// How a patch's light leaves it, for the gather: the light a translucent patch received
+/// from elsewhere leaves in the deep field's limb-darkened law
+/// ([`deep_exit_law`](super::diffusion::deep_exit_law)), what its own direct light gives back
+/// in Lambert's. The default (all zero) is Lambert's: opaque patches.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ExitLaw {
+    /// What a unit irradiance on the patch gives back in all, per channel (its column of `K`
+    /// summed over the exit areas): its own direct light accounts for this times `E⁰` of its
+    /// exitance.
+    pub local_albedo: Vec3,
+    /// Per channel, [`deep_exit_law`](super::diffusion::deep_exit_law):
+    /// `(α, ν, 1/N, g)`.
+    pub channels: [Vec4; 3],
+    /// The boundary's index of refraction (1: index-matched).
+    pub eta: f32,
+}
+
+impl ExitLaw {
+    /// The exit radiance over the Lambertian `B/π` at exit cosine `mu`, per channel, for
+    /// exitance `b` and direct irradiance `e0`: `1 + D (s(μ) − 1)`, with
+    /// `D = g · clamp(1 − A E⁰/B, 0, 1)` the share of `B` that came from elsewhere in the deep
+    /// field's mode (the same arithmetic as `gather.wgsl`).
+    pub fn factor(&self, b: Vec3, e0: Vec3, mu: f32) -> Vec3 {
+        Vec3::from_array(std::array::from_fn(|c| {
+            let law = self.channels[c].to_array();
+            if law[3] <= 0.0 || b[c] <= 0.0 {
+                return 1.0;
+            }
+            let deep = law[3] * (1.0 - self.local_albedo[c] * e0[c] / b[c]).clamp(0.0, 1.0);
+            1.0 + deep * (super::diffusion::deep_exit_shape(law, self.eta, mu) - 1.0)
+        }))
+    }
+}
+
+/// How the transport is built.
+#[derive(Clone, Copy, Debug, PartialEq, Reflect)]
+pub struct TransportSettings {
+    /// The diffusion profile.
+    pub kernel: DiffusionKernel,
+    /// The share of each profile's energy its sparse rows keep (0.9 – 1): pairs of patches
+    /// further apart than the radius holding it are dropped.
+    pub diffusion_energy_kept: f32,
+    /// Form factors below this (before visibility) are dropped, 0 – 0.01.
+    pub form_factor_cutoff: f32,
+    /// Width of a far-field cluster in patches (≥ 2; 0 or 1: every link is patch to patch).
+    pub cluster_size: u32,
+    /// A cluster further than this many times its radius is linked as one (≥ 1).
+    pub far_field_ratio: f32,
+    /// Scale each translucent object's columns from the semi-infinite slab's total `W∞` by
+    /// what random walks find leaves the object's own shape over what leaves a slab
+    /// (`random_walk`; 3 × 4096 walks an object at build time: +0.03–0.2 s for a 1 cm ball,
+    /// twice behind a dielectric boundary: there the slab is index-matched, as Chiang et al.'s
+    /// `A` is, so the walks also carry the boundary's internal reflection — a skin ball at
+    /// η 1.3 in uniform light was 1.3–1.7× too bright without).
+    /// On by default: a 1 cm skin ball gives off 1.19× / 1.13× / 1.10× a slab's share, and
+    /// against a light-traced reference the walks take skin from 0.137 to 0.076 and marble
+    /// from 0.073 to 0.045 in relative L1 (`docs/translucent.md`).
+    pub object_exit_share: bool,
+    /// Weight the direct light on translucent patches by how much a beam at its own
+    /// incidence takes in and gives back ([`IncidenceWeight`](super::diffusion::IncidenceWeight):
+    /// Chandrasekhar's plane albedo, up to 1.9× at grazing incidence against normal) instead of
+    /// the diffuse albedo `K` holds for every light. On by default: against a light-traced
+    /// reference it takes a 1 cm skin ball lit from the side from 0.112 to 0.076 in relative
+    /// L1 and marble from 0.053 to 0.045 (`docs/translucent.md`). Per frame only; the
+    /// transport is the same. Used with the kernels that carry Chiang et al.'s albedo (the dipole keeps its own
+    /// single-scattering term for a beam's incidence).
+    pub beam_incidence: bool,
+    /// Solve the diffusion in each translucent object's own shape
+    /// ([`shape_diffusion`](super::shape_diffusion): the oriented dipole of each entry patch
+    /// plus a boundary-element correction for the light its surface lets out on the way)
+    /// instead of taking the flat profile between every pair of patches. Columns keep their
+    /// totals (the slab's, times the object's walks); only where the light leaves moves. For
+    /// objects of up to [`MAX_SHAPE_PATCHES`](super::shape_diffusion::MAX_SHAPE_PATCHES)
+    /// patches with a dipole kernel; larger ones keep the flat profile (one dense system of
+    /// their side per channel, `O(N³)`: 1.4 s at 960 patches on 2 cores). On by default: lit
+    /// from behind, a 1 cm skin ball goes from 0.612 to 0.420 in relative L1 against a
+    /// light-traced reference, marble from 0.277 to 0.153 (with [`deep_exit_law`](Self::deep_exit_law)
+    /// 0.431 and 0.078); from the front both stay within 0.002 (`docs/translucent.md`).
+    pub shape_diffusion: bool,
+    /// Let the light a translucent patch received from elsewhere leave it in the deep field's
+    /// limb-darkened law ([`ExitLaw`], [`deep_exit_law`](super::diffusion::deep_exit_law))
+    /// instead of Lambert's: light that crossed an object comes out brighter facing the
+    /// camera and dimmer at grazing angles. On by default: a back-lit 1 cm marble ball goes
+    /// from 0.15 to 0.08 in relative L1 against a light-traced reference (its Lambertian
+    /// picture was 0.86× the reference's at the centre and 1.33× at the rim); from the front
+    /// both media move by less than 0.003; behind the presets' η 1.3 (the boundary's Fresnel
+    /// and internal reflection shape the law) marble lit from behind goes from 0.088 to 0.083
+    /// and skin from the front from 0.076 to 0.074 (`docs/translucent.md`). Per frame only
+    /// (the gather); the transport is the same.
+    pub deep_exit_law: bool,
+}
+
+impl Default for TransportSettings {
+    /// 99.9 % of the profile (the tail beyond holds 0.1 %: lit from behind, the light that
+    /// crosses a 2 cm marble ball — 0.55 → 0.28 relative L1 against 99 %, for 1.8× the ball's
+    /// memory, +3 % in the test room's); form factors down to 1e-5 (a
+    /// patch of 1/1000 of a room's wall area seen face-on from 5 wall widths away); clusters
+    /// 4 patches wide linked as one beyond 3 radii; each object's own random walks and each
+    /// beam's incidence (both measured closer to a light-traced reference; see
+    /// `docs/translucent.md` for what each costs and changes).
+    fn default() -> Self {
+        Self {
+            kernel: DiffusionKernel::ScaledDipole,
+            diffusion_energy_kept: 0.999,
+            form_factor_cutoff: 1e-5,
+            cluster_size: 4,
+            far_field_ratio: 3.0,
+            object_exit_share: true,
+            beam_incidence: true,
+            shape_diffusion: true,
+            deep_exit_law: true,
+        }
+    }
+}
+
+/// What building the transport kept and dropped, and what it cost.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TransportReport {
+    /// Entries of `F`.
+    pub form_factor_entries: usize,
+    /// Far-field clusters (0 without clustering).
+    pub clusters: usize,
+    /// Entries of `K`.
+    pub scattering_entries: usize,
+    /// Visibility rays cast.
+    pub rays: usize,
+    /// Mean over patches of the form-factor sum dropped by the cut-off (before visibility:
+    /// an upper bound).
+    pub dropped_form_factor_mean: f32,
+    /// Largest such sum.
+    pub dropped_form_factor_max: f32,
+    /// Mean over translucent patches of the profile energy their column of `K` carried before
+    /// it was rescaled to the semi-infinite slab's, relative to it, per channel (below 1:
+    /// the cut-off and the object's finite extent; above: overlapping patch discs).
+    pub diffusion_kept_mean: Vec3,
+    /// Mean over translucent patches of what their object gives off in all (the columns'
+    /// total: random walks in its shape, or the slab's), relative to the slab's `W∞`, per
+    /// channel (above 1: an object a few diffusion lengths across).
+    pub object_exit_over_slab_mean: Vec3,
+    /// Translucent objects whose diffusion was solved in their shape
+    /// ([`TransportSettings::shape_diffusion`]).
+    pub shape_solved_objects: usize,
+    /// Translucent objects that kept the flat profile because they have more than
+    /// [`MAX_SHAPE_PATCHES`](super::shape_diffusion::MAX_SHAPE_PATCHES) patches.
+    pub shape_too_large_objects: usize,
+    /// Wall-clock seconds to build.
+    pub seconds: f32,
+}
+
+/// The precomputed transport of one static scene.
+#[derive(Clone, Debug, Default)]
+pub struct EnergyTransport {
+    /// `K`: exitance from entering irradiance (per channel).
+    pub scattering: SparseMatrix<Vec3>,
+    /// `F`: irradiance at `i` from exitance at `j`; columns `n..` are clusters' area-mean
+    /// exitances (the far field).
+    pub form_factors: SparseMatrix<f32>,
+    /// Row `c`: cluster `c`'s members with their share of its area (`A_j / A_c`).
+    pub cluster_means: SparseMatrix<f32>,
+    /// Per patch, `(1 − F_dr,ext) α/2` of its medium (zero on opaque patches): times
+    /// [`single_scattering_shape`](super::diffusion::single_scattering_shape) of a beam's
+    /// incidence, the single-scattered exitance per unit irradiance.
+    pub single_scattering: Vec<Vec3>,
+    /// Patch areas (for energies).
+    pub areas: Vec<f32>,
+    /// Per object, the weight of a beam's incidence on a translucent surface (`None`: opaque,
+    /// the dipole kernel, or [`TransportSettings::beam_incidence`] off); see
+    /// [`EnergyTransport::incidence_weights`]. Not kept in the cache: set again on load.
+    pub incidence: Vec<Option<super::diffusion::IncidenceWeight>>,
+    /// What was kept and dropped.
+    pub report: TransportReport,
+}
+
+/// The converged transport of one frame's light.
+#[derive(Clone, Debug, Default)]
+pub struct TransportSolution {
+    /// Exitance `B` per patch (outgoing radiance `B/π`).
+    pub exitance: Vec<Vec3>,
+    /// Irradiance `E` arriving per patch, direct and bounced.
+    pub irradiance: Vec<Vec3>,
+    /// Iterations run (each one `F` and one `K` product).
+    pub iterations: u32,
+    /// The energy of the last increment relative to the first bounce's: below the
+    /// threshold unless `iterations` hit the cap.
+    pub energy_left: f32,
+}
+
+fn threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Each patch's albedo: its object's on opaque patches, zero on translucent ones (all their
+/// light is the transport's; the gather and the ambient light tell them apart by it).
+pub fn patch_albedos(patches: &Patches, surfaces: &[PatchSurface]) -> Vec<Vec3> {
+    patches
+        .patches
+        .iter()
+        .map(|p| match surfaces.get(p.object as usize) {
+            Some(PatchSurface::Opaque { albedo }) => *albedo,
+            _ => Vec3::ZERO,
+        })
+        .collect()
+}
+
+/// Runs `f(i)` for `0..n` on every core, interleaved so uneven rows balance; results in order.
+pub(super) fn parallel_rows<R: Send>(n: usize, f: impl Fn(usize) -> R + Sync) -> Vec<R> {
+    let t = threads().min(n.max(1));
+    let mut parts: Vec<Vec<(usize, R)>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..t)
+            .map(|k| {
+                let f = &f;
+                scope.spawn(move || (k..n).step_by(t).map(|i| (i, f(i))).collect::<Vec<_>>())
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().expect("transport worker panicked"))
+            .collect()
+    });
+    let mut out: Vec<Option<R>> = (0..n).map(|_| None).collect();
+    for part in parts.iter_mut() {
+        for (i, r) in part.drain(..) {
+            out[i] = Some(r);
+        }
+    }
+    out.into_iter()
+        .map(|r| r.expect("every row computed"))
+        .collect()
+}
+
+impl EnergyTransport {
+    /// Builds `K` and `F` for `patches`; `surfaces[o]` is object `o`'s surface.
+    pub fn build(
+        patches: &Patches,
+        surfaces: &[PatchSurface],
+        rays: &SceneRays,
+        settings: &TransportSettings,
+    ) -> Self {
+        let start = Instant::now();
+        let n = patches.patches.len();
+        let f = form_factors::build(patches, rays, settings);
+        let k = scattering::build(patches, surfaces, rays, settings);
+        let report = TransportReport {
+            form_factor_entries: f.matrix.entries(),
+            clusters: f.cluster_means.rows(),
+            scattering_entries: k.matrix.entries(),
+            rays: f.rays_cast,
+            dropped_form_factor_mean: f.dropped.iter().sum::<f32>() / n.max(1) as f32,
+            dropped_form_factor_max: f.dropped.iter().copied().fold(0.0, f32::max),
+            diffusion_kept_mean: k.diffusion_kept_mean,
+            object_exit_over_slab_mean: k.object_exit_over_slab_mean,
+            shape_solved_objects: k.shape_solved_objects,
+            shape_too_large_objects: k.shape_too_large_objects,
+            seconds: start.elapsed().as_secs_f32(),
+        };
+        Self {
+            scattering: k.matrix,
+            form_factors: f.matrix,
+            cluster_means: f.cluster_means,
+            single_scattering: k.single_scattering,
+            areas: patches.patches.iter().map(|q| q.area).collect(),
+            incidence: Self::incidence_weights(surfaces, settings),
+            report,
+        }
+    }
+
+    /// Per object, the [`IncidenceWeight`](super::diffusion::IncidenceWeight) of its medium
+    /// where it applies: translucent, valid, a kernel carrying Chiang et al.'s `A` (the diffuse
+    /// albedo; the dipole keeps its own single-scattering term for a beam's incidence), and
+    /// [`TransportSettings::beam_incidence`] on.
+    pub fn incidence_weights(
+        surfaces: &[PatchSurface],
+        settings: &TransportSettings,
+    ) -> Vec<Option<super::diffusion::IncidenceWeight>> {
+        surfaces
+            .iter()
+            .map(|s| match *s {
+                PatchSurface::Translucent { medium, .. }
+                    if settings.beam_incidence
+                        && settings.kernel != DiffusionKernel::Dipole
+                        && medium.invalid_reason().is_none() =>
+                {
+                    Some(super::diffusion::IncidenceWeight::new(
+                        medium.single_scattering_albedo(),
+                        medium.index_of_refraction as f64,
+                    ))
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Each patch's [`ExitLaw`]: on translucent patches of a valid medium with
+    /// [`TransportSettings::deep_exit_law`] on, its column of `K` summed over the exit areas
+    /// (what a unit irradiance on it gives back in all) and its medium's
+    /// [`deep_exit_law`](super::diffusion::deep_exit_law) per channel; Lambert's elsewhere.
+    pub fn exit_laws(
+        &self,
+        patches: &Patches,
+        surfaces: &[PatchSurface],
+        settings: &TransportSettings,
+    ) -> Vec<ExitLaw> {
+        let p = &patches.patches;
+        let column_totals = self.scattering.weighted_column_sums(&self.areas, p.len());
+        // The law is the medium's: once per object, not per patch.
+        let laws: Vec<Option<([Vec4; 3], f32)>> = surfaces
+            .iter()
+            .map(|s| match s {
+                PatchSurface::Translucent { medium, .. }
+                    if settings.deep_exit_law && medium.invalid_reason().is_none() =>
+                {
+                    let eta = medium.index_of_refraction;
+                    let channels = medium
+                        .single_scattering_albedo()
+                        .map(|a| Vec4::from_array(super::diffusion::deep_exit_law(a, eta as f64)));
+                    Some((channels, eta))
+                }
+                _ => None,
+            })
+            .collect();
+        p.iter()
+            .zip(&column_totals)
+            .map(|(q, total)| match laws.get(q.object as usize) {
+                Some(&Some((channels, eta))) if q.area > 0.0 => ExitLaw {
+                    local_albedo: *total / q.area,
+                    channels,
+                    eta,
+                },
+                _ => ExitLaw::default(),
+            })
+            .collect()
+    }
+
+    /// Σ A_i (B_i.r + B_i.g + B_i.b): the flux of an exitance vector.
+    pub fn flux(&self, exitance: &[Vec3]) -> f32 {
+        exitance
+            .iter()
+            .zip(&self.areas)
+            .map(|(b, a)| a * (b.x + b.y + b.z))
+            .sum()
+    }
+
+    /// `E = F B`: the irradiance each patch gathers from the exitance `B` of the others
+    /// (clusters' exitance as their members' area mean).
+    pub fn gather(&self, exitance: &[Vec3]) -> Vec<Vec3> {
+        let means = self.cluster_means.mul_vec(exitance);
+        let extended: Vec<Vec3> = exitance.iter().chain(&means).copied().collect();
+        self.form_factors.mul_vec(&extended)
+    }
+
+    /// Iterates `ΔE = F ΔB`, `ΔB = K ΔE` from `B = K E⁰` until the flux of `ΔB` is below
+    /// `threshold` × the flux of the first `B`, or `max_iterations`.
+    pub fn solve(&self, direct: &[Vec3], threshold: f32, max_iterations: u32) -> TransportSolution {
+        self.solve_with(
+            &DirectLight {
+                irradiance: direct.to_vec(),
+                exitance: Vec::new(),
+            },
+            threshold,
+            max_iterations,
+        )
+    }
+
+    /// [`solve`](Self::solve) from `B = K E⁰ + S⁰`: `direct.exitance` is the exitance the
+    /// direct light leaves besides `K E⁰` (single scattering at each beam's own incidence).
+    pub fn solve_with(
+        &self,
+        direct: &DirectLight,
+        threshold: f32,
+        max_iterations: u32,
+    ) -> TransportSolution {
+        let mut irradiance = direct.irradiance.clone();
+        let mut delta = self.scattering.mul_vec(&direct.irradiance);
+        for (d, s) in delta.iter_mut().zip(&direct.exitance) {
+            *d += *s;
+        }
+        let mut exitance = delta.clone();
+        let first = self.flux(&exitance);
+        let mut iterations = 0;
+        // Nothing lit: nothing to iterate.
+        let mut energy_left = if first > 0.0 { 1.0 } else { 0.0 };
+        while iterations < max_iterations && energy_left > threshold {
+            let gathered = self.gather(&delta);
+            for (e, g) in irradiance.iter_mut().zip(&gathered) {
+                *e += *g;
+            }
+            delta = self.scattering.mul_vec(&gathered);
+            for (b, d) in exitance.iter_mut().zip(&delta) {
+                *b += *d;
+            }
+            iterations += 1;
+            energy_left = self.flux(&delta) / first;
+        }
+        TransportSolution {
+            exitance,
+            irradiance,
+            iterations,
+            energy_left,
+        }
+    }
+}
