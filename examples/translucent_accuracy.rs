@@ -17,7 +17,7 @@
 //!     [--kernel scaled-dipole|burley|dipole] [--gather interpolation|photons]
 //!     [--object-exit-share true|false] [--beam-incidence true|false]
 //!     [--oriented-dipole true|false] [--shape-diffusion true|false]
-//!     [--deep-exit-law true|false]
+//!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks] [--walks 256]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
@@ -56,7 +56,8 @@ use bevy_mesostructure::translucency::{
     DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings,
 };
 use translucent_accuracy_scene::{
-    BUNNY_LENGTH, FOV_Y, FRONT_LIGHT, RADIUS, SceneLighting, Shape, ShapeView, plugin_picture, score,
+    BUNNY_LENGTH, FOV_Y, FRONT_LIGHT, RADIUS, ScatteringSource, SceneLighting, Shape, ShapeView,
+    plugin_picture, score,
 };
 
 /// The translucency's picture of a ball or the bunny against a path tracer's, per patch
@@ -91,6 +92,16 @@ struct Cli {
     /// `_diffuse` when off)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     beam_incidence: bool,
+    /// Where the object's scattering `K` comes from: the plugin's diffusion profile, or as an
+    /// oracle of it random walks from every patch (`--walks` a channel; the references' own
+    /// physics) entering diffusely as `K` assumes, or as the light's own beam (exact first
+    /// flights: a bound on what a better beam model gains, not something a moving light can
+    /// have; index-matched only). Method suffix `_walks<n>` / `_beamwalks<n>`
+    #[arg(long, value_enum, default_value_t = Scattering::Profile)]
+    scattering: Scattering,
+    /// Walks a channel from each patch for `--scattering walks|beam-walks`
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    walks: u32,
     /// Take the dipole's flux along each exit patch's normal
     /// (`Translucent::oriented_dipole`; method suffix `_oriented` when on)
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
@@ -167,6 +178,13 @@ enum ShapeArg {
     Bunny,
 }
 
+#[derive(Clone, Copy, clap::ValueEnum, Debug, PartialEq)]
+enum Scattering {
+    Profile,
+    Walks,
+    BeamWalks,
+}
+
 #[derive(Clone, Copy, clap::ValueEnum, Debug)]
 enum Gather {
     Interpolation,
@@ -238,6 +256,9 @@ fn main() {
     };
     if shape == Shape::Bunny && (cli.eta != 1.0 || cli.uniform) {
         fail("the bunny is index-matched under the directional light only (its reference is Mitsuba's; drop --eta and --uniform)".into());
+    }
+    if cli.scattering == Scattering::BeamWalks && (cli.eta != 1.0 || cli.uniform) {
+        fail("--scattering beam-walks takes the directional light into an index-matched object only (drop --eta and --uniform)".into());
     }
     if cli.uniform && cli.bevy {
         fail("--bevy fits Bevy's material under the directional light only (drop --uniform)".into());
@@ -351,9 +372,18 @@ fn main() {
     } else {
         format!("_kept{}", cli.energy_kept)
     };
-    let method =
-        format!("patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}", cli.kernel)
-            .to_lowercase();
+    let (source, walked) = match cli.scattering {
+        Scattering::Profile => (ScatteringSource::Profile, String::new()),
+        Scattering::Walks => (ScatteringSource::Walks(cli.walks), format!("_walks{}", cli.walks)),
+        Scattering::BeamWalks => {
+            (ScatteringSource::BeamWalks(cli.walks), format!("_beamwalks{}", cli.walks))
+        }
+    };
+    let method = format!(
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}",
+        cli.kernel
+    )
+    .to_lowercase();
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
     for &budget in &cli.budgets {
@@ -365,6 +395,7 @@ fn main() {
             gather,
             budget,
             if cli.uniform { SceneLighting::Uniform } else { SceneLighting::Directional(light) },
+            source,
         );
         let picture = &result.pixels;
         let scores = score(picture, &reference, &view);

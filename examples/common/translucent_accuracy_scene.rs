@@ -2,7 +2,7 @@
 //! integration test that holds the plugin to path-traced references: one object of one
 //! medium, index-matched or behind a dielectric boundary, lit by one directional light of
 //! irradiance 1 or a uniform environment of radiance 1 — a ball of radius 1 cm (Bevy's ico
-//! sphere, 20 480 triangles) seen from 4 cm, or the Stanford bunny 4 cm long seen from above
+//! sphere, 720 triangles) seen from 4 cm, or the Stanford bunny 4 cm long seen from above
 //! and aside (`Shape`) — the plugin's picture computed on the CPU by the same patches,
 //! transport, iteration and gather as the passes, and its score against a reference picture.
 #![allow(dead_code)] // The example reads every field; the test only the picture and its score.
@@ -12,9 +12,16 @@ use std::time::Instant;
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface, SceneRays,
-    TranslucentMedium, TransportSettings, direct_light, gather::gathered_radiance,
-    patches::world_triangles, resample_into_patches,
+    SparseMatrix, TranslucentMedium, TransportSettings, direct_light,
+    diffusion::{DiffusionKernel, DiffusionProfile},
+    gather::gathered_radiance,
+    patches::{Patches, world_triangles},
+    random_walk::{EntryPoint, WalkLaunch, walk_exits},
+    resample_into_patches,
 };
+
+/// The scenes are in metres.
+const WORLD_UNITS_PER_MM: f32 = 0.001;
 
 /// The ball's radius, metres.
 pub const RADIUS: f32 = 0.01;
@@ -33,7 +40,8 @@ pub const FOV_Y: f32 = std::f32::consts::FRAC_PI_4;
 /// The object of an accuracy scene, centred on the origin; the camera looks at the origin.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Shape {
-    /// A ball of radius 1 cm (ico sphere, 20 480 triangles), seen from 4 cm.
+    /// A ball of radius 1 cm (Bevy's ico sphere of 5 subdivisions: 720 triangles), seen from
+    /// 4 cm.
     Ball,
     /// The Stanford bunny (`assets/meshes/bunny.obj`, 3 674 triangles) 4 cm long: thin ears,
     /// concave creases and flat flanks, seen from above and aside.
@@ -220,8 +228,104 @@ pub enum SceneLighting {
     Uniform,
 }
 
+/// Where the translucent object's scattering `K` comes from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ScatteringSource {
+    /// The plugin's: the diffusion profile of `TransportSettings`.
+    Profile,
+    /// An oracle of the profile: this many random walks a channel from each patch
+    /// (`random_walk::walk_exits`, the references' own physics), entering diffusely as `K`
+    /// assumes, each exit counted on the patch it leaves by. What is left against the
+    /// reference is the rest of the pipeline's: the beam's incidence weight, the patches'
+    /// resolution, the exit law, the gather.
+    Walks(u32),
+    /// As `Walks`, entering as the directional light's own beam (exact first flights, every
+    /// order of scattering; no incidence weight, no separate single scattering): not
+    /// something a moving light could have, but a bound on what a better beam model gains.
+    BeamWalks(u32),
+}
+
+/// `K` of the one translucent object of `patches` from random walks: column `j` the share of
+/// the walks from patch `j`'s samples leaving through each patch `i` (the nearest sample
+/// facing the exit's way), times `T A_j / A_i` — the profile's own normalisation
+/// (`Σ_i A_i K_ij` = what leaves of `T A_j`).
+fn walked_scattering(
+    patches: &Patches,
+    medium: TranslucentMedium,
+    world_units_per_mm: f32,
+    rays: &SceneRays,
+    walks: u32,
+    launch: WalkLaunch,
+) -> SparseMatrix<Vec3> {
+    let p = &patches.patches;
+    // Samples by grid cell of a patch size: the exit's nearest sample is within a cell.
+    let cell = patches.patch_size.max(1e-9);
+    let key = |x: Vec3| (x / cell).floor().as_ivec3();
+    let mut grid: std::collections::HashMap<IVec3, Vec<(Vec3, Vec3, u32)>> = Default::default();
+    for i in 0..p.len() {
+        for s in patches.samples_of(i) {
+            grid.entry(key(s.position)).or_default().push((s.position, s.normal, i as u32));
+        }
+    }
+    let exit_patch = |x: Vec3, outward: Vec3| -> Option<u32> {
+        // The nearest sample facing the exit's way, and the nearest of any: (distance², patch).
+        let mut facing: Option<(f32, u32)> = None;
+        let mut any: Option<(f32, u32)> = None;
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    for &(position, normal, patch) in
+                        grid.get(&(key(x) + IVec3::new(dx, dy, dz))).into_iter().flatten()
+                    {
+                        let d = position.distance_squared(x);
+                        if any.is_none_or(|b| d < b.0) {
+                            any = Some((d, patch));
+                        }
+                        // Not the far side of a thin part.
+                        if normal.dot(outward) > 0.0 && facing.is_none_or(|b| d < b.0) {
+                            facing = Some((d, patch));
+                        }
+                    }
+                }
+            }
+        }
+        facing.or(any).map(|b| b.1)
+    };
+    let entering = DiffusionProfile::new(&medium, DiffusionKernel::ScaledDipole)
+        .entrance_transmittance as f32;
+    let mut rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); p.len()];
+    for (j, pj) in p.iter().enumerate() {
+        let entries: Vec<EntryPoint> = patches
+            .samples_of(j)
+            .iter()
+            .map(|s| EntryPoint { position: s.position, normal: s.normal, area: s.area })
+            .collect();
+        let mut column: Vec<(u32, Vec3)> = Vec::new();
+        walk_exits(&medium, world_units_per_mm, &entries, rays, walks as usize, j as u64, launch, |c, exit| {
+            // Through a gap in the mesh: lost.
+            let Some(i) = exit.and_then(|exit| exit_patch(exit.position, exit.outward)) else {
+                return;
+            };
+            let at = match column.iter().position(|e| e.0 == i) {
+                Some(at) => at,
+                None => {
+                    column.push((i, Vec3::ZERO));
+                    column.len() - 1
+                }
+            };
+            column[at].1[c] += 1.0;
+        });
+        for (i, count) in column {
+            let value = count * (entering / walks as f32) * pj.area / p[i as usize].area;
+            rows[i as usize].push((j as u32, value));
+        }
+    }
+    SparseMatrix::from_rows(rows)
+}
+
 /// The plugin's picture of `view`'s shape of `medium` lit by `lighting`, at `budget`
-/// patches.
+/// patches, its scattering from `source`.
+#[allow(clippy::too_many_arguments)]
 pub fn plugin_picture(
     view: &ShapeView,
     medium: TranslucentMedium,
@@ -230,6 +334,7 @@ pub fn plugin_picture(
     gather: GatherMethod,
     budget: u32,
     lighting: SceneLighting,
+    source: ScatteringSource,
 ) -> ShapePicture {
     let views = [PatchObject {
         positions: &view.positions,
@@ -237,7 +342,7 @@ pub fn plugin_picture(
     }];
     let surfaces = [PatchSurface::Translucent {
         medium,
-        world_units_per_mm: 0.001,
+        world_units_per_mm: WORLD_UNITS_PER_MM,
         oriented_dipole,
     }];
     let (lights, ambient) = match lighting {
@@ -253,7 +358,27 @@ pub fn plugin_picture(
     let start = Instant::now();
     let patches = resample_into_patches(&views, budget as usize);
     let rays = SceneRays::new(&views);
-    let transport = EnergyTransport::build(&patches, &surfaces, &rays, settings);
+    let mut transport = EnergyTransport::build(&patches, &surfaces, &rays, settings);
+    let walked = match (source, lighting) {
+        (ScatteringSource::Walks(walks), _) => Some((walks, WalkLaunch::Diffuse)),
+        (ScatteringSource::BeamWalks(walks), SceneLighting::Directional(beam)) => {
+            Some((walks, WalkLaunch::Beam(beam.normalize())))
+        }
+        // Light from everywhere has no one beam: diffuse walks.
+        (ScatteringSource::BeamWalks(walks), SceneLighting::Uniform) => {
+            Some((walks, WalkLaunch::Diffuse))
+        }
+        (ScatteringSource::Profile, _) => None,
+    };
+    if let Some((walks, launch)) = walked {
+        transport.scattering =
+            walked_scattering(&patches, medium, WORLD_UNITS_PER_MM, &rays, walks, launch);
+        if let WalkLaunch::Beam(_) = launch {
+            // The beam's walks hold its incidence and its single scattering already.
+            transport.incidence.iter_mut().for_each(|w| *w = None);
+            transport.single_scattering.iter_mut().for_each(|s| *s = Vec3::ZERO);
+        }
+    }
     let precompute_s = start.elapsed().as_secs_f32();
     let mut direct = direct_light(&patches, Some(&transport), &lights, &rays);
     for e in &mut direct.irradiance {

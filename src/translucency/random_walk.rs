@@ -163,6 +163,95 @@ fn exit_share(
     seed: u64,
     first_hit: impl Fn(Vec3, Vec3) -> Option<(f32, Vec3)>,
 ) -> Option<Exits> {
+    let mut left = [0usize; 3];
+    let mut other_face = [0usize; 3];
+    walk(
+        medium,
+        world_units_per_mm,
+        entries,
+        walks,
+        seed,
+        WalkLaunch::Diffuse,
+        first_hit,
+        |channel, entry, exit| {
+            left[channel] += 1;
+            if exit.is_some_and(|exit| entry.normal.dot(exit.outward) < 0.99) {
+                other_face[channel] += 1;
+            }
+        },
+    )?;
+    let n = walks.max(1) as f32;
+    let share = |c: [usize; 3]| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) / n;
+    Some(Exits {
+        left: share(left),
+        other_face: share(other_face),
+    })
+}
+
+/// Where a walk left its object.
+#[derive(Clone, Copy, Debug)]
+pub struct WalkExit {
+    /// On the boundary.
+    pub position: Vec3,
+    /// The boundary's unit normal there, outward.
+    pub outward: Vec3,
+}
+
+/// How walks enter the medium.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum WalkLaunch {
+    /// Diffusely: cosine-distributed about the inward normal, as light from everywhere
+    /// enters (what the transport's `K` carries).
+    Diffuse,
+    /// As a beam travelling along this unit direction, refracted by the boundary; the light
+    /// it carries out without scattering is not reported (it goes on along the beam).
+    Beam(Vec3),
+}
+
+/// Walks `walks` paths a colour channel into `rays`' triangles from `entries` (drawn by
+/// area; each walk carries a `1 / walks` share of the light that entered) and calls
+/// `on_exit(channel, exit)` for each that leaves; `exit` is `None` where a walk leaves
+/// through a gap in the mesh. A beam's walks from entries facing away from it are not
+/// walked (their share is lost). `false` where the medium, the scale or the entries are
+/// invalid (nothing walked). The same physics as the path-traced references
+/// (`tools/translucent_reference.py`): `translucent_accuracy --scattering walks` builds `K`
+/// from it to measure what the diffusion profile costs.
+#[allow(clippy::too_many_arguments)]
+pub fn walk_exits(
+    medium: &TranslucentMedium,
+    world_units_per_mm: f32,
+    entries: &[EntryPoint],
+    rays: &SceneRays,
+    walks: usize,
+    seed: u64,
+    launch: WalkLaunch,
+    mut on_exit: impl FnMut(usize, Option<WalkExit>),
+) -> bool {
+    walk(
+        medium,
+        world_units_per_mm,
+        entries,
+        walks,
+        seed,
+        launch,
+        |x, d| rays.first_hit(x, d),
+        |channel, _, exit| on_exit(channel, exit),
+    )
+    .is_some()
+}
+
+/// The walks themselves: `on_exit(channel, entry, exit)` for each walk that leaves.
+#[allow(clippy::too_many_arguments)]
+fn walk(
+    medium: &TranslucentMedium,
+    world_units_per_mm: f32,
+    entries: &[EntryPoint],
+    walks: usize,
+    seed: u64,
+    launch: WalkLaunch,
+    first_hit: impl Fn(Vec3, Vec3) -> Option<(f32, Vec3)>,
+    mut on_exit: impl FnMut(usize, &EntryPoint, Option<WalkExit>),
+) -> Option<()> {
     if medium.invalid_reason().is_some()
         || !(world_units_per_mm.is_finite() && world_units_per_mm > 0.0)
         || entries.is_empty()
@@ -180,25 +269,32 @@ fn exit_share(
         return None;
     }
     let eta = medium.index_of_refraction.max(1.0) as f64;
-    let channel = |c: usize| -> (f32, f32) {
+    for c in 0..3 {
         let sigma_s = medium.reduced_scattering[c] as f64 / world_units_per_mm as f64;
         let sigma_t = sigma_s + medium.absorption[c] as f64 / world_units_per_mm as f64;
         let albedo = sigma_s / sigma_t;
         // Steps off the surface: a thousandth of a mean free path.
         let epsilon = (1e-3 / sigma_t) as f32;
         let mut random = SplitMix(seed ^ (c as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        let (mut left, mut other_face) = (0usize, 0usize);
         for _ in 0..walks {
             let pick = random.next() * total;
             let e = &entries[cumulative.partition_point(|&c| c < pick).min(entries.len() - 1)];
             let inward = -e.normal;
             let mut x = e.position + inward * epsilon;
-            let mut d = cosine_about(inward, random.next(), random.next());
+            let (mut d, report_uncollided) = match launch {
+                WalkLaunch::Diffuse => (cosine_about(inward, random.next(), random.next()), true),
+                WalkLaunch::Beam(direction) => match refracted(direction, e.normal, eta as f32) {
+                    Some(d) => (d, false),
+                    // A beam along or behind this face does not enter through it.
+                    None => continue,
+                },
+            };
+            let mut scattered = false;
             for _ in 0..MAX_EVENTS {
                 let free_path = (-(1.0 - random.next()).ln() / sigma_t) as f32;
                 let Some((to_boundary, normal)) = first_hit(x, d) else {
                     // Out through a gap in the mesh: it has left.
-                    left += 1;
+                    on_exit(c, e, None);
                     break;
                 };
                 if free_path < to_boundary {
@@ -207,6 +303,7 @@ fn exit_share(
                         break;
                     }
                     d = uniform_direction(random.next(), random.next());
+                    scattered = true;
                     continue;
                 }
                 // At the boundary, from inside: Fresnel reflection back in (total internal
@@ -219,21 +316,23 @@ fn exit_share(
                     x = hit - outward * epsilon;
                     continue;
                 }
-                left += 1;
-                if e.normal.dot(outward) < 0.99 {
-                    other_face += 1;
+                if !(scattered || report_uncollided) {
+                    // A beam's uncollided light goes on along the beam: not the surface's.
+                    break;
                 }
+                on_exit(
+                    c,
+                    e,
+                    Some(WalkExit {
+                        position: hit,
+                        outward,
+                    }),
+                );
                 break;
             }
         }
-        let n = walks.max(1) as f32;
-        (left as f32 / n, other_face as f32 / n)
-    };
-    let [r, g, b] = [channel(0), channel(1), channel(2)];
-    Some(Exits {
-        left: Vec3::new(r.0, g.0, b.0),
-        other_face: Vec3::new(r.1, g.1, b.1),
-    })
+    }
+    Some(())
 }
 
 /// A direction cosine-distributed about the unit vector `axis`.
@@ -242,6 +341,20 @@ fn cosine_about(axis: Vec3, u1: f64, u2: f64) -> Vec3 {
     let phi = (2.0 * std::f64::consts::PI * u2) as f32;
     let (t, b) = axis.any_orthonormal_pair();
     (t * (r * phi.cos()) + b * (r * phi.sin()) + axis * (1.0 - r * r).max(0.0).sqrt()).normalize()
+}
+
+/// The direction a beam travelling along the unit `direction` takes past a boundary of
+/// outward unit normal `normal` into a medium of relative index `eta` (Snell's law); `None`
+/// where the beam does not meet the face from outside.
+fn refracted(direction: Vec3, normal: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = -direction.dot(normal);
+    if cos_i <= 0.0 {
+        return None;
+    }
+    let eta = eta.max(1.0);
+    let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
+    let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
+    Some((direction / eta + (cos_i / eta - cos_t) * normal).normalize())
 }
 
 /// A direction uniform over the sphere (isotropic scattering).
