@@ -18,6 +18,7 @@
 //!     [--object-exit-share true|false] [--beam-incidence true|false]
 //!     [--oriented-dipole true|false] [--shape-diffusion true|false]
 //!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks] [--walks 256]
+//!     [--single-scattering-oracle]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
@@ -56,8 +57,8 @@ use bevy_mesostructure::translucency::{
     DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings,
 };
 use translucent_accuracy_scene::{
-    BUNNY_LENGTH, FOV_Y, FRONT_LIGHT, RADIUS, ScatteringSource, SceneLighting, Shape, ShapeView,
-    plugin_picture, score,
+    BUNNY_LENGTH, FOV_Y, FRONT_LIGHT, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
+    ShapeView, plugin_picture, score,
 };
 
 /// The translucency's picture of a ball or the bunny against a path tracer's, per patch
@@ -99,6 +100,11 @@ struct Cli {
     /// have; index-matched only). Method suffix `_walks<n>` / `_beamwalks<n>`
     #[arg(long, value_enum, default_value_t = Scattering::Profile)]
     scattering: Scattering,
+    /// As an oracle of a gather that carries each beam's single scattering apart: re-shape
+    /// each lit pixel's single scattering from Lambert's law into its own (index-matched,
+    /// under the directional light; method suffix `_ssoracle`)
+    #[arg(long)]
+    single_scattering_oracle: bool,
     /// Walks a channel from each patch for `--scattering walks|beam-walks`
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=65536))]
     walks: u32,
@@ -260,6 +266,9 @@ fn main() {
     if cli.scattering == Scattering::BeamWalks && (cli.eta != 1.0 || cli.uniform) {
         fail("--scattering beam-walks takes the directional light into an index-matched object only (drop --eta and --uniform)".into());
     }
+    if cli.single_scattering_oracle && (cli.eta != 1.0 || cli.uniform) {
+        fail("--single-scattering-oracle takes the directional light on an index-matched object only (drop --eta and --uniform)".into());
+    }
     if cli.uniform && cli.bevy {
         fail("--bevy fits Bevy's material under the directional light only (drop --uniform)".into());
     }
@@ -379,11 +388,16 @@ fn main() {
             (ScatteringSource::BeamWalks(cli.walks), format!("_beamwalks{}", cli.walks))
         }
     };
+    let ss_oracle = if cli.single_scattering_oracle { "_ssoracle" } else { "" };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}",
         cli.kernel
     )
     .to_lowercase();
+    let oracles = Oracles {
+        scattering: source,
+        single_scattering_law: cli.single_scattering_oracle,
+    };
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
     for &budget in &cli.budgets {
@@ -395,7 +409,7 @@ fn main() {
             gather,
             budget,
             if cli.uniform { SceneLighting::Uniform } else { SceneLighting::Directional(light) },
-            source,
+            oracles,
         );
         let picture = &result.pixels;
         let scores = score(picture, &reference, &view);

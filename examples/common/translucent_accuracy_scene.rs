@@ -13,7 +13,7 @@ use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface, SceneRays,
     SparseMatrix, TranslucentMedium, TransportSettings, direct_light,
-    diffusion::{DiffusionKernel, DiffusionProfile},
+    diffusion::{DiffusionKernel, DiffusionProfile, single_scattering_shape},
     gather::gathered_radiance,
     patches::{Patches, world_triangles},
     random_walk::{EntryPoint, WalkLaunch, walk_exits},
@@ -245,6 +245,27 @@ pub enum ScatteringSource {
     BeamWalks(u32),
 }
 
+/// What the accuracy scene swaps in for the plugin's own stages, as oracles of them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Oracles {
+    /// Where `K` comes from.
+    pub scattering: ScatteringSource,
+    /// Index-matched under the directional light: re-shape each lit pixel's single scattering
+    /// from Lambert's law (the patches' `B/π`) into its own, `α E / (4π(μ₀ + μ))`, by
+    /// `α E/(4π) (1/(μ₀ + μ) − 2 shape(μ₀))` with the pixel's own `μ₀ = n·l`, shadow ray and
+    /// exit cosine `μ` — what a gather carrying each beam's single scattering apart would
+    /// give, per pixel.
+    pub single_scattering_law: bool,
+}
+
+impl Oracles {
+    /// The plugin's own stages throughout.
+    pub const NONE: Self = Self {
+        scattering: ScatteringSource::Profile,
+        single_scattering_law: false,
+    };
+}
+
 /// `K` of the one translucent object of `patches` from random walks: column `j` the share of
 /// the walks from patch `j`'s samples leaving through each patch `i` (the nearest sample
 /// facing the exit's way), times `T A_j / A_i` — the profile's own normalisation
@@ -324,7 +345,7 @@ fn walked_scattering(
 }
 
 /// The plugin's picture of `view`'s shape of `medium` lit by `lighting`, at `budget`
-/// patches, its scattering from `source`.
+/// patches, with `oracles` in place of its own stages.
 #[allow(clippy::too_many_arguments)]
 pub fn plugin_picture(
     view: &ShapeView,
@@ -334,7 +355,7 @@ pub fn plugin_picture(
     gather: GatherMethod,
     budget: u32,
     lighting: SceneLighting,
-    source: ScatteringSource,
+    oracles: Oracles,
 ) -> ShapePicture {
     let views = [PatchObject {
         positions: &view.positions,
@@ -359,7 +380,7 @@ pub fn plugin_picture(
     let patches = resample_into_patches(&views, budget as usize);
     let rays = SceneRays::new(&views);
     let mut transport = EnergyTransport::build(&patches, &surfaces, &rays, settings);
-    let walked = match (source, lighting) {
+    let walked = match (oracles.scattering, lighting) {
         (ScatteringSource::Walks(walks), _) => Some((walks, WalkLaunch::Diffuse)),
         (ScatteringSource::BeamWalks(walks), SceneLighting::Directional(beam)) => {
             Some((walks, WalkLaunch::Beam(beam.normalize())))
@@ -408,6 +429,14 @@ pub fn plugin_picture(
             .unwrap_or(Vec3::ZERO)
         })
         .collect();
+    let pixels = match lighting {
+        SceneLighting::Directional(travel)
+            if oracles.single_scattering_law && medium.index_of_refraction == 1.0 =>
+        {
+            single_scattering_law(&view.hits, pixels, medium, travel, &rays)
+        }
+        _ => pixels,
+    };
     let n = patches.patches.len();
     ShapePicture {
         pixels,
@@ -418,6 +447,34 @@ pub fn plugin_picture(
             + 16 * transport.scattering.entries(),
         iterations: solution.iterations,
     }
+}
+
+/// [`Oracles::single_scattering_law`] on `pixels`, lit by a directional light of irradiance 1
+/// travelling along the unit `travel`.
+fn single_scattering_law(
+    hits: &[Option<PixelHit>],
+    pixels: Vec<Vec3>,
+    medium: TranslucentMedium,
+    travel: Vec3,
+    rays: &SceneRays,
+) -> Vec<Vec3> {
+    let alpha = Vec3::from_array(medium.single_scattering_albedo().map(|a| a as f32));
+    pixels
+        .into_iter()
+        .zip(hits)
+        .map(|(pixel, hit)| {
+            let Some(hit) = hit else {
+                return pixel;
+            };
+            let (mu0, mu) = (hit.normal.dot(-travel), hit.normal.dot(-hit.direction).max(0.0));
+            if mu0 <= 0.0 || rays.first_hit(hit.point + hit.normal * 1e-5, -travel).is_some() {
+                return pixel;
+            }
+            let shape = single_scattering_shape(mu0 as f64) as f32;
+            let change = alpha * mu0 / (4.0 * std::f32::consts::PI) * (1.0 / (mu0 + mu) - 2.0 * shape);
+            (pixel + change).max(Vec3::ZERO)
+        })
+        .collect()
 }
 
 /// A picture against the reference over the scored pixels.
