@@ -203,8 +203,10 @@ pub enum WalkLaunch {
     /// Diffusely: cosine-distributed about the inward normal, as light from everywhere
     /// enters (what the transport's `K` carries).
     Diffuse,
-    /// As a beam travelling along this unit direction, refracted by the boundary; the light
-    /// it carries out without scattering is not reported (it goes on along the beam).
+    /// As a beam travelling along this unit direction, refracted by the boundary (each walk
+    /// is light that got in: the share the boundary reflects on the way in is the caller's);
+    /// the light it carries out without scattering is not reported (it goes on along the
+    /// beam).
     Beam(Vec3),
 }
 
