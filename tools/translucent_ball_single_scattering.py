@@ -22,6 +22,9 @@ Needs `mitsuba` (to read the EXR) and `numpy` (PyPI); not needed by the crate.
 import argparse
 import sys
 
+# The accuracy scene's camera, as the reference renders it.
+from translucent_reference import camera_rays_into_ball
+
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -45,20 +48,7 @@ def main():
     light = np.array(args.light, dtype=np.float64)
     light /= np.linalg.norm(light)
     radius, eye = 0.01, np.array([0.0, 0.0, 0.04])
-    tan = np.tan(np.radians(45.0) / 2.0)
-    u = (np.arange(size) + 0.5) / size * 2.0 - 1.0
-    sx, sy = np.meshgrid(u * tan, -u * tan)
-    forward = -eye / np.linalg.norm(eye)
-    right = np.cross(forward, [0.0, 1.0, 0.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    d = forward + sx[..., None] * right + sy[..., None] * up
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    b = d @ eye
-    disc = b * b - (eye @ eye - radius * radius)
-    hit = disc > 0.0
-    root = np.sqrt(np.where(hit, disc, 0.0))
-    near, far = -b - root, -b + root
+    d, hit, near, far = camera_rays_into_ball(size, 45.0, eye, radius)
     entry = eye + near[..., None] * d
     facing = -(d * entry / radius).sum(-1)
     steps = 400

@@ -138,6 +138,28 @@ def fresnel(cos_i, eta):
     return 0.5 * (rs * rs + rp * rp)
 
 
+def camera_rays_into_ball(n, fov, eye, radius):
+    """The camera's n × n unit ray directions (at `eye`, looking at the origin, y up,
+    vertical field of view `fov` degrees, pixel centres, rows from the top) and where each
+    meets the ball of `radius` about the origin: (directions, hit, near, far), the distances
+    along each ray where it enters and leaves (numpy arrays; meaningless where not hit)."""
+    import numpy as np
+    tan = np.tan(np.radians(fov) / 2.0)
+    u = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    sx, sy = np.meshgrid(u * tan, -u * tan)
+    forward = -eye / np.linalg.norm(eye)
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    d = forward + sx[..., None] * right + sy[..., None] * up
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    b = d @ eye
+    disc = b * b - (eye @ eye - radius ** 2)
+    hit = disc > 0.0
+    root = np.sqrt(np.where(hit, disc, 0.0))
+    return d, hit, -b - root, -b + root
+
+
 def environment_seen(args):
     """Per pixel, how much of the uniform environment the camera sees other than through the
     medium: directly beside the ball (1), and mirrored in its outer surface (Fresnel's
@@ -146,21 +168,8 @@ def environment_seen(args):
     matter)."""
     import numpy as np
     sub = 8
-    n = args.size * sub
-    tan = np.tan(np.radians(args.fov) / 2.0)
-    u = (np.arange(n) + 0.5) / n * 2.0 - 1.0
-    sx, sy = np.meshgrid(u * tan, -u * tan)
     eye = np.array(args.eye, dtype=np.float64)
-    forward = -eye / np.linalg.norm(eye)
-    right = np.cross(forward, [0.0, 1.0, 0.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    d = forward + sx[..., None] * right + sy[..., None] * up
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    b = d @ eye
-    disc = b * b - (eye @ eye - args.radius ** 2)
-    hit = disc > 0.0
-    t = -b - np.sqrt(np.where(hit, disc, 0.0))
+    d, hit, t, _ = camera_rays_into_ball(args.size * sub, args.fov, eye, args.radius)
     normal = (eye + t[..., None] * d) / args.radius
     cos_i = np.clip(-(d * normal).sum(-1), 0.0, 1.0)
     reflected = np.where(hit, fresnel(cos_i, args.eta), 1.0)

@@ -13,7 +13,7 @@ use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface, SceneRays,
     SparseMatrix, TranslucentMedium, TransportSettings, direct_light,
-    diffusion::{DiffusionKernel, DiffusionProfile, single_scattering_shape},
+    diffusion::{diffuse_fresnel_reflectance, single_scattering_shape},
     gather::gathered_radiance,
     patches::{Patches, world_triangles},
     random_walk::{EntryPoint, WalkLaunch, walk_exits},
@@ -312,8 +312,8 @@ fn walked_scattering(
         }
         facing.or(any).map(|b| b.1)
     };
-    let entering = DiffusionProfile::new(&medium, DiffusionKernel::ScaledDipole)
-        .entrance_transmittance as f32;
+    // What diffuse light gets past the boundary (the profiles' `entrance_transmittance`).
+    let entering = (1.0 - diffuse_fresnel_reflectance(medium.index_of_refraction as f64)) as f32;
     let mut rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); p.len()];
     for (j, pj) in p.iter().enumerate() {
         let entries: Vec<EntryPoint> = patches

@@ -96,51 +96,40 @@ pub(super) fn build(
                 && pi.centre.distance_squared(cluster.centroid)
                     > far_ratio2 * cluster.radius * cluster.radius
         };
+        // The light a cluster's patches send towards patch `i`, as one link.
+        let cluster_sum =
+            |c: &Cluster| -> f32 { c.members.iter().map(|&j| kernel(j) * p[j].area).sum() };
+        // One link of the row: nothing at zero or below, dropped under the cut-off, kept
+        // where its target (a patch or a cluster's representative) is visible.
+        let mut link = |f: f32, column: usize, target: Vec3| {
+            if !(f > 0.0) {
+                return;
+            }
+            if f < cutoff {
+                dropped += f;
+                return;
+            }
+            rays_cast += 1;
+            if rays.visible(xi, target) {
+                row.push((column as u32, f));
+            }
+        };
         for (c2, (big, fines)) in coarse.iter().enumerate() {
             if fines.len() > 1 && far_from(big) {
-                let f: f32 = big.members.iter().map(|&j| kernel(j) * p[j].area).sum();
-                if !(f > 0.0) {
-                    continue;
-                }
-                if f < cutoff {
-                    dropped += f;
-                    continue;
-                }
-                rays_cast += 1;
-                if rays.visible(xi, lifted[big.representative]) {
-                    row.push(((n + fine_count + c2) as u32, f));
-                }
+                link(
+                    cluster_sum(big),
+                    n + fine_count + c2,
+                    lifted[big.representative],
+                );
                 continue;
             }
             for &c in fines {
                 let cluster = &clusters[c];
                 if far_from(cluster) {
-                    let f: f32 = cluster.members.iter().map(|&j| kernel(j) * p[j].area).sum();
-                    if !(f > 0.0) {
-                        continue;
-                    }
-                    if f < cutoff {
-                        dropped += f;
-                        continue;
-                    }
-                    rays_cast += 1;
-                    if rays.visible(xi, lifted[cluster.representative]) {
-                        row.push(((n + c) as u32, f));
-                    }
+                    link(cluster_sum(cluster), n + c, lifted[cluster.representative]);
                 } else {
                     for &j in cluster.members.iter().filter(|&&j| j != i) {
-                        let f = kernel(j) * p[j].area;
-                        if !(f > 0.0) {
-                            continue;
-                        }
-                        if f < cutoff {
-                            dropped += f;
-                            continue;
-                        }
-                        rays_cast += 1;
-                        if rays.visible(xi, lifted[j]) {
-                            row.push((j as u32, f));
-                        }
+                        link(kernel(j) * p[j].area, j, lifted[j]);
                     }
                 }
             }
