@@ -76,16 +76,35 @@ struct Config {
     size: UVec2,
     scale: f32,
     quality: MesostructureQuality,
+    texture_space: TextureSpace,
 }
 
 impl Config {
-    /// The scene column: the mesh, and the preset where it is not the default.
+    /// The scene column: the mesh, the preset where it is not the default, and the
+    /// texture-space terms where they are not the defaults'.
     fn label(&self) -> String {
-        match self.quality {
+        let scene = match self.quality {
             MesostructureQuality::High => self.scene.to_string(),
             q => format!("{}@{}", self.scene, q.name()),
+        };
+        match self.texture_space {
+            TextureSpace::Bounce => scene,
+            TextureSpace::Horizons => format!("{scene}+no-ts-bounce"),
+            TextureSpace::Off => format!("{scene}+no-ts-horizons"),
         }
     }
+}
+
+/// `--texture-space`: which of `Mesostructure`'s texture-space terms are on, to see what each
+/// costs in the height pass.
+#[derive(clap::ValueEnum, Clone, Copy, PartialEq, Eq)]
+enum TextureSpace {
+    /// `texture_space_horizons` and `texture_space_bounce` (the defaults).
+    Bounce,
+    /// `texture_space_horizons` only.
+    Horizons,
+    /// Neither: the paper's screen-space terms alone.
+    Off,
 }
 
 struct Row {
@@ -173,6 +192,8 @@ fn measure(config: Config, run: Run, frames: usize, warm_up: usize) -> (Vec<(Str
     if run != Run::PluginOff {
         camera.insert(Mesostructure {
             quality: config.quality,
+            texture_space_horizons: config.texture_space != TextureSpace::Off,
+            texture_space_bounce: config.texture_space == TextureSpace::Bounce,
             ..default()
         });
     }
@@ -327,6 +348,10 @@ struct Cli {
     /// Small sizes only (for the software driver)
     #[arg(long)]
     quick: bool,
+    /// Which texture-space terms are on (`Mesostructure::texture_space_horizons` and
+    /// `texture_space_bounce`): both (the defaults), the horizons only, or neither
+    #[arg(long, value_enum, default_value_t = TextureSpace::Bounce)]
+    texture_space: TextureSpace,
 }
 
 fn parse_quality(s: &str) -> Result<MesostructureQuality, String> {
@@ -365,6 +390,7 @@ fn main() {
                     size,
                     scale: 0.2,
                     quality,
+                    texture_space: cli.texture_space,
                 });
             }
         }
@@ -386,6 +412,7 @@ fn main() {
                 size,
                 scale,
                 quality,
+                texture_space: cli.texture_space,
             });
         }
     }
@@ -404,6 +431,7 @@ fn main() {
                     size,
                     scale: 0.2,
                     quality,
+                    texture_space: cli.texture_space,
                 });
             }
         }

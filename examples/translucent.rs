@@ -11,7 +11,7 @@
 //! ```text
 //! cargo run --example translucent -- [--frames N] [--out DIR] [--size WxH] [--headless]
 //!     [--patches N] [--injection light-view|shadow-rays] [--shape-diffusion true|false]
-//!     [--deep-exit-law true|false]
+//!     [--deep-exit-law true|false] [--max-iterations N] [--swing]
 //! ```
 
 #[path = "common/mod.rs"]
@@ -46,6 +46,14 @@ struct Cli {
     /// Light from deep inside leaves limb-darkened (`TransportSettings::deep_exit_law`)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     deep_exit_law: bool,
+    /// At most this many iterations a frame (`TranslucencySettings::max_iterations`)
+    #[arg(long, default_value_t = TranslucencySettings::default().max_iterations,
+          value_parser = clap::value_parser!(u32).range(1..=256))]
+    max_iterations: u32,
+    /// Headless: swing the spot during the warm-up frames, as in a window, so that every frame
+    /// injects and iterates anew (for timing; the shots still fix it in front and behind)
+    #[arg(long)]
+    swing: bool,
 }
 
 /// `--injection`: [`LightInjection`]'s two ways.
@@ -108,10 +116,11 @@ fn main() {
                 deep_exit_law: cli.deep_exit_law,
                 ..default()
             },
+            max_iterations: cli.max_iterations,
             ..default()
         })
         .insert_resource(SpotPlace {
-            fixed: (!windowed).then_some(0.0),
+            fixed: (!windowed && !cli.swing).then_some(0.0),
         })
         .add_systems(Update, move_spot);
     setup(app.world_mut());

@@ -181,6 +181,10 @@ pub struct Script {
     wait: u32,
     exit_when_done: bool,
     pub(crate) out: PathBuf,
+    /// When the script first found a height map or the translucency transport building.
+    settling_since: Option<std::time::Instant>,
+    settle_limit_reached: bool,
+    translucency_printed: bool,
 }
 
 /// The app: Bevy with a window (and the tuning panel) or headless, the plugin, timing
@@ -257,6 +261,9 @@ pub fn app(args: &ExampleArgs, title: &str, shots: Vec<Shot>) -> App {
             wait: 0,
             exit_when_done: !windowed || args.frames.is_some(),
             out: args.out.clone(),
+            settling_since: None,
+            settle_limit_reached: false,
+            translucency_printed: false,
         })
         .init_resource::<Clock>()
         .add_systems(Update, advance_clock)
@@ -308,11 +315,33 @@ fn advance_clock(mut clock: ResMut<Clock>) {
     }
 }
 
+/// How long the script waits for a height map or a translucency precompute before it goes on
+/// (a mesh that never stays still keeps the precompute waiting).
+const SETTLE_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
+
 fn run_script(world: &mut World) {
-    if MesostructureStatus::building(world) {
-        return;
-    }
+    let building = MesostructureStatus::building(world)
+        || bevy_mesostructure::translucency::TranslucencyStatus::building(world);
     let mut script = world.resource_mut::<Script>();
+    if building {
+        let since = *script.settling_since.get_or_insert_with(std::time::Instant::now);
+        if since.elapsed() < SETTLE_LIMIT {
+            return;
+        }
+        if !script.settle_limit_reached {
+            script.settle_limit_reached = true;
+            eprintln!(
+                "warning: still building after {} s; going on without waiting",
+                SETTLE_LIMIT.as_secs()
+            );
+        }
+    } else {
+        script.settling_since = None;
+    }
+    let mut printed = script.translucency_printed;
+    panel::print_translucency_ready(world, &mut printed);
+    let mut script = world.resource_mut::<Script>();
+    script.translucency_printed = printed;
     script.frame += 1;
     if script.frame < script.warm_up || !script.exit_when_done {
         return;

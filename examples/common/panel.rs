@@ -306,3 +306,14 @@ pub fn print_timings(world: &World) {
         println!("average time per pass: {}", times.join(", "));
     }
 }
+
+/// Prints the translucency precompute's outcome once, when it is ready.
+pub fn print_translucency_ready(world: &World, printed: &mut bool) {
+    use bevy_mesostructure::translucency::TranslucencyStatus;
+    if let Some(status @ TranslucencyStatus::Ready { .. }) = world.get_resource::<TranslucencyStatus>()
+        && !*printed
+    {
+        *printed = true;
+        println!("translucency: {}", translucency_status(status));
+    }
+}

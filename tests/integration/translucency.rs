@@ -14,7 +14,7 @@ use bevy::{
 use bevy_mesostructure::translucency::{
     DiffusionKernel, EnergyTransport, PatchLight, PatchObject, PatchSurface, SceneRays,
     TranslucentPreset, TransportSettings, direct_light, patch_albedos,
-    iteration::{GpuTransport, IterationLimits},
+    iteration::{GpuTransport, IterationLimits, RowLanes},
     Patches,
     injection::{GpuInjection, MAX_INJECTED_LIGHTS},
     resample_into_patches_with_caps, translucent_patch_cap,
@@ -145,8 +145,9 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
     assert!(direct.exitance.iter().any(|s| *s != Vec3::ZERO));
     let n = patches.patches.len();
 
-    // Converged (the loop stops on the GPU), and stopped by the cap.
-    for limits in [
+    // Converged (the loop stops on the GPU), and stopped by the cap; each row summed by 32
+    // lanes (a GPU's products) and by one (a CPU driver's).
+    let limit_sets = [
         IterationLimits {
             threshold: 1e-4,
             max_iterations: 60,
@@ -155,17 +156,30 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
             threshold: 1e-9,
             max_iterations: 3,
         },
-    ] {
+    ];
+    for (limits, row_lanes) in limit_sets
+        .into_iter()
+        .flat_map(|l| [(l, RowLanes::Gpu), (l, RowLanes::Cpu)])
+    {
         let cpu = transport.solve_with(&direct, limits.threshold, limits.max_iterations);
-        let gpu = GpuTransport::new(&device, &transport, limits);
+        let gpu = GpuTransport::new(&device, &transport, limits, row_lanes);
         gpu.write_direct(&queue, &direct);
         let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
         gpu.record(&mut encoder);
         queue.submit([encoder.finish()]);
 
-        let state = read_back(&device, &queue, gpu.state(), 0, 36);
+        let state = read_back(&device, &queue, gpu.state(), 0, 56);
         let iterations = u32::from_le_bytes(state[24..28].try_into().unwrap());
         assert_eq!(iterations, cpu.iterations, "{limits:?}");
+        // The geometric tail's ratio (clamped where it is used).
+        let tail_ratio = f32::from_le_bytes(state[52..56].try_into().unwrap())
+            .clamp(0.0, bevy_mesostructure::translucency::transport::MAX_TAIL_RATIO);
+        assert!(cpu.tail_ratio > 0.0, "{limits:?}");
+        assert!(
+            (tail_ratio - cpu.tail_ratio).abs() <= 1e-5,
+            "{limits:?}: tail ratio {tail_ratio} on the GPU, {} on the CPU",
+            cpu.tail_ratio
+        );
         let (buffer, range) = gpu.exitance();
         let bytes = read_back(
             &device,
@@ -187,14 +201,15 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
             .map(|(g, c)| (Vec3::new(g[0], g[1], g[2]) - *c).abs().max_element())
             .fold(0.0, f32::max);
         eprintln!(
-            "{limits:?}: {iterations} iterations, worst |GPU − CPU| {:.2e} of peak {peak:.3e}",
+            "{limits:?} {row_lanes:?}: {iterations} iterations, worst |GPU − CPU| {:.2e} of peak {peak:.3e}",
             worst / peak
         );
-        // The same arithmetic in the same order (measured bit-identical on the software
-        // driver); another device may fuse or reorder: within 1e-5 of the peak.
+        // One lane a row: the same arithmetic in the same order (measured bit-identical on the
+        // software driver); 32 lanes sum each row in another order (2.4e-7 of the peak there);
+        // another device may fuse or reorder too: within 1e-5 of the peak.
         assert!(
             peak > 0.0 && worst <= 1e-5 * peak,
-            "{limits:?}: worst {worst} of {peak}"
+            "{limits:?} {row_lanes:?}: worst {worst} of {peak}"
         );
     }
 }
@@ -243,6 +258,7 @@ fn the_gpu_light_injection_matches_the_shadow_rays() {
                 threshold: 1e-3,
                 max_iterations: 8,
             },
+            RowLanes::Gpu,
         );
         let spot_position = Vec3::new(0.15, 0.25, 0.1);
         let cases: [(&str, Vec<PatchLight>); 5] = [
@@ -417,6 +433,7 @@ fn the_gpu_light_injection_matches_the_shadow_rays_in_the_examples_room() {
             threshold: 1e-3,
             max_iterations: 8,
         },
+        RowLanes::Gpu,
     );
     let mut injection =
         GpuInjection::new(&device, &patches, &transport, &albedo, &gpu_transport, 512);

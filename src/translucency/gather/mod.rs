@@ -10,7 +10,7 @@ use bevy::{
     render::{
         diagnostic::RecordDiagnostics,
         render_resource::{binding_types::*, *},
-        renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
+        renderer::{RenderAdapterInfo, RenderContext, RenderDevice, RenderQueue, ViewQuery},
         view::{ViewTarget, ViewUniform, ViewUniformOffset, ViewUniforms},
     },
 };
@@ -18,7 +18,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{
     injection::GpuInjection,
-    iteration::{GpuTransport, IterationLimits},
+    iteration::{GpuTransport, IterationLimits, RowLanes},
     plugin::{GatherMethod, TranslucencyFrame, TranslucencyScene},
     transport::ExitLaw,
 };
@@ -201,7 +201,9 @@ pub fn prepare_translucency(
     mut gpu: ResMut<TranslucencyGpu>,
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
+    adapter: Res<RenderAdapterInfo>,
 ) {
+    let row_lanes = RowLanes::for_adapter(&adapter);
     let Some((generation, scene)) = &frame.scene else {
         *gpu = TranslucencyGpu::default();
         return;
@@ -211,7 +213,7 @@ pub fn prepare_translucency(
             threshold: frame.settings.iteration_threshold.clamp(1e-6, 0.5),
             max_iterations: frame.settings.max_iterations.clamp(1, 256),
         };
-        let transport = GpuTransport::new(&device, &scene.transport, limits);
+        let transport = GpuTransport::new(&device, &scene.transport, limits, row_lanes);
         gpu.gather = Some(gather_buffers(&device, scene, &transport));
         gpu.transport = Some(transport);
         gpu.injection = None;

@@ -1,7 +1,9 @@
 // Seed 001's per-frame transport on the GPU: B = K E⁰ + S⁰ + K F B, iterated as
 //   ΔB₀ = K E⁰ + S⁰;  repeat { ΔB_c = cluster means of ΔB;  ΔE = F [ΔB, ΔB_c];  E += ΔE;
-//                         ΔB = K ΔE;  B += ΔB }  until flux(ΔB) ≤ threshold · flux(ΔB₀).
-// The same arithmetic as `EnergyTransport::solve` (src/translucency/transport.rs). The loop is
+//                         ΔB = K ΔE;  B += ΔB }  until flux(ΔB) ≤ threshold · flux(ΔB₀);
+//   then B += ΔB r/(1 − r), the geometric tail (r = flux(ΔB) / flux(the ΔB before)).
+// The same arithmetic as `EnergyTransport::solve` (src/translucency/transport/mod.rs), each
+// row's sum in another order (a few lanes' partial sums, then a tree). The loop is
 // recorded max_iterations times; `decide` zeroes the indirect dispatch arguments once the
 // energy still moving is below the threshold, so the rest of the recorded loop costs nothing.
 
@@ -29,11 +31,16 @@ struct Layout {
     delta_irradiance: u32,
     // The direct light's exitance besides K E⁰ (single scattering at each beam's incidence).
     direct_exitance: u32,
+    // `MAX_TAIL_RATIO` (transport/mod.rs): the most the tail ratio is trusted.
+    max_tail_ratio: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 struct State {
     // Indirect dispatch arguments (x, y, z; scalars, so the two sets pack without padding):
-    // one thread per patch, one per cluster.
+    // the products over the patches' rows and over the clusters' rows.
     patch_groups: u32,
     patch_groups_y: u32,
     patch_groups_z: u32,
@@ -43,6 +50,13 @@ struct State {
     iterations: u32,
     first_flux: f32,
     energy_left: f32,
+    // The K product's (its rows are shorter: fewer lanes a row, more rows a workgroup).
+    scattering_groups: u32,
+    scattering_groups_y: u32,
+    scattering_groups_z: u32,
+    // The flux of the last ΔB, and how much it shrank from the one before.
+    previous_flux: f32,
+    tail_ratio: f32,
 }
 
 @group(0) @binding(0) var<uniform> packing: Layout;
@@ -54,25 +68,59 @@ struct State {
 @group(1) @binding(0) var<storage, read_write> state: State;
 
 const WORKGROUP: u32 = 64u;
+// The products are CSR-vector: ROW_LANES neighbouring threads share a matrix row, each reading
+// every ROW_LANES-th entry, so a row's columns and values are read in whole cache lines
+// rather than one thread walking hundreds of entries alone (a form-factor row holds ~300).
+// Powers of two up to WORKGROUP, set per pipeline (`RowLanes` in mod.rs): ROW_LANES for F
+// and the cluster means, SCATTERING_LANES for K (~45 entries a translucent row, one or none
+// an opaque one).
+override ROW_LANES: u32 = 32u;
+override SCATTERING_LANES: u32 = 8u;
+// Workgroups per dispatch dimension (WebGPU's least limit): more rows spill into y.
+const MAX_GROUPS_X: u32 = 65535u;
 
 fn groups(n: u32) -> u32 {
     return (n + WORKGROUP - 1u) / WORKGROUP;
 }
 
-// E = E⁰, ΔE = E⁰, B = 0; the loop's state reset.
+// Workgroups of a product over `rows` rows, `lanes` threads a row.
+fn row_groups(rows: u32, lanes: u32) -> u32 {
+    let rows_per_group = WORKGROUP / lanes;
+    return (rows + rows_per_group - 1u) / rows_per_group;
+}
+
+// A dispatch of `count` workgroups: x up to MAX_GROUPS_X, the rest in y.
+fn dispatch_size(count: u32) -> vec2<u32> {
+    return vec2(min(count, MAX_GROUPS_X), (count + MAX_GROUPS_X - 1u) / MAX_GROUPS_X);
+}
+
+// The product's workgroup, counted across both dispatch dimensions.
+fn group_index(group: vec3<u32>, count: vec3<u32>) -> u32 {
+    return group.y * count.x + group.x;
+}
+
+// E = E⁰, ΔE = E⁰, B = 0; the loop's state reset; the products' dispatch sizes.
 @compute @workgroup_size(64)
 fn seed(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if i == 0u {
-        state.patch_groups = groups(packing.patches);
-        state.patch_groups_y = 1u;
+        let patches = dispatch_size(row_groups(packing.patches, ROW_LANES));
+        state.patch_groups = patches.x;
+        state.patch_groups_y = patches.y;
         state.patch_groups_z = 1u;
-        state.cluster_groups = groups(packing.clusters);
-        state.cluster_groups_y = 1u;
+        let clusters = dispatch_size(row_groups(packing.clusters, ROW_LANES));
+        state.cluster_groups = clusters.x;
+        state.cluster_groups_y = clusters.y;
         state.cluster_groups_z = 1u;
+        let scattering = dispatch_size(row_groups(packing.patches, SCATTERING_LANES));
+        state.scattering_groups = scattering.x;
+        state.scattering_groups_y = scattering.y;
+        state.scattering_groups_z = 1u;
         state.iterations = 0u;
         state.first_flux = -1.0;
         state.energy_left = 1.0;
+        state.previous_flux = 0.0;
+        state.tail_ratio = 0.0;
     }
     if i >= packing.patches {
         return;
@@ -83,29 +131,70 @@ fn seed(@builtin(global_invocation_id) id: vec3<u32>) {
     vectors[packing.exitance + i] = vec4(0.0);
 }
 
+var<workgroup> lanes: array<vec4<f32>, 64>;
 var<workgroup> flux: array<f32, 64>;
+
+// The sum of `part` over the `row_lanes` threads of `local`'s row, for every thread of the
+// workgroup (all of whose threads must call it: it holds barriers).
+fn row_sum(local: u32, part: vec4<f32>, row_lanes: u32) -> vec4<f32> {
+    lanes[local] = part;
+    workgroupBarrier();
+    let lane = local % row_lanes;
+    for (var stride = row_lanes / 2u; stride > 0u; stride /= 2u) {
+        if lane < stride {
+            lanes[local] += lanes[local + stride];
+        }
+        workgroupBarrier();
+    }
+    return lanes[local - lane];
+}
+
+// This lane's share of row `row` of a scalar CSR matrix (F or the cluster means) times ΔB
+// (patches, then clusters).
+fn scalar_row_part(offsets: u32, columns: u32, values: u32, row: u32, lane: u32) -> vec4<f32> {
+    var sum = vec4(0.0);
+    let start = matrices[offsets + row];
+    let end = matrices[offsets + row + 1u];
+    for (var e = start + lane; e < end; e += ROW_LANES) {
+        let j = matrices[columns + e];
+        sum += bitcast<f32>(matrices[values + e]) * vectors[packing.delta_exitance + j];
+    }
+    return sum;
+}
+
+// This lane's share of row `row` of K (RGB values) times ΔE.
+fn scattering_row_part(row: u32, lane: u32) -> vec4<f32> {
+    var sum = vec4(0.0);
+    let start = matrices[packing.k_offsets + row];
+    let end = matrices[packing.k_offsets + row + 1u];
+    for (var e = start + lane; e < end; e += SCATTERING_LANES) {
+        let j = matrices[packing.k_columns + e];
+        let v = packing.k_values + 3u * e;
+        let k = vec4(bitcast<f32>(matrices[v]), bitcast<f32>(matrices[v + 1u]),
+                     bitcast<f32>(matrices[v + 2u]), 0.0);
+        sum += k * vectors[packing.delta_irradiance + j];
+    }
+    return sum;
+}
 
 // ΔB = K ΔE (+ S⁰ on the first bounce); B += ΔB; each workgroup's share of
 // flux(ΔB) = Σ A_i (ΔB.r + ΔB.g + ΔB.b).
-fn scatter_rows(i: u32, local: u32, group: u32, first: bool) {
+fn scatter_rows(local: u32, group: u32, first: bool) {
+    let row = group * (WORKGROUP / SCATTERING_LANES) + local / SCATTERING_LANES;
+    let lane = local % SCATTERING_LANES;
+    var part = vec4(0.0);
+    if row < packing.patches {
+        part = scattering_row_part(row, lane);
+    }
+    var sum = row_sum(local, part, SCATTERING_LANES);
     var own = 0.0;
-    if i < packing.patches {
-        var sum = vec4(0.0);
-        let start = matrices[packing.k_offsets + i];
-        let end = matrices[packing.k_offsets + i + 1u];
-        for (var e = start; e < end; e += 1u) {
-            let j = matrices[packing.k_columns + e];
-            let v = packing.k_values + 3u * e;
-            let k = vec4(bitcast<f32>(matrices[v]), bitcast<f32>(matrices[v + 1u]),
-                         bitcast<f32>(matrices[v + 2u]), 0.0);
-            sum += k * vectors[packing.delta_irradiance + j];
-        }
+    if row < packing.patches && lane == 0u {
         if first {
-            sum += vectors[packing.direct_exitance + i];
+            sum += vectors[packing.direct_exitance + row];
         }
-        vectors[packing.delta_exitance + i] = sum;
-        vectors[packing.exitance + i] += sum;
-        own = bitcast<f32>(matrices[packing.areas + i]) * (sum.x + sum.y + sum.z);
+        vectors[packing.delta_exitance + row] = sum;
+        vectors[packing.exitance + row] += sum;
+        own = bitcast<f32>(matrices[packing.areas + row]) * (sum.x + sum.y + sum.z);
     }
     flux[local] = own;
     workgroupBarrier();
@@ -115,38 +204,42 @@ fn scatter_rows(i: u32, local: u32, group: u32, first: bool) {
         }
         workgroupBarrier();
     }
-    if local == 0u {
+    if local == 0u && group < row_groups(packing.patches, SCATTERING_LANES) {
         partials[group] = flux[0];
     }
 }
 
 @compute @workgroup_size(64)
-fn scatter_first(@builtin(global_invocation_id) id: vec3<u32>,
-                 @builtin(local_invocation_index) local: u32,
-                 @builtin(workgroup_id) group: vec3<u32>) {
-    scatter_rows(id.x, local, group.x, true);
+fn scatter_first(@builtin(local_invocation_index) local: u32,
+                 @builtin(workgroup_id) group: vec3<u32>,
+                 @builtin(num_workgroups) count: vec3<u32>) {
+    scatter_rows(local, group_index(group, count), true);
 }
 
 @compute @workgroup_size(64)
-fn scatter(@builtin(global_invocation_id) id: vec3<u32>,
-           @builtin(local_invocation_index) local: u32,
-           @builtin(workgroup_id) group: vec3<u32>) {
-    scatter_rows(id.x, local, group.x, false);
+fn scatter(@builtin(local_invocation_index) local: u32,
+           @builtin(workgroup_id) group: vec3<u32>,
+           @builtin(num_workgroups) count: vec3<u32>) {
+    scatter_rows(local, group_index(group, count), false);
 }
 
-// Sums the partial fluxes and decides whether the loop goes on.
-@compute @workgroup_size(64)
+const DECIDE_THREADS: u32 = 256u;
+var<workgroup> totals: array<f32, DECIDE_THREADS>;
+
+// Sums the partial fluxes and decides whether the loop goes on. (One workgroup, as wide as
+// WebGPU allows: each thread's loads are a serial chain, once per iteration.)
+@compute @workgroup_size(256)
 fn decide(@builtin(local_invocation_index) local: u32) {
-    let count = groups(packing.patches);
+    let count = row_groups(packing.patches, SCATTERING_LANES);
     var own = 0.0;
-    for (var g = local; g < count; g += WORKGROUP) {
+    for (var g = local; g < count; g += DECIDE_THREADS) {
         own += partials[g];
     }
-    flux[local] = own;
+    totals[local] = own;
     workgroupBarrier();
-    for (var stride = WORKGROUP / 2u; stride > 0u; stride /= 2u) {
+    for (var stride = DECIDE_THREADS / 2u; stride > 0u; stride /= 2u) {
         if local < stride {
-            flux[local] += flux[local + stride];
+            totals[local] += totals[local + stride];
         }
         workgroupBarrier();
     }
@@ -154,7 +247,7 @@ fn decide(@builtin(local_invocation_index) local: u32) {
     if local != 0u || state.patch_groups == 0u {
         return;
     }
-    let total = flux[0];
+    let total = totals[0];
     var go_on: bool;
     if state.first_flux < 0.0 {
         state.first_flux = total;
@@ -163,45 +256,60 @@ fn decide(@builtin(local_invocation_index) local: u32) {
     } else {
         state.iterations += 1u;
         state.energy_left = total / state.first_flux;
+        state.tail_ratio = select(0.0, total / state.previous_flux, state.previous_flux > 0.0);
         go_on = state.energy_left > packing.threshold && state.iterations < packing.max_iterations;
     }
+    state.previous_flux = total;
     if !go_on {
         state.patch_groups = 0u;
         state.cluster_groups = 0u;
+        state.scattering_groups = 0u;
     }
-}
-
-// Row `row` of a scalar CSR matrix (F or the cluster means) times ΔB (patches, then clusters).
-fn scalar_row(offsets: u32, columns: u32, values: u32, row: u32) -> vec4<f32> {
-    var sum = vec4(0.0);
-    let start = matrices[offsets + row];
-    let end = matrices[offsets + row + 1u];
-    for (var e = start; e < end; e += 1u) {
-        let j = matrices[columns + e];
-        sum += bitcast<f32>(matrices[values + e]) * vectors[packing.delta_exitance + j];
-    }
-    return sum;
 }
 
 // ΔB of each far-field cluster: its members' area mean.
 @compute @workgroup_size(64)
-fn cluster_means(@builtin(global_invocation_id) id: vec3<u32>) {
-    let c = id.x;
-    if c >= packing.clusters {
-        return;
+fn cluster_means(@builtin(local_invocation_index) local: u32,
+                 @builtin(workgroup_id) group: vec3<u32>,
+                 @builtin(num_workgroups) count: vec3<u32>) {
+    let c = group_index(group, count) * (WORKGROUP / ROW_LANES) + local / ROW_LANES;
+    let lane = local % ROW_LANES;
+    var part = vec4(0.0);
+    if c < packing.clusters {
+        part = scalar_row_part(packing.c_offsets, packing.c_columns, packing.c_values, c, lane);
     }
-    vectors[packing.delta_exitance + packing.patches + c] =
-        scalar_row(packing.c_offsets, packing.c_columns, packing.c_values, c);
+    let sum = row_sum(local, part, ROW_LANES);
+    if c < packing.clusters && lane == 0u {
+        vectors[packing.delta_exitance + packing.patches + c] = sum;
+    }
 }
 
 // ΔE = F [ΔB, ΔB_clusters]; E += ΔE.
 @compute @workgroup_size(64)
-fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
+fn gather(@builtin(local_invocation_index) local: u32,
+          @builtin(workgroup_id) group: vec3<u32>,
+          @builtin(num_workgroups) count: vec3<u32>) {
+    let i = group_index(group, count) * (WORKGROUP / ROW_LANES) + local / ROW_LANES;
+    let lane = local % ROW_LANES;
+    var part = vec4(0.0);
+    if i < packing.patches {
+        part = scalar_row_part(packing.f_offsets, packing.f_columns, packing.f_values, i, lane);
+    }
+    let sum = row_sum(local, part, ROW_LANES);
+    if i < packing.patches && lane == 0u {
+        vectors[packing.delta_irradiance + i] = sum;
+        vectors[packing.irradiance + i] += sum;
+    }
+}
+
+// After the loop: B += the geometric tail of the last ΔB, ΔB r/(1 − r) (`geometric_tail` in
+// transport/mod.rs), r the last shrink of the increments' flux.
+@compute @workgroup_size(64)
+fn extrapolate(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
-    if i >= packing.patches {
+    if i >= packing.patches || state.iterations == 0u {
         return;
     }
-    let sum = scalar_row(packing.f_offsets, packing.f_columns, packing.f_values, i);
-    vectors[packing.delta_irradiance + i] = sum;
-    vectors[packing.irradiance + i] += sum;
+    let r = clamp(state.tail_ratio, 0.0, packing.max_tail_ratio);
+    vectors[packing.exitance + i] += vectors[packing.delta_exitance + i] * (r / (1.0 - r));
 }

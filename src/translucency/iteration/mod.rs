@@ -53,6 +53,8 @@ struct Layout {
     delta_exitance: u32,
     delta_irradiance: u32,
     direct_exitance: u32,
+    max_tail_ratio: f32,
+    _pad: [u32; 3],
 }
 
 /// `State` in `iterate.wgsl` (indirect arguments first, as dispatches read them).
@@ -64,6 +66,9 @@ struct State {
     iterations: u32,
     first_flux: f32,
     energy_left: f32,
+    scattering_groups: [u32; 3],
+    previous_flux: f32,
+    tail_ratio: f32,
 }
 
 /// How the GPU iteration stops.
@@ -86,6 +91,7 @@ pub struct GpuTransport {
     scatter_first: ComputePipeline,
     scatter: ComputePipeline,
     decide: ComputePipeline,
+    extrapolate: ComputePipeline,
     restrict: ComputePipeline,
     gather: ComputePipeline,
 }
@@ -115,14 +121,61 @@ pub(super) fn compute_pipeline(
     module: &ShaderModule,
     entry: &str,
 ) -> ComputePipeline {
+    specialized_compute_pipeline(device, layout, module, entry, &[])
+}
+
+/// The same with values for the module's `override` constants.
+fn specialized_compute_pipeline(
+    device: &RenderDevice,
+    layout: &PipelineLayout,
+    module: &ShaderModule,
+    entry: &str,
+    constants: &[(&str, f64)],
+) -> ComputePipeline {
     device.create_compute_pipeline(&RawComputePipelineDescriptor {
         label: Some(entry),
         layout: Some(layout),
         module,
         entry_point: Some(entry),
-        compilation_options: PipelineCompilationOptions::default(),
+        compilation_options: PipelineCompilationOptions {
+            constants,
+            ..Default::default()
+        },
         cache: None,
     })
+}
+
+/// How many threads share one matrix row in the iteration's products (`ROW_LANES` and
+/// `SCATTERING_LANES` in `iterate.wgsl`): a form-factor row holds ~300 entries, read in whole
+/// cache lines by 32 lanes on a GPU, a row of `K` ~45 by 8 (docs/translucent.md has the H100's
+/// times); a CPU driver
+/// (llvmpipe) runs a workgroup's threads in turn and pays for every barrier the lanes' sum
+/// needs, so there each thread takes a row alone, as before.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RowLanes {
+    /// 32 lanes a row (one NVIDIA warp).
+    Gpu,
+    /// One lane a row.
+    Cpu,
+}
+
+impl RowLanes {
+    /// For the adapter `info` describes.
+    pub fn for_adapter(info: &bevy::render::render_resource::WgpuAdapterInfo) -> Self {
+        if info.device_type == wgpu::DeviceType::Cpu {
+            RowLanes::Cpu
+        } else {
+            RowLanes::Gpu
+        }
+    }
+
+    /// Threads per row of `F` (and of the cluster means), and of `K`.
+    pub fn lanes(self) -> (u32, u32) {
+        match self {
+            RowLanes::Gpu => (32, 8),
+            RowLanes::Cpu => (1, 1),
+        }
+    }
 }
 
 /// Appends `values` to `words`, returning where they start.
@@ -138,6 +191,7 @@ impl GpuTransport {
         device: &RenderDevice,
         transport: &EnergyTransport,
         limits: IterationLimits,
+        row_lanes: RowLanes,
     ) -> Self {
         let n = transport.areas.len() as u32;
         let clusters = transport.cluster_means.rows() as u32;
@@ -152,6 +206,7 @@ impl GpuTransport {
             clusters,
             threshold: limits.threshold,
             max_iterations: limits.max_iterations,
+            max_tail_ratio: super::transport::MAX_TAIL_RATIO,
             f_offsets: push(&mut words, f.row_offsets.iter().copied()),
             f_columns: push(&mut words, f.columns.iter().copied()),
             f_values: push(&mut words, f.values.iter().map(|v| v.to_bits())),
@@ -195,7 +250,9 @@ impl GpuTransport {
         });
         let partials = device.create_buffer(&BufferDescriptor {
             label: Some("translucency_partial_fluxes"),
-            size: (n.div_ceil(WORKGROUP).max(1) as u64) * 4,
+            // One per workgroup of the K product: at most one per patch whatever its rows
+            // per workgroup (`ROWS_PER_GROUP` in the shader).
+            size: (n.max(1) as u64) * 4,
             usage: BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
@@ -246,7 +303,13 @@ impl GpuTransport {
             bind_group_layouts: &[Some(&bind_group_layout), Some(&state_layout)],
             immediate_size: 0,
         });
-        let pipeline = |entry, layout| compute_pipeline(device, layout, &module, entry);
+        let (form_factor_lanes, scattering_lanes) = row_lanes.lanes();
+        let constants = [
+            ("ROW_LANES", form_factor_lanes as f64),
+            ("SCATTERING_LANES", scattering_lanes as f64),
+        ];
+        let pipeline =
+            |entry, layout| specialized_compute_pipeline(device, layout, &module, entry, &constants);
         Self {
             layout,
             vectors,
@@ -257,6 +320,7 @@ impl GpuTransport {
             scatter_first: pipeline("scatter_first", &products),
             scatter: pipeline("scatter", &products),
             decide: pipeline("decide", &control),
+            extrapolate: pipeline("extrapolate", &control),
             restrict: pipeline("cluster_means", &products),
             gather: pipeline("gather", &products),
         }
@@ -304,15 +368,17 @@ impl GpuTransport {
             });
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.set_bind_group(1, &self.state_bind_group, &[]);
-            let groups = n.div_ceil(WORKGROUP);
-            pass.set_pipeline(&self.seed);
-            pass.dispatch_workgroups(groups, 1, 1);
-            pass.set_pipeline(&self.scatter_first);
-            pass.dispatch_workgroups(groups, 1, 1);
-            pass.set_pipeline(&self.decide);
-            pass.dispatch_workgroups(1, 1, 1);
+            // `seed` is a thread per patch; it writes the products' dispatch sizes (rows
+            // per workgroup are the shader's business).
             let patch_args = 0;
             let cluster_args = 12;
+            let scattering_args = 36;
+            pass.set_pipeline(&self.seed);
+            pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
+            pass.set_pipeline(&self.scatter_first);
+            pass.dispatch_workgroups_indirect(&self.state, scattering_args);
+            pass.set_pipeline(&self.decide);
+            pass.dispatch_workgroups(1, 1, 1);
             for _ in 0..self.layout.max_iterations {
                 if self.layout.clusters > 0 {
                     pass.set_pipeline(&self.restrict);
@@ -321,10 +387,12 @@ impl GpuTransport {
                 pass.set_pipeline(&self.gather);
                 pass.dispatch_workgroups_indirect(&self.state, patch_args);
                 pass.set_pipeline(&self.scatter);
-                pass.dispatch_workgroups_indirect(&self.state, patch_args);
+                pass.dispatch_workgroups_indirect(&self.state, scattering_args);
                 pass.set_pipeline(&self.decide);
                 pass.dispatch_workgroups(1, 1, 1);
             }
+            pass.set_pipeline(&self.extrapolate);
+            pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
         }
         encoder.pop_debug_group();
     }
@@ -352,7 +420,7 @@ impl GpuTransport {
     }
 
     /// The buffer holding the iteration's state (`iterations: u32` at byte 24,
-    /// `energy_left: f32` at byte 32).
+    /// `energy_left: f32` at byte 32, `tail_ratio: f32` at byte 52).
     pub fn state(&self) -> &Buffer {
         &self.state
     }

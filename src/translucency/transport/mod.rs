@@ -239,6 +239,22 @@ pub struct TransportSolution {
     /// The energy of the last increment relative to the first bounce's: below the
     /// threshold unless `iterations` hit the cap.
     pub energy_left: f32,
+    /// How much the last increment's flux shrank from the one before: `B` holds the
+    /// geometric tail `ΔB r/(1 − r)` beyond it ([`MAX_TAIL_RATIO`] at most; 0 without an
+    /// iteration).
+    pub tail_ratio: f32,
+}
+
+/// The most the iteration's tail ratio is trusted: 0.95 adds at most 19 last increments.
+/// A closed box of albedo ρ converges as ρ (the room of `docs/translucent.md` as ~0.62).
+pub const MAX_TAIL_RATIO: f32 = 0.95;
+
+/// The geometric tail of the increments the iteration stopped before: each one about `ratio`
+/// times the last (the dominant eigenvalue of `K F`), so the rest sums to
+/// `last · ratio / (1 − ratio)` (`ratio` capped at [`MAX_TAIL_RATIO`]).
+pub fn geometric_tail(last: Vec3, ratio: f32) -> Vec3 {
+    let r = ratio.clamp(0.0, MAX_TAIL_RATIO);
+    last * (r / (1.0 - r))
 }
 
 fn threads() -> usize {
@@ -405,7 +421,8 @@ impl EnergyTransport {
     }
 
     /// Iterates `ΔE = F ΔB`, `ΔB = K ΔE` from `B = K E⁰` until the flux of `ΔB` is below
-    /// `threshold` × the flux of the first `B`, or `max_iterations`.
+    /// `threshold` × the flux of the first `B`, or `max_iterations`; then adds the
+    /// [`geometric_tail`] of the last `ΔB` to `B`.
     pub fn solve(&self, direct: &[Vec3], threshold: f32, max_iterations: u32) -> TransportSolution {
         self.solve_with(
             &DirectLight {
@@ -435,6 +452,7 @@ impl EnergyTransport {
         let mut iterations = 0;
         // Nothing lit: nothing to iterate.
         let mut energy_left = if first > 0.0 { 1.0 } else { 0.0 };
+        let (mut previous_flux, mut tail_ratio) = (first, 0.0);
         while iterations < max_iterations && energy_left > threshold {
             let gathered = self.gather(&delta);
             for (e, g) in irradiance.iter_mut().zip(&gathered) {
@@ -445,13 +463,25 @@ impl EnergyTransport {
                 *b += *d;
             }
             iterations += 1;
-            energy_left = self.flux(&delta) / first;
+            let flux = self.flux(&delta);
+            energy_left = flux / first;
+            tail_ratio = if previous_flux > 0.0 { flux / previous_flux } else { 0.0 };
+            previous_flux = flux;
+        }
+        // What the truncated series leaves: with the tail a threshold of 1e-2 (10 iterations
+        // in the room of docs/translucent.md) comes within 0.03 % of the converged B, where
+        // 1e-3 without it (15 iterations) came within 0.05–0.07 %.
+        if iterations > 0 {
+            for (b, d) in exitance.iter_mut().zip(&delta) {
+                *b += geometric_tail(*d, tail_ratio);
+            }
         }
         TransportSolution {
             exitance,
             irradiance,
             iterations,
             energy_left,
+            tail_ratio: if iterations > 0 { tail_ratio.clamp(0.0, MAX_TAIL_RATIO) } else { 0.0 },
         }
     }
 }
