@@ -148,12 +148,11 @@ fn specialized_compute_pipeline(
 /// How many threads share one matrix row in the iteration's products (`ROW_LANES` and
 /// `SCATTERING_LANES` in `iterate.wgsl`): a form-factor row holds ~300 entries, read in whole
 /// cache lines by 32 lanes on a GPU, a row of `K` ~45 by 8 (docs/translucent.md has the H100's
-/// times); a CPU driver
-/// (llvmpipe) runs a workgroup's threads in turn and pays for every barrier the lanes' sum
-/// needs, so there each thread takes a row alone, as before.
+/// times); a CPU driver (llvmpipe) runs a workgroup's threads in turn and pays for every
+/// barrier the lanes' sum needs, so there each thread takes a row alone, as before.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RowLanes {
-    /// 32 lanes a row (one NVIDIA warp).
+    /// 32 lanes a row of `F` (one NVIDIA warp), 8 a row of `K`.
     Gpu,
     /// One lane a row.
     Cpu,
@@ -250,8 +249,8 @@ impl GpuTransport {
         });
         let partials = device.create_buffer(&BufferDescriptor {
             label: Some("translucency_partial_fluxes"),
-            // One per workgroup of the K product: at most one per patch whatever its rows
-            // per workgroup (`ROWS_PER_GROUP` in the shader).
+            // One per workgroup of the K product: at most one per patch whatever its lanes
+            // a row (`SCATTERING_LANES` in the shader).
             size: (n.max(1) as u64) * 4,
             usage: BufferUsages::STORAGE,
             mapped_at_creation: false,
