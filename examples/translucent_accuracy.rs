@@ -41,14 +41,17 @@ mod headless;
 #[allow(dead_code)]
 #[path = "common/meshes.rs"]
 mod meshes;
+#[path = "common/translucent_accuracy_chart.rs"]
+mod translucent_accuracy_chart;
 #[path = "common/translucent_accuracy_scene.rs"]
 mod translucent_accuracy_scene;
+#[path = "common/translucent_bevy_fit.rs"]
+mod translucent_bevy_fit;
 
 use std::{
     io::Write,
     path::PathBuf,
     process::Command,
-    sync::{Arc, Mutex},
     time::Instant,
 };
 
@@ -57,7 +60,7 @@ use bevy_mesostructure::translucency::{
     DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings,
 };
 use translucent_accuracy_scene::{
-    BUNNY_LENGTH, FOV_Y, FRONT_LIGHT, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
+    FOV_Y, FRONT_LIGHT, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
     ShapeView, plugin_picture, score,
 };
 
@@ -471,7 +474,8 @@ fn main() {
         }
     }
     if cli.bevy {
-        let (best, transmission, thickness, colour) = bevy_best_fit(&reference, &view, light);
+        let (best, transmission, thickness, colour) =
+            translucent_bevy_fit::bevy_best_fit(&reference, &view, light).unwrap_or_else(|e| fail(e));
         eprintln!(
             "{name} Bevy diffuse_transmission best fit: rel L1 {best:.4} at transmission {transmission}, thickness {thickness} m, base colour {colour:?}"
         );
@@ -505,287 +509,9 @@ fn main() {
             fail(format!("cannot write {}: {e}", out.display()));
         }
         if let Some(path) = &cli.chart {
-            draw_chart(&out, path);
+            translucent_accuracy_chart::draw_chart(&out, path).unwrap_or_else(|e| fail(e));
         }
     }
-}
-
-/// Relative L1 against patch count (log) in the CSV `csv`: the index-matched skin1 and marble
-/// balls, today's defaults, the shape's solve with Lambert's exit, the flat profile (the
-/// defaults before) and Bevy's best fit (every other row stays in the CSV and the docs' tables).
-fn draw_chart(csv: &std::path::Path, path: &std::path::Path) {
-    const SCENES: [&str; 4] = [
-        "ball_skin1_r10mm_front",
-        "ball_marble_r10mm_front",
-        "ball_skin1_r10mm_back",
-        "ball_marble_r10mm_back",
-    ];
-    const METHODS: [&str; 4] = [
-        "patches_scaleddipole",
-        "patches_scaleddipole_lambert",
-        "patches_scaleddipole_flat_lambert",
-        "bevy_diffuse_transmission",
-    ];
-    use plotters::prelude::*;
-    let text = std::fs::read_to_string(csv)
-        .unwrap_or_else(|e| fail(format!("cannot read {}: {e}", csv.display())));
-    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-    let mut levels: Vec<(String, f64)> = Vec::new();
-    for line in text.lines().skip(1) {
-        let f: Vec<&str> = line.split(',').collect();
-        let (Some(scene), Some(method), Some(rel)) = (
-            f.first(),
-            f.get(1),
-            f.get(9).and_then(|v| v.parse::<f64>().ok()),
-        ) else {
-            continue;
-        };
-        if !SCENES.contains(scene) || !METHODS.contains(method) {
-            continue;
-        }
-        let key = format!("{scene} {method}");
-        match f.get(3).and_then(|v| v.parse::<f64>().ok()) {
-            Some(patches) => match series.iter_mut().find(|s| s.0 == key) {
-                Some(s) => s.1.push((patches.log10(), rel)),
-                None => series.push((key, vec![(patches.log10(), rel)])),
-            },
-            None => levels.push((key, rel)),
-        }
-    }
-    for s in &mut series {
-        s.1.sort_by(|a, b| a.0.total_cmp(&b.0));
-    }
-    chart::save(1400, 600, path, |root| {
-        let panels = root.split_evenly((1, 2));
-        for (panel, (which, title)) in panels.iter().zip([
-            ("_front", "lit from the front"),
-            ("_back", "lit from behind"),
-        ]) {
-            let shown: Vec<&(String, Vec<(f64, f64)>)> =
-                series.iter().filter(|s| s.0.contains(which)).collect();
-            let flat: Vec<&(String, f64)> = levels.iter().filter(|l| l.0.contains(which)).collect();
-            let top = shown
-                .iter()
-                .flat_map(|s| s.1.iter().map(|p| p.1))
-                .chain(flat.iter().map(|l| l.1))
-                .fold(0.1, f64::max);
-            let mut c = ChartBuilder::on(panel)
-                .caption(
-                    format!("1 cm ball against the light-traced reference, {title}"),
-                    ("sans-serif", 18),
-                )
-                .margin(12)
-                .x_label_area_size(40)
-                .y_label_area_size(56)
-                .build_cartesian_2d(
-                    2.0f64..3.8f64,
-                    0.0f64..top * if which == "_front" { 2.4 } else { 1.3 },
-                )
-                .expect("draw");
-            c.configure_mesh()
-                .x_desc("patches on the ball")
-                .y_desc("relative L1 (all channels)")
-                .x_label_formatter(&|x| format!("{:.0}", 10f64.powf(*x)))
-                .label_style(("sans-serif", 13))
-                .draw()
-                .expect("draw");
-            for (i, (label, points)) in shown.iter().map(|s| (&s.0, &s.1)).enumerate() {
-                let colour = Palette99::pick(i).to_rgba();
-                chart::line_with_points(&mut c, &label.replace("ball_", ""), points, colour);
-            }
-            for (i, (label, level)) in flat.iter().map(|l| (&l.0, l.1)).enumerate() {
-                let colour = Palette99::pick(shown.len() + i).to_rgba();
-                c.draw_series(DashedLineSeries::new(
-                    [(2.0, level), (3.8, level)],
-                    8,
-                    6,
-                    colour.stroke_width(2),
-                ))
-                .expect("draw")
-                .label(format!("{} (best fit)", label.replace("ball_", "")))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
-            }
-            // The goal.
-            c.draw_series(DashedLineSeries::new(
-                [(2.0, 0.08), (3.8, 0.08)],
-                3,
-                3,
-                BLACK.stroke_width(1),
-            ))
-            .expect("draw")
-            .label("goal 0.08")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
-            // Where the data is not: above the front-lit curves; left of the back-lit ones
-            // (scored at 960 and 1660 patches only).
-            chart::legend_at(
-                &mut c,
-                if which == "_front" {
-                    SeriesLabelPosition::UpperRight
-                } else {
-                    SeriesLabelPosition::UpperLeft
-                },
-            );
-        }
-    });
-    println!("wrote {}", path.display());
-}
-
-/// Renders the ball with Bevy's `StandardMaterial` (white, no specular) for each diffuse
-/// transmission and thickness of the grid, fits the base colour per channel (the weighted
-/// median of reference / render: the L1-best scale, as Bevy's light is linear in it) and
-/// returns the best relative L1 with its transmission, thickness and colour.
-fn bevy_best_fit(
-    reference: &image::Rgb32FImage,
-    view: &ShapeView,
-    light: Vec3,
-) -> (f64, f32, f32, [f32; 3]) {
-    let size = view.size;
-    let scored = |x: u32, y: u32, _: u32| view.scored[(y * size + x) as usize];
-    use bevy::{
-        camera::{Exposure, RenderTarget},
-        core_pipeline::tonemapping::Tonemapping,
-        render::{
-            render_resource::{TextureFormat, TextureUsages},
-            view::screenshot::{Screenshot, ScreenshotCaptured},
-        },
-    };
-    let mut app = App::new();
-    app.add_plugins(headless::headless_plugins().disable::<bevy::log::LogPlugin>());
-    app.finish();
-    app.cleanup();
-    app.insert_resource(bevy::light::GlobalAmbientLight {
-        brightness: 0.0,
-        ..default()
-    });
-    // Irradiance × exposure: a white Lambertian facing the light reads 0.85.
-    let exposure = Exposure { ev100: 0.0 };
-    let illuminance = 0.85 * std::f32::consts::PI / exposure.exposure();
-    app.world_mut().spawn((
-        DirectionalLight {
-            illuminance,
-            ..default()
-        },
-        Transform::default().looking_to(light, Vec3::Y),
-    ));
-    let mut image = Image::new_target_texture(size, size, TextureFormat::Rgba8UnormSrgb, None);
-    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
-    let target = app.world_mut().resource_mut::<Assets<Image>>().add(image);
-    app.world_mut().spawn((
-        Camera3d::default(),
-        Projection::Perspective(PerspectiveProjection {
-            fov: FOV_Y,
-            near: 0.0005,
-            ..default()
-        }),
-        RenderTarget::Image(target.clone().into()),
-        Msaa::Off,
-        Tonemapping::None,
-        exposure,
-        Transform::from_translation(view.shape.eye()).looking_at(Vec3::ZERO, Vec3::Y),
-    ));
-    // The shape as a game would load it: the ico sphere, or the bunny's OBJ with smooth
-    // normals and UVs (as the `translucent` example's; a mesh without UVs rendered black
-    // here), scaled as the accuracy scene scales it.
-    let shape_mesh = match view.shape {
-        Shape::Ball => Sphere::new(RADIUS).mesh().ico(5).expect("a valid subdivision"),
-        Shape::Bunny => meshes::obj_mesh(&meshes::asset_path("meshes/bunny.obj"), 1.0)
-            .scaled_by(Vec3::splat(BUNNY_LENGTH / 1.6)),
-    };
-    let mesh = app.world_mut().resource_mut::<Assets<Mesh>>().add(shape_mesh);
-    let material = app
-        .world_mut()
-        .resource_mut::<Assets<StandardMaterial>>()
-        .add(StandardMaterial {
-            base_color: Color::WHITE,
-            perceptual_roughness: 1.0,
-            reflectance: 0.0,
-            ..default()
-        });
-    app.world_mut()
-        .spawn((Mesh3d(mesh), MeshMaterial3d(material.clone())));
-    let decode = |s: f32| {
-        if s <= 0.04045 {
-            s / 12.92
-        } else {
-            ((s + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    let mut best = (f64::INFINITY, 0.0, 0.0, [0.0; 3]);
-    for thickness in [0.0, 0.02] {
-        for step in 0..=10 {
-            let transmission = step as f32 / 10.0;
-            if let Some(mut m) = app
-                .world_mut()
-                .resource_mut::<Assets<StandardMaterial>>()
-                .get_mut(&material)
-            {
-                m.diffuse_transmission = transmission;
-                m.thickness = thickness;
-            }
-            for _ in 0..3 {
-                app.update();
-            }
-            let slot: Arc<Mutex<Option<Image>>> = Arc::default();
-            let s = slot.clone();
-            app.world_mut()
-                .spawn(Screenshot::image(target.clone()))
-                .observe(move |ev: On<ScreenshotCaptured>| {
-                    *s.lock().unwrap() = Some(ev.image.clone())
-                });
-            let shot = (0..20).find_map(|_| {
-                app.update();
-                slot.lock().unwrap().take()
-            });
-            let Some(shot) = shot else {
-                fail("Bevy's picture never came back".into());
-            };
-            // Radiance per unit irradiance of the white ball, per pixel and channel.
-            let white: Vec<[f32; 3]> = (0..size * size)
-                .map(|i| {
-                    let c = shot
-                        .get_color_at(i % size, i / size)
-                        .map(|c| c.to_srgba())
-                        .unwrap_or(Srgba::BLACK);
-                    [c.red, c.green, c.blue]
-                        .map(|v| decode(v) / (illuminance * exposure.exposure()))
-                })
-                .collect();
-            let mut colour = [0.0f32; 3];
-            let mut error = 0.0f64;
-            let mut total = 0.0f64;
-            for c in 0..3 {
-                // Weighted median of reference / render, weights the render.
-                let mut pairs: Vec<(f32, f32)> = (0..size * size)
-                    .filter(|&i| scored(i % size, i / size, size))
-                    .filter_map(|i| {
-                        let f = white[i as usize][c];
-                        let m = reference.get_pixel(i % size, i / size).0[c];
-                        (f > 1e-4 && m > 0.0).then_some((m / f, f))
-                    })
-                    .collect();
-                pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let half = pairs.iter().map(|p| p.1).sum::<f32>() / 2.0;
-                let mut acc = 0.0;
-                colour[c] = pairs
-                    .iter()
-                    .find(|p| {
-                        acc += p.1;
-                        acc >= half
-                    })
-                    .map_or(0.0, |p| p.0.clamp(0.0, 1.0));
-                for i in (0..size * size).filter(|&i| scored(i % size, i / size, size)) {
-                    let m = reference.get_pixel(i % size, i / size).0[c];
-                    error += (colour[c] * white[i as usize][c] - m).abs() as f64;
-                    total += m as f64;
-                }
-            }
-            let relative = error / total;
-            if relative < best.0 {
-                best = (relative, transmission, thickness, colour);
-            }
-        }
-    }
-    best
 }
 
 /// Writes `view`'s triangles as an OBJ in metres, for the reference renderer.
