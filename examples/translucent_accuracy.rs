@@ -18,7 +18,7 @@
 //!     [--object-exit-share true|false] [--beam-incidence true|false]
 //!     [--oriented-dipole true|false] [--shape-diffusion true|false]
 //!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks] [--walks 256]
-//!     [--single-scattering-oracle]
+//!     [--beam-table COSINES,AZIMUTHS] [--single-scattering-oracle]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
@@ -111,6 +111,12 @@ struct Cli {
     /// Walks a channel from each patch for `--scattering walks|beam-walks`
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=65536))]
     walks: u32,
+    /// With `--scattering beam-walks`: snap each patch's beam to the nearest of a per-patch
+    /// table's directions, COSINES incidence cosines × AZIMUTHS azimuths in the patch's frame
+    /// (what precomputed beam columns looked up per frame would give; method suffix
+    /// `_table<c>x<a>`)
+    #[arg(long, value_name = "COSINES,AZIMUTHS", value_parser = parse_table)]
+    beam_table: Option<(u32, u32)>,
     /// Take the dipole's flux along each exit patch's normal
     /// (`Translucent::oriented_dipole`; method suffix `_oriented` when on)
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
@@ -230,6 +236,19 @@ fn parse_direction(s: &str) -> Result<Vec3, String> {
     }
 }
 
+fn parse_table(s: &str) -> Result<(u32, u32), String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    let [Ok(cosines), Ok(azimuths)] = [parts.first(), parts.get(1)].map(|p| {
+        p.ok_or(())?.trim().parse::<u32>().map_err(|_| ())
+    }) else {
+        return Err(format!("expected COSINES,AZIMUTHS (two whole numbers), got {s:?}"));
+    };
+    if parts.len() != 2 || !(1..=64).contains(&cosines) || !(1..=64).contains(&azimuths) {
+        return Err(format!("expected two numbers in 1 – 64, got {s:?}"));
+    }
+    Ok((cosines, azimuths))
+}
+
 fn parse_eta(s: &str) -> Result<f32, String> {
     match s.parse::<f32>() {
         Ok(eta) if (1.0..=3.0).contains(&eta) => Ok(eta),
@@ -268,6 +287,9 @@ fn main() {
     }
     if cli.scattering == Scattering::BeamWalks && (cli.eta != 1.0 || cli.uniform) {
         fail("--scattering beam-walks takes the directional light into an index-matched object only (drop --eta and --uniform)".into());
+    }
+    if cli.beam_table.is_some() && cli.scattering != Scattering::BeamWalks {
+        fail("--beam-table snaps the beam walks' directions: it needs --scattering beam-walks".into());
     }
     if cli.single_scattering_oracle && (cli.eta != 1.0 || cli.uniform) {
         fail("--single-scattering-oracle takes the directional light on an index-matched object only (drop --eta and --uniform)".into());
@@ -387,9 +409,13 @@ fn main() {
     let (source, walked) = match cli.scattering {
         Scattering::Profile => (ScatteringSource::Profile, String::new()),
         Scattering::Walks => (ScatteringSource::Walks(cli.walks), format!("_walks{}", cli.walks)),
-        Scattering::BeamWalks => {
-            (ScatteringSource::BeamWalks(cli.walks), format!("_beamwalks{}", cli.walks))
-        }
+        Scattering::BeamWalks => match cli.beam_table {
+            None => (ScatteringSource::BeamWalks(cli.walks), format!("_beamwalks{}", cli.walks)),
+            Some((cosines, azimuths)) => (
+                ScatteringSource::BinnedBeamWalks { walks: cli.walks, cosines, azimuths },
+                format!("_beamwalks{}_table{cosines}x{azimuths}", cli.walks),
+            ),
+        },
     };
     let ss_oracle = if cli.single_scattering_oracle { "_ssoracle" } else { "" };
     let method = format!(

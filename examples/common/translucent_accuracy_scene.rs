@@ -243,6 +243,35 @@ pub enum ScatteringSource {
     /// order of scattering; no incidence weight, no separate single scattering): not
     /// something a moving light could have, but a bound on what a better beam model gains.
     BeamWalks(u32),
+    /// As `BeamWalks`, each patch's beam snapped to the nearest of a table's directions in the
+    /// patch's own frame (`cosines` incidence cosines, `(k + ½)/cosines`, times `azimuths`
+    /// azimuths about its normal): what a per-patch table of beam columns, precomputed for
+    /// any light and looked up (nearest, not interpolated) per frame, would give.
+    BinnedBeamWalks {
+        walks: u32,
+        cosines: u32,
+        azimuths: u32,
+    },
+}
+
+/// `beam` (a unit travel direction) snapped to the nearest of `cosines` × `azimuths`
+/// directions in the frame of `normal`: incidence cosines `(k + ½)/cosines`, azimuths
+/// `2π m/azimuths` from a tangent fixed by the normal alone. A beam from behind the surface
+/// stays as it is (it enters nowhere).
+pub fn binned_beam(beam: Vec3, normal: Vec3, cosines: u32, azimuths: u32) -> Vec3 {
+    let mu = -beam.dot(normal);
+    if mu <= 0.0 {
+        return beam;
+    }
+    let (t, b) = normal.any_orthonormal_pair();
+    let along = beam + mu * normal;
+    let azimuth = along.dot(b).atan2(along.dot(t));
+    let step = std::f32::consts::TAU / azimuths as f32;
+    let azimuth = (azimuth / step).round() * step;
+    let k = ((mu * cosines as f32).floor()).min(cosines as f32 - 1.0);
+    let mu = (k + 0.5) / cosines as f32;
+    let sine = (1.0 - mu * mu).max(0.0).sqrt();
+    (sine * (azimuth.cos() * t + azimuth.sin() * b) - mu * normal).normalize()
 }
 
 /// What the accuracy scene swaps in for the plugin's own stages, as oracles of them.
@@ -276,7 +305,7 @@ fn walked_scattering(
     world_units_per_mm: f32,
     rays: &SceneRays,
     walks: u32,
-    launch: WalkLaunch,
+    launch: impl Fn(usize) -> WalkLaunch,
 ) -> SparseMatrix<Vec3> {
     let p = &patches.patches;
     // Samples by grid cell of a patch size: the exit's nearest sample is within a cell.
@@ -322,7 +351,7 @@ fn walked_scattering(
             .map(|s| EntryPoint { position: s.position, normal: s.normal, area: s.area })
             .collect();
         let mut column: Vec<(u32, Vec3)> = Vec::new();
-        walk_exits(&medium, world_units_per_mm, &entries, rays, walks as usize, j as u64, launch, |c, exit| {
+        walk_exits(&medium, world_units_per_mm, &entries, rays, walks as usize, j as u64, launch(j), |c, exit| {
             // Through a gap in the mesh: lost.
             let Some(i) = exit.and_then(|exit| exit_patch(exit.position, exit.outward)) else {
                 return;
@@ -380,21 +409,34 @@ pub fn plugin_picture(
     let patches = resample_into_patches(&views, budget as usize);
     let rays = SceneRays::new(&views);
     let mut transport = EnergyTransport::build(&patches, &surfaces, &rays, settings);
-    let walked = match (oracles.scattering, lighting) {
-        (ScatteringSource::Walks(walks), _) => Some((walks, WalkLaunch::Diffuse)),
-        (ScatteringSource::BeamWalks(walks), SceneLighting::Directional(beam)) => {
-            Some((walks, WalkLaunch::Beam(beam.normalize())))
-        }
+    // Each patch's launch: diffuse, the light's beam, or its beam snapped to a table's.
+    let beam = match lighting {
+        SceneLighting::Directional(beam) => Some(beam.normalize()),
         // Light from everywhere has no one beam: diffuse walks.
-        (ScatteringSource::BeamWalks(walks), SceneLighting::Uniform) => {
-            Some((walks, WalkLaunch::Diffuse))
+        SceneLighting::Uniform => None,
+    };
+    let walked = match (oracles.scattering, beam) {
+        (ScatteringSource::Walks(walks), _)
+        | (ScatteringSource::BeamWalks(walks), None)
+        | (ScatteringSource::BinnedBeamWalks { walks, .. }, None) => Some((walks, None)),
+        (ScatteringSource::BeamWalks(walks), Some(beam)) => Some((walks, Some((beam, None)))),
+        (ScatteringSource::BinnedBeamWalks { walks, cosines, azimuths }, Some(beam)) => {
+            Some((walks, Some((beam, Some((cosines, azimuths))))))
         }
         (ScatteringSource::Profile, _) => None,
     };
-    if let Some((walks, launch)) = walked {
+    if let Some((walks, beam)) = walked {
+        let p = &patches.patches;
+        let launch = |j: usize| match beam {
+            None => WalkLaunch::Diffuse,
+            Some((beam, None)) => WalkLaunch::Beam(beam),
+            Some((beam, Some((cosines, azimuths)))) => {
+                WalkLaunch::Beam(binned_beam(beam, p[j].normal, cosines, azimuths))
+            }
+        };
         transport.scattering =
             walked_scattering(&patches, medium, WORLD_UNITS_PER_MM, &rays, walks, launch);
-        if let WalkLaunch::Beam(_) = launch {
+        if beam.is_some() {
             // The beam's walks hold its incidence and its single scattering already.
             transport.incidence.iter_mut().for_each(|w| *w = None);
             transport.single_scattering.iter_mut().for_each(|s| *s = Vec3::ZERO);

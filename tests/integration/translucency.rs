@@ -1177,7 +1177,38 @@ fn holds_as_documented(
 /// closer and from behind further. With `K` from random walks (the references' physics, as
 /// an oracle) skin from the front is still 0.143 and 1.10× too bright: the profile is not
 /// what is left; with walks entering as the light's own beam, 0.109 and 0.270 from behind;
-/// with single scattering leaving in its own law as well, 0.083 from the front.
+/// with single scattering leaving in its own law as well, 0.083 from the front; with the beam
+/// snapped to a per-patch table of 6 × 12 directions, 0.084.
+/// The beam table's snapping (`--beam-table`): a unit direction into the surface, at one of
+/// the table's incidence cosines, within half a bin of the beam; a beam from behind unchanged.
+#[test]
+fn a_beam_snaps_to_the_nearest_direction_of_the_table() {
+    use translucent_accuracy_scene::binned_beam;
+    let normal = Vec3::new(0.3, 0.9, -0.2).normalize();
+    for (cosines, azimuths) in [(6u32, 12u32), (64, 64)] {
+        for k in 0..200 {
+            let t = k as f32 * 0.37;
+            let beam = Vec3::new(t.sin(), -1.2 - (t * 1.7).cos(), (t * 0.6).cos()).normalize();
+            let snapped = binned_beam(beam, normal, cosines, azimuths);
+            assert!((snapped.length() - 1.0).abs() < 1e-5);
+            let (mu, snapped_mu) = (-beam.dot(normal), -snapped.dot(normal));
+            if mu <= 0.0 {
+                assert_eq!(snapped, beam, "from behind: unchanged");
+                continue;
+            }
+            let bin = (snapped_mu * cosines as f32 - 0.5).round();
+            assert!((snapped_mu * cosines as f32 - 0.5 - bin).abs() < 1e-3, "a table cosine");
+            assert!((snapped_mu - mu).abs() <= 0.5 / cosines as f32 + 1e-5);
+            // Azimuth within half a bin (measured on the tangent plane).
+            let along = |d: Vec3| (d + -d.dot(normal) * normal).normalize_or_zero();
+            if along(beam) != Vec3::ZERO && along(snapped) != Vec3::ZERO {
+                let angle = along(beam).dot(along(snapped)).clamp(-1.0, 1.0).acos();
+                assert!(angle <= std::f32::consts::PI / azimuths as f32 + 1e-3, "azimuth off by {angle}");
+            }
+        }
+    }
+}
+
 #[test]
 fn a_translucent_bunny_matches_mitsuba_as_documented() {
     use translucent_accuracy_scene::{
@@ -1194,6 +1225,12 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         Oracles { scattering: ScatteringSource::BeamWalks(256), ..own },
     );
     let beam_walks_and_law = Oracles { single_scattering_law: true, ..beam_walks };
+    // The beam snapped to the nearest of 6 incidence cosines × 12 azimuths in each patch's
+    // frame: what a per-patch table of beam columns would give.
+    let beam_table_and_law = Oracles {
+        scattering: ScatteringSource::BinnedBeamWalks { walks: 256, cosines: 6, azimuths: 12 },
+        ..beam_walks_and_law
+    };
     // (medium, lighting, how, the object's walks, oracles, relative L1, mean ratio r/g/b):
     // measured. The last four put oracles in for the plugin's own stages: `K` from 256 random
     // walks a patch and channel (the references' own physics), entering diffusely as `K`
@@ -1210,6 +1247,7 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks, 0.1086, [1.032, 1.054, 1.106]),
         (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_walks, 0.2698, [0.805, 0.836, 0.911]),
         (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks_and_law, 0.0831, [0.995, 1.002, 1.037]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table_and_law, 0.0844, [0.993, 1.002, 1.041]),
     ];
     for (preset, name, lighting, how, object_exit_share, oracles, rel_l1, ratio) in cases {
         let label = format!(
@@ -1219,6 +1257,9 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
                 ScatteringSource::Profile => String::new(),
                 ScatteringSource::Walks(n) => format!(" (K from {n} diffuse walks a patch)"),
                 ScatteringSource::BeamWalks(n) => format!(" (K from {n} beam walks a patch)"),
+                ScatteringSource::BinnedBeamWalks { walks, cosines, azimuths } => format!(
+                    " (K from {walks} beam walks a patch, beams snapped to {cosines}×{azimuths})"
+                ),
             },
             if oracles.single_scattering_law { " (single scattering in its own law)" } else { "" },
         );
