@@ -322,7 +322,15 @@ const SETTLE_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
 fn run_script(world: &mut World) {
     let building = MesostructureStatus::building(world)
         || bevy_mesostructure::translucency::TranslucencyStatus::building(world);
+    // The precompute's outcome, printed once.
+    let ready = (!world.resource::<Script>().translucency_printed)
+        .then(|| panel::translucency_ready(world))
+        .flatten();
     let mut script = world.resource_mut::<Script>();
+    if let Some(line) = ready {
+        println!("translucency: {line}");
+        script.translucency_printed = true;
+    }
     if building {
         let since = *script.settling_since.get_or_insert_with(std::time::Instant::now);
         if since.elapsed() < SETTLE_LIMIT {
@@ -338,10 +346,6 @@ fn run_script(world: &mut World) {
     } else {
         script.settling_since = None;
     }
-    let mut printed = script.translucency_printed;
-    panel::print_translucency_ready(world, &mut printed);
-    let mut script = world.resource_mut::<Script>();
-    script.translucency_printed = printed;
     script.frame += 1;
     if script.frame < script.warm_up || !script.exit_when_done {
         return;

@@ -307,13 +307,11 @@ pub fn print_timings(world: &World) {
     }
 }
 
-/// Prints the translucency precompute's outcome once, when it is ready.
-pub fn print_translucency_ready(world: &World, printed: &mut bool) {
+/// The translucency precompute's outcome, once it is ready.
+pub fn translucency_ready(world: &World) -> Option<String> {
     use bevy_mesostructure::translucency::TranslucencyStatus;
-    if let Some(status @ TranslucencyStatus::Ready { .. }) = world.get_resource::<TranslucencyStatus>()
-        && !*printed
-    {
-        *printed = true;
-        println!("translucency: {}", translucency_status(status));
+    match world.get_resource::<TranslucencyStatus>()? {
+        status @ TranslucencyStatus::Ready { .. } => Some(translucency_status(status)),
+        _ => None,
     }
 }

@@ -267,20 +267,37 @@ fn decide(@builtin(local_invocation_index) local: u32) {
     }
 }
 
+// Row `row` of a product of a scalar CSR matrix (F or the cluster means) over `rows` rows,
+// this thread's workgroup (`group` of `count`) holding WORKGROUP / ROW_LANES of them: its sum
+// for every lane of the row; `owner` for the one lane that writes it. All threads call it
+// (barriers).
+struct RowProduct {
+    row: u32,
+    owner: bool,
+    sum: vec4<f32>,
+}
+
+fn scalar_rows(local: u32, group: vec3<u32>, count: vec3<u32>, rows: u32,
+               offsets: u32, columns: u32, values: u32) -> RowProduct {
+    let row = group_index(group, count) * (WORKGROUP / ROW_LANES) + local / ROW_LANES;
+    let lane = local % ROW_LANES;
+    var part = vec4(0.0);
+    if row < rows {
+        part = scalar_row_part(offsets, columns, values, row, lane);
+    }
+    let sum = row_sum(local, part, ROW_LANES);
+    return RowProduct(row, row < rows && lane == 0u, sum);
+}
+
 // ΔB of each far-field cluster: its members' area mean.
 @compute @workgroup_size(64)
 fn cluster_means(@builtin(local_invocation_index) local: u32,
                  @builtin(workgroup_id) group: vec3<u32>,
                  @builtin(num_workgroups) count: vec3<u32>) {
-    let c = group_index(group, count) * (WORKGROUP / ROW_LANES) + local / ROW_LANES;
-    let lane = local % ROW_LANES;
-    var part = vec4(0.0);
-    if c < packing.clusters {
-        part = scalar_row_part(packing.c_offsets, packing.c_columns, packing.c_values, c, lane);
-    }
-    let sum = row_sum(local, part, ROW_LANES);
-    if c < packing.clusters && lane == 0u {
-        vectors[packing.delta_exitance + packing.patches + c] = sum;
+    let c = scalar_rows(local, group, count, packing.clusters,
+                        packing.c_offsets, packing.c_columns, packing.c_values);
+    if c.owner {
+        vectors[packing.delta_exitance + packing.patches + c.row] = c.sum;
     }
 }
 
@@ -289,16 +306,11 @@ fn cluster_means(@builtin(local_invocation_index) local: u32,
 fn gather(@builtin(local_invocation_index) local: u32,
           @builtin(workgroup_id) group: vec3<u32>,
           @builtin(num_workgroups) count: vec3<u32>) {
-    let i = group_index(group, count) * (WORKGROUP / ROW_LANES) + local / ROW_LANES;
-    let lane = local % ROW_LANES;
-    var part = vec4(0.0);
-    if i < packing.patches {
-        part = scalar_row_part(packing.f_offsets, packing.f_columns, packing.f_values, i, lane);
-    }
-    let sum = row_sum(local, part, ROW_LANES);
-    if i < packing.patches && lane == 0u {
-        vectors[packing.delta_irradiance + i] = sum;
-        vectors[packing.irradiance + i] += sum;
+    let i = scalar_rows(local, group, count, packing.patches,
+                        packing.f_offsets, packing.f_columns, packing.f_values);
+    if i.owner {
+        vectors[packing.delta_irradiance + i.row] = i.sum;
+        vectors[packing.irradiance + i.row] += i.sum;
     }
 }
 

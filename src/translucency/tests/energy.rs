@@ -356,16 +356,14 @@ fn the_oriented_dipole_changes_only_its_own_objects_transport() {
     assert_ne!(key(&flat), key(&second_oriented));
 }
 
-/// The iteration's geometric tail: stopped at the default threshold (1e-2), the exitance with
-/// the tail added is nearer the converged one than the old default (1e-3) without it. In the
-/// closed box of albedo 0.6 the increments shrink by ~0.6 an iteration.
-#[test]
-fn the_geometric_tail_brings_a_loose_threshold_near_the_converged_exitance() {
+/// The closed box of one grey `albedo` (1200 patches, default transport) and the direct light
+/// of a point light of 1 cd in it (the one of `a_closed_box_absorbs_exactly_the_light_put_in`).
+fn point_lit_closed_box(albedo: f32) -> (EnergyTransport, Vec<Vec3>) {
     let (objects, patches) = closed_box(1200);
     let views = views_of(&objects);
     let rays = SceneRays::new(&views);
     let surfaces = [PatchSurface::Opaque {
-        albedo: Vec3::splat(0.6),
+        albedo: Vec3::splat(albedo),
     }; 2];
     let lights = [PatchLight::Point {
         position: Vec3::new(-0.2, 0.5, -0.3),
@@ -374,15 +372,27 @@ fn the_geometric_tail_brings_a_loose_threshold_near_the_converged_exitance() {
     }];
     let direct = direct_irradiance(&patches, &lights, &rays);
     let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
+    (transport, direct)
+}
+
+/// Relative L1 of exitance `b` against `reference`, weighted by patch area, over all channels.
+fn exitance_relative_l1(b: &[Vec3], reference: &[Vec3], areas: &[f32]) -> f32 {
+    let (mut off, mut total) = (0.0, 0.0);
+    for ((x, c), a) in b.iter().zip(reference).zip(areas) {
+        off += (*x - *c).abs().element_sum() * a;
+        total += c.element_sum() * a;
+    }
+    off / total
+}
+
+/// The iteration's geometric tail: stopped at the default threshold (1e-2), the exitance with
+/// the tail added is nearer the converged one than the old default (1e-3) without it. In the
+/// closed box of albedo 0.6 the increments shrink by ~0.6 an iteration.
+#[test]
+fn the_geometric_tail_brings_a_loose_threshold_near_the_converged_exitance() {
+    let (transport, direct) = point_lit_closed_box(0.6);
     let converged = transport.solve(&direct, 1e-7, 1000);
-    let relative_l1 = |b: &[Vec3]| -> f32 {
-        let (mut off, mut total) = (0.0, 0.0);
-        for ((x, c), a) in b.iter().zip(&converged.exitance).zip(&transport.areas) {
-            off += (*x - *c).abs().element_sum() * a;
-            total += c.element_sum() * a;
-        }
-        off / total
-    };
+    let relative_l1 = |b: &[Vec3]| exitance_relative_l1(b, &converged.exitance, &transport.areas);
     // The truncated series alone, B = Σ (K F)^k K E⁰ over `iterations` bounces.
     let untailed = |iterations: u32| -> Vec<Vec3> {
         let mut delta = transport.scattering.mul_vec(&direct);
@@ -419,28 +429,11 @@ fn the_geometric_tail_brings_a_loose_threshold_near_the_converged_exitance() {
 /// stays near the converged one.
 #[test]
 fn a_bright_box_capped_at_the_default_iterations_keeps_its_light() {
-    let (objects, patches) = closed_box(1200);
-    let views = views_of(&objects);
-    let rays = SceneRays::new(&views);
-    let surfaces = [PatchSurface::Opaque {
-        albedo: Vec3::splat(0.9),
-    }; 2];
-    let lights = [PatchLight::Point {
-        position: Vec3::new(-0.2, 0.5, -0.3),
-        intensity: Vec3::ONE,
-        range: 100.0,
-    }];
-    let direct = direct_irradiance(&patches, &lights, &rays);
-    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
+    let (transport, direct) = point_lit_closed_box(0.9);
     let converged = transport.solve(&direct, 1e-7, 2000);
     let defaults = crate::translucency::TranslucencySettings::default();
     let capped = transport.solve(&direct, defaults.iteration_threshold, defaults.max_iterations);
-    let (mut off, mut total) = (0.0, 0.0);
-    for ((x, c), a) in capped.exitance.iter().zip(&converged.exitance).zip(&transport.areas) {
-        off += (*x - *c).abs().element_sum() * a;
-        total += c.element_sum() * a;
-    }
-    let relative_l1 = off / total;
+    let relative_l1 = exitance_relative_l1(&capped.exitance, &converged.exitance, &transport.areas);
     eprintln!(
         "{} iterations (cap {}), ratio {:.3}, relative L1 {relative_l1:.2e}",
         capped.iterations, defaults.max_iterations, capped.tail_ratio
