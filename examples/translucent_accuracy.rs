@@ -19,6 +19,8 @@
 //!     [--oriented-dipole true|false] [--shape-diffusion true|false]
 //!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks] [--walks 256]
 //!     [--beam-table COSINES,AZIMUTHS] [--single-scattering-oracle]
+//!     [--beam-orders FIRST,LAST] [--late-light profile|profile-less-early|clamped|near-scaled]
+//!     [--late-walks 1024] [--lit-face-single-scattering-law]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
@@ -57,10 +59,10 @@ use std::{
 
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
-    DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings,
+    DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings, random_walk::ScatteringOrders,
 };
 use translucent_accuracy_scene::{
-    FOV_Y, FRONT_LIGHT, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
+    FOV_Y, FRONT_LIGHT, LateLight, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
     ShapeView, plugin_picture, score,
 };
 
@@ -117,6 +119,25 @@ struct Cli {
     /// `_table<c>x<a>`)
     #[arg(long, value_name = "COSINES,AZIMUTHS", value_parser = parse_table)]
     beam_table: Option<(u32, u32)>,
+    /// With `--beam-table`: the orders of scattering the beam walks carry, FIRST (2: single
+    /// scattering is left to each pixel's own law) to LAST (walks still inside after it leave
+    /// as the profile's diffuse light; method suffix `_orders<first>to<last>`)
+    #[arg(long, value_name = "FIRST,LAST", value_parser = parse_orders)]
+    beam_orders: Option<(u32, u32)>,
+    /// With `--beam-orders`: how the light still inside after LAST leaves — as diffuse light
+    /// entering the patch (`profile`: its column of the profile's `K`), as the late part of
+    /// it (`profile-less-early`: that column less the early exits of `--late-walks` diffuse
+    /// walks), or that without its negative entries (`clamped`). Method suffix `_late<name>`
+    #[arg(long, value_enum, default_value_t = Late::Profile)]
+    late_light: Late,
+    /// Diffuse walks a channel from each patch for `--late-light profile-less-early|clamped`
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    late_walks: u32,
+    /// With `--beam-orders 1,..`: single scattering leaving by the lit face goes to each lit
+    /// pixel's own law instead of the table (what leaves through a thin part's far side stays
+    /// in it). Method suffix `_litfacelaw`
+    #[arg(long)]
+    lit_face_single_scattering_law: bool,
     /// Take the dipole's flux along each exit patch's normal
     /// (`Translucent::oriented_dipole`; method suffix `_oriented` when on)
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
@@ -236,6 +257,22 @@ fn parse_direction(s: &str) -> Result<Vec3, String> {
     }
 }
 
+/// `--late-light`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Late {
+    Profile,
+    ProfileLessEarly,
+    Clamped,
+    NearScaled,
+}
+
+fn parse_orders(s: &str) -> Result<(u32, u32), String> {
+    match s.split(',').map(|p| p.trim().parse::<u32>()).collect::<Vec<_>>()[..] {
+        [Ok(first), Ok(last)] if first <= 2 && last >= first.max(1) => Ok((first, last)),
+        _ => Err(format!("expected FIRST,LAST: FIRST 0 – 2, LAST ≥ FIRST and ≥ 1, got {s:?}")),
+    }
+}
+
 fn parse_table(s: &str) -> Result<(u32, u32), String> {
     let parts: Vec<&str> = s.split(',').collect();
     let [Ok(cosines), Ok(azimuths)] = [parts.first(), parts.get(1)].map(|p| {
@@ -287,6 +324,17 @@ fn main() {
     }
     if cli.scattering == Scattering::BeamWalks && (cli.eta != 1.0 || cli.uniform) {
         fail("--scattering beam-walks takes the directional light into an index-matched object only (drop --eta and --uniform)".into());
+    }
+    if cli.beam_orders.is_some() && cli.beam_table.is_none() {
+        fail("--beam-orders limits the table's beam walks: it needs --beam-table".into());
+    }
+    if cli.lit_face_single_scattering_law && cli.beam_orders.is_none_or(|(first, _)| first != 1) {
+        fail("--lit-face-single-scattering-law takes single scattering out of the table's walks: it needs --beam-orders 1,LAST".into());
+    }
+    if cli.single_scattering_oracle
+        && (cli.lit_face_single_scattering_law || cli.beam_orders.is_some_and(|(first, _)| first >= 2))
+    {
+        fail("--beam-orders 2,.. and --lit-face-single-scattering-law give single scattering in its own law already: drop --single-scattering-oracle".into());
     }
     if cli.beam_table.is_some() && cli.scattering != Scattering::BeamWalks {
         fail("--beam-table snaps the beam walks' directions: it needs --scattering beam-walks".into());
@@ -412,8 +460,37 @@ fn main() {
         Scattering::BeamWalks => match cli.beam_table {
             None => (ScatteringSource::BeamWalks(cli.walks), format!("_beamwalks{}", cli.walks)),
             Some((cosines, azimuths)) => (
-                ScatteringSource::BinnedBeamWalks { walks: cli.walks, cosines, azimuths },
-                format!("_beamwalks{}_table{cosines}x{azimuths}", cli.walks),
+                ScatteringSource::BinnedBeamWalks {
+                    walks: cli.walks,
+                    cosines,
+                    azimuths,
+                    orders: cli.beam_orders.map_or(
+                        ScatteringOrders { first: 1, last: u32::MAX },
+                        |(first, last)| ScatteringOrders { first, last },
+                    ),
+                    late: match cli.late_light {
+                        Late::Profile => LateLight::Profile,
+                        Late::ProfileLessEarly => LateLight::ProfileLessEarly,
+                        Late::Clamped => LateLight::ProfileLessEarlyClamped,
+                        Late::NearScaled => LateLight::ProfileNearScaled,
+                    },
+                    late_walks: cli.late_walks,
+                    lit_face_single_to_law: cli.lit_face_single_scattering_law,
+                },
+                format!(
+                    "_beamwalks{}_table{cosines}x{azimuths}{}",
+                    cli.walks,
+                    cli.beam_orders.map_or(String::new(), |(f, l)| format!(
+                        "_orders{f}to{l}{}_late{}",
+                        if cli.lit_face_single_scattering_law { "_litfacelaw" } else { "" },
+                        match cli.late_light {
+                            Late::Profile => "profile".to_string(),
+                            Late::ProfileLessEarly => format!("lessearly{}", cli.late_walks),
+                            Late::Clamped => format!("clamped{}", cli.late_walks),
+                            Late::NearScaled => format!("nearscaled{}", cli.late_walks),
+                        }
+                    ))
+                ),
             ),
         },
     };

@@ -7,7 +7,7 @@
 //! transport, iteration and gather as the passes, and its score against a reference picture.
 #![allow(dead_code)] // The example reads every field; the test only the picture and its score.
 
-use std::time::Instant;
+use std::{collections::BTreeMap, time::Instant};
 
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
@@ -16,7 +16,7 @@ use bevy_mesostructure::translucency::{
     diffusion::{diffuse_fresnel_reflectance, single_scattering_shape},
     gather::gathered_radiance,
     patches::{Patches, world_triangles},
-    random_walk::{EntryPoint, WalkLaunch, walk_exits},
+    random_walk::{EntryPoint, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
     resample_into_patches,
 };
 
@@ -251,7 +251,37 @@ pub enum ScatteringSource {
         walks: u32,
         cosines: u32,
         azimuths: u32,
+        /// The orders of scattering the walks carry: where `orders.first` is 2, single
+        /// scattering is each lit pixel's own, `α E/(4π(μ₀ + μ))`; walks still inside after
+        /// `orders.last` scatterings leave by `late`.
+        orders: ScatteringOrders,
+        /// How the light still inside after `orders.last` leaves.
+        late: LateLight,
+        /// Diffuse walks a channel from each patch for [`LateLight::ProfileLessEarly`] and
+        /// the others that subtract the early exits.
+        late_walks: u32,
+        /// Single scattering that leaves by the lit face (an exit normal within 60° of the
+        /// patch's) is each lit pixel's own law's, not the walks': what leaves after one
+        /// scattering through the far side of a thin part stays in the table.
+        lit_face_single_to_law: bool,
     },
+}
+
+/// How a beam's light still inside after the walks' last order leaves, per unit of it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LateLight {
+    /// As diffuse light entering the patch does: the profile's column.
+    Profile,
+    /// As the late part of diffuse light entering the patch: the profile's column less
+    /// the exits of diffuse walks within the same orders, per unit of their own remainder.
+    ProfileLessEarly,
+    /// [`ProfileLessEarly`](Self::ProfileLessEarly) without its negative entries (where the
+    /// profile holds less near the entry than the walks' early exits), rescaled to the same
+    /// flux.
+    ProfileLessEarlyClamped,
+    /// The profile's column with its near field — the patches the early diffuse walks leave
+    /// by — scaled down by the early walks' share of it as a whole, the rest as it is.
+    ProfileNearScaled,
 }
 
 /// `beam` (a unit travel direction) snapped to the nearest of `cosines` × `azimuths`
@@ -306,7 +336,17 @@ fn walked_scattering(
     rays: &SceneRays,
     walks: u32,
     launch: impl Fn(usize) -> WalkLaunch,
+    orders: ScatteringOrders,
+    (late, late_walks, lit_face_single_to_law): (LateLight, u32, bool),
+    profile: &SparseMatrix<Vec3>,
 ) -> SparseMatrix<Vec3> {
+    // The profile's columns, for the walks still inside after `orders.last`.
+    let mut profile_columns: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); patches.patches.len()];
+    for i in 0..profile.rows() {
+        for (j, v) in profile.row(i) {
+            profile_columns[j].push((i as u32, v));
+        }
+    }
     let p = &patches.patches;
     // Samples by grid cell of a patch size: the exit's nearest sample is within a cell.
     let cell = patches.patch_size.max(1e-9);
@@ -350,23 +390,109 @@ fn walked_scattering(
             .iter()
             .map(|s| EntryPoint { position: s.position, normal: s.normal, area: s.area })
             .collect();
-        let mut column: Vec<(u32, Vec3)> = Vec::new();
-        walk_exits(&medium, world_units_per_mm, &entries, rays, walks as usize, j as u64, launch(j), |c, exit| {
-            // Through a gap in the mesh: lost.
-            let Some(i) = exit.and_then(|exit| exit_patch(exit.position, exit.outward)) else {
-                return;
-            };
-            let at = match column.iter().position(|e| e.0 == i) {
-                Some(at) => at,
-                None => {
-                    column.push((i, Vec3::ZERO));
-                    column.len() - 1
-                }
-            };
-            column[at].1[c] += 1.0;
-        });
+        // Each walk's exits by patch, and the share still inside after `orders.last`.
+        let walked = |launch: WalkLaunch, orders: ScatteringOrders, walks: u32, lit_face_single_to_law: bool| {
+            let mut column: Vec<(u32, Vec3)> = Vec::new();
+            let mut remaining = Vec3::ZERO;
+            walk_ends(&medium, world_units_per_mm, &entries, rays, walks as usize, j as u64, launch, orders, |c, end| {
+                let exit = match end {
+                    // Single scattering leaving by the lit face is the pixel's own law's.
+                    WalkEnd::Exit(exit)
+                        if lit_face_single_to_law && exit.order == 1 && exit.outward.dot(pj.normal) > 0.5 =>
+                    {
+                        return;
+                    }
+                    WalkEnd::Exit(exit) => exit,
+                    // Through a gap in the mesh: lost.
+                    WalkEnd::Gap => return,
+                    WalkEnd::Remainder => {
+                        remaining[c] += 1.0 / walks as f32;
+                        return;
+                    }
+                };
+                let Some(i) = exit_patch(exit.position, exit.outward) else {
+                    return;
+                };
+                let at = match column.iter().position(|e| e.0 == i) {
+                    Some(at) => at,
+                    None => {
+                        column.push((i, Vec3::ZERO));
+                        column.len() - 1
+                    }
+                };
+                column[at].1[c] += 1.0;
+            });
+            (column, remaining)
+        };
+        let (column, remaining) = walked(launch(j), orders, walks, lit_face_single_to_law);
+        let mut entries_of: BTreeMap<u32, Vec3> = Default::default();
         for (i, count) in column {
             let value = count * (entering / walks as f32) * pj.area / p[i as usize].area;
+            *entries_of.entry(i).or_default() += value;
+        }
+        if remaining != Vec3::ZERO && late == LateLight::Profile {
+            for &(i, v) in &profile_columns[j] {
+                *entries_of.entry(i).or_default() += v * remaining;
+            }
+        } else if remaining != Vec3::ZERO {
+            // The late part of diffuse light entering here: the profile's column less the
+            // early exits of diffuse walks, per unit of their own remainder.
+            let (early, diffuse_remaining) = walked(
+                WalkLaunch::Diffuse,
+                ScatteringOrders { first: 0, last: orders.last },
+                late_walks,
+                false,
+            );
+            let scale = Vec3::select(
+                diffuse_remaining.cmpgt(Vec3::ZERO),
+                remaining / diffuse_remaining.max(Vec3::splat(1e-9)),
+                Vec3::ZERO,
+            );
+            let mut late_column: BTreeMap<u32, Vec3> = profile_columns[j].iter().copied().collect();
+            let early_patches: std::collections::BTreeSet<u32> = early.iter().map(|e| e.0).collect();
+            for (i, count) in early {
+                let value = count * (entering / late_walks as f32) * pj.area / p[i as usize].area;
+                *late_column.entry(i).or_default() -= value;
+            }
+            if late == LateLight::ProfileNearScaled {
+                let flux = |m: &BTreeMap<u32, Vec3>, near: bool| -> Vec3 {
+                    m.iter()
+                        .filter(|(i, _)| early_patches.contains(i) == near)
+                        .map(|(&i, &v)| v * p[i as usize].area)
+                        .sum()
+                };
+                let profile_near: BTreeMap<u32, Vec3> = profile_columns[j].iter().copied().collect();
+                let whole_near = flux(&profile_near, true);
+                let late_near = flux(&late_column, true).max(Vec3::ZERO);
+                let f = Vec3::select(
+                    whole_near.cmpgt(Vec3::ZERO),
+                    late_near / whole_near.max(Vec3::splat(1e-30)),
+                    Vec3::ZERO,
+                );
+                late_column = profile_near
+                    .into_iter()
+                    .map(|(i, v)| (i, if early_patches.contains(&i) { v * f } else { v }))
+                    .collect();
+            }
+            if late == LateLight::ProfileLessEarlyClamped {
+                let flux = |m: &BTreeMap<u32, Vec3>| -> Vec3 {
+                    m.iter().map(|(&i, &v)| v * p[i as usize].area).sum()
+                };
+                let total = flux(&late_column);
+                late_column.values_mut().for_each(|v| *v = v.max(Vec3::ZERO));
+                let clamped = flux(&late_column);
+                let rescale = Vec3::select(
+                    clamped.cmpgt(Vec3::ZERO),
+                    total.max(Vec3::ZERO) / clamped.max(Vec3::splat(1e-30)),
+                    Vec3::ZERO,
+                );
+                late_column.values_mut().for_each(|v| *v *= rescale);
+            }
+            for (i, v) in late_column {
+                *entries_of.entry(i).or_default() += v * scale;
+            }
+        }
+        for (i, value) in entries_of {
             rows[i as usize].push((j as u32, value));
         }
     }
@@ -420,7 +546,7 @@ pub fn plugin_picture(
         | (ScatteringSource::BeamWalks(walks), None)
         | (ScatteringSource::BinnedBeamWalks { walks, .. }, None) => Some((walks, None)),
         (ScatteringSource::BeamWalks(walks), Some(beam)) => Some((walks, Some((beam, None)))),
-        (ScatteringSource::BinnedBeamWalks { walks, cosines, azimuths }, Some(beam)) => {
+        (ScatteringSource::BinnedBeamWalks { walks, cosines, azimuths, .. }, Some(beam)) => {
             Some((walks, Some((beam, Some((cosines, azimuths))))))
         }
         (ScatteringSource::Profile, _) => None,
@@ -434,8 +560,41 @@ pub fn plugin_picture(
                 WalkLaunch::Beam(binned_beam(beam, p[j].normal, cosines, azimuths))
             }
         };
-        transport.scattering =
-            walked_scattering(&patches, medium, WORLD_UNITS_PER_MM, &rays, walks, launch);
+        let (orders, late) = match oracles.scattering {
+            ScatteringSource::BinnedBeamWalks { orders, late, late_walks, lit_face_single_to_law, .. }
+                if beam.is_some() =>
+            {
+                (orders, (late, late_walks, lit_face_single_to_law))
+            }
+            // Every order: nothing is left inside.
+            _ if beam.is_some() => (ScatteringOrders { first: 1, last: u32::MAX }, (LateLight::Profile, 0, false)),
+            _ => (ScatteringOrders { first: 0, last: u32::MAX }, (LateLight::Profile, 0, false)),
+        };
+        let start = Instant::now();
+        transport.scattering = walked_scattering(
+            &patches,
+            medium,
+            WORLD_UNITS_PER_MM,
+            &rays,
+            walks,
+            launch,
+            orders,
+            late,
+            &transport.scattering,
+        );
+        let walked_patches = patches
+            .patches
+            .iter()
+            .enumerate()
+            .filter(|&(j, q)| match launch(j) {
+                WalkLaunch::Beam(direction) => q.normal.dot(direction) < 0.0,
+                WalkLaunch::Diffuse => true,
+            })
+            .count();
+        eprintln!(
+            "  walks: {walked_patches} patches facing their launch, {:.2} s on one thread",
+            start.elapsed().as_secs_f32()
+        );
         if beam.is_some() {
             // The beam's walks hold its incidence and its single scattering already.
             transport.incidence.iter_mut().for_each(|w| *w = None);
@@ -475,7 +634,14 @@ pub fn plugin_picture(
         SceneLighting::Directional(travel)
             if oracles.single_scattering_law && medium.index_of_refraction == 1.0 =>
         {
-            single_scattering_law(&view.hits, pixels, medium, travel, &rays)
+            single_scattering_law(&view.hits, pixels, medium, travel, &rays, true)
+        }
+        SceneLighting::Directional(travel)
+            if matches!(oracles.scattering, ScatteringSource::BinnedBeamWalks { orders, lit_face_single_to_law, .. }
+                if orders.first >= 2 || lit_face_single_to_law)
+                && medium.index_of_refraction == 1.0 =>
+        {
+            single_scattering_law(&view.hits, pixels, medium, travel, &rays, false)
         }
         _ => pixels,
     };
@@ -499,6 +665,7 @@ fn single_scattering_law(
     medium: TranslucentMedium,
     travel: Vec3,
     rays: &SceneRays,
+    lambert_held: bool,
 ) -> Vec<Vec3> {
     let alpha = Vec3::from_array(medium.single_scattering_albedo().map(|a| a as f32));
     pixels
@@ -512,7 +679,7 @@ fn single_scattering_law(
             if mu0 <= 0.0 || rays.first_hit(hit.point + hit.normal * 1e-5, -travel).is_some() {
                 return pixel;
             }
-            let shape = single_scattering_shape(mu0 as f64) as f32;
+            let shape = if lambert_held { single_scattering_shape(mu0 as f64) as f32 } else { 0.0 };
             let change = alpha * mu0 / (4.0 * std::f32::consts::PI) * (1.0 / (mu0 + mu) - 2.0 * shape);
             (pixel + change).max(Vec3::ZERO)
         })

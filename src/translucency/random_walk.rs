@@ -172,12 +172,17 @@ fn exit_share(
         walks,
         seed,
         WalkLaunch::Diffuse,
-        first_hit,
-        |channel, entry, exit| {
-            left[channel] += 1;
-            if exit.is_some_and(|exit| entry.normal.dot(exit.outward) < 0.99) {
-                other_face[channel] += 1;
+        ScatteringOrders { first: 0, last: MAX_EVENTS },
+        (|x, d, _| first_hit(x, d), false),
+        |channel, entry, end| match end {
+            WalkEnd::Exit(exit) => {
+                left[channel] += 1;
+                if entry.normal.dot(exit.outward) < 0.99 {
+                    other_face[channel] += 1;
+                }
             }
+            WalkEnd::Gap => left[channel] += 1,
+            WalkEnd::Remainder => {}
         },
     )?;
     let n = walks.max(1) as f32;
@@ -195,6 +200,9 @@ pub struct WalkExit {
     pub position: Vec3,
     /// The boundary's unit normal there, outward.
     pub outward: Vec3,
+    /// How many times the walk scattered before it left (0: a diffuse launch's light that
+    /// left unscattered).
+    pub order: u32,
 }
 
 /// How walks enter the medium.
@@ -229,6 +237,11 @@ pub fn walk_exits(
     launch: WalkLaunch,
     mut on_exit: impl FnMut(usize, Option<WalkExit>),
 ) -> bool {
+    let orders = ScatteringOrders {
+        // A beam's uncollided light goes on along the beam: not the surface's.
+        first: u32::from(matches!(launch, WalkLaunch::Beam(_))),
+        last: MAX_EVENTS,
+    };
     walk(
         medium,
         world_units_per_mm,
@@ -236,8 +249,69 @@ pub fn walk_exits(
         walks,
         seed,
         launch,
-        |x, d| rays.first_hit(x, d),
-        |channel, _, exit| on_exit(channel, exit),
+        orders,
+        (|x, d, _| rays.first_hit(x, d), false),
+        |c, _, end| match end {
+            WalkEnd::Exit(exit) => on_exit(c, Some(exit)),
+            WalkEnd::Gap => on_exit(c, None),
+            WalkEnd::Remainder => {}
+        },
+    )
+    .is_some()
+}
+
+/// Which orders of scattering a walk reports (`walk_ends`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ScatteringOrders {
+    /// Walks that leave after fewer scatterings than this are not reported (0: all; 1: not
+    /// a beam's uncollided light; 2: not single scattering either, which a caller gives in
+    /// its own law).
+    pub first: u32,
+    /// Walks still inside after this many scatterings stop and are reported as
+    /// [`WalkEnd::Remainder`] (at most `MAX_EVENTS`, 20 000, beyond which a walk counts as
+    /// absorbed).
+    pub last: u32,
+}
+
+/// How a walk ended, where it is reported.
+#[derive(Clone, Copy, Debug)]
+pub enum WalkEnd {
+    /// It left through the boundary.
+    Exit(WalkExit),
+    /// It left through a gap in the mesh.
+    Gap,
+    /// It was still inside after [`ScatteringOrders::last`] scatterings.
+    Remainder,
+}
+
+/// [`walk_exits`] for the `orders` given: `on_end(channel, end)` for each walk that leaves
+/// after at least `orders.first` scatterings or is still inside after `orders.last`. The mesh
+/// is queried only as far as each free flight reaches (several times faster for walks of a
+/// few mean free paths), so a walk that left through a gap in the mesh is not told apart: it
+/// scatters on outside until it is absorbed or ends as a [`WalkEnd::Remainder`] — use short
+/// `orders.last` on meshes that may be open.
+#[allow(clippy::too_many_arguments)]
+pub fn walk_ends(
+    medium: &TranslucentMedium,
+    world_units_per_mm: f32,
+    entries: &[EntryPoint],
+    rays: &SceneRays,
+    walks: usize,
+    seed: u64,
+    launch: WalkLaunch,
+    orders: ScatteringOrders,
+    mut on_end: impl FnMut(usize, WalkEnd),
+) -> bool {
+    walk(
+        medium,
+        world_units_per_mm,
+        entries,
+        walks,
+        seed,
+        launch,
+        orders,
+        (|x, d, t_max| rays.first_hit_within(x, d, t_max), true),
+        |channel, _, end| on_end(channel, end),
     )
     .is_some()
 }
@@ -251,8 +325,9 @@ fn walk(
     walks: usize,
     seed: u64,
     launch: WalkLaunch,
-    first_hit: impl Fn(Vec3, Vec3) -> Option<(f32, Vec3)>,
-    mut on_exit: impl FnMut(usize, &EntryPoint, Option<WalkExit>),
+    orders: ScatteringOrders,
+    (first_hit, bounded): (impl Fn(Vec3, Vec3, f32) -> Option<(f32, Vec3)>, bool),
+    mut on_end: impl FnMut(usize, &EntryPoint, WalkEnd),
 ) -> Option<()> {
     if medium.invalid_reason().is_some()
         || !(world_units_per_mm.is_finite() && world_units_per_mm > 0.0)
@@ -283,31 +358,42 @@ fn walk(
             let e = &entries[cumulative.partition_point(|&c| c < pick).min(entries.len() - 1)];
             let inward = -e.normal;
             let mut x = e.position + inward * epsilon;
-            let (mut d, report_uncollided) = match launch {
-                WalkLaunch::Diffuse => (cosine_about(inward, random.next(), random.next()), true),
+            let mut d = match launch {
+                WalkLaunch::Diffuse => cosine_about(inward, random.next(), random.next()),
                 WalkLaunch::Beam(direction) => match refracted(direction, e.normal, eta as f32) {
-                    Some(d) => (d, false),
+                    Some(d) => d,
                     // A beam along or behind this face does not enter through it.
                     None => continue,
                 },
             };
-            let mut scattered = false;
+            let mut order = 0u32;
             for _ in 0..MAX_EVENTS {
                 let free_path = (-(1.0 - random.next()).ln() / sigma_t) as f32;
-                let Some((to_boundary, normal)) = first_hit(x, d) else {
+                let boundary = first_hit(x, d, free_path);
+                let (to_boundary, normal) = match boundary {
+                    Some((t, normal)) if t <= free_path => (t, normal),
                     // Out through a gap in the mesh: it has left.
-                    on_exit(c, e, None);
-                    break;
-                };
-                if free_path < to_boundary {
-                    x += d * free_path;
-                    if random.next() >= albedo {
+                    None if !bounded => {
+                        if order >= orders.first {
+                            on_end(c, e, WalkEnd::Gap);
+                        }
                         break;
                     }
-                    d = uniform_direction(random.next(), random.next());
-                    scattered = true;
-                    continue;
-                }
+                    // The boundary is beyond the free flight: a collision.
+                    _ => {
+                        x += d * free_path;
+                        if random.next() >= albedo {
+                            break;
+                        }
+                        order += 1;
+                        if order > orders.last {
+                            on_end(c, e, WalkEnd::Remainder);
+                            break;
+                        }
+                        d = uniform_direction(random.next(), random.next());
+                        continue;
+                    }
+                };
                 // At the boundary, from inside: Fresnel reflection back in (total internal
                 // reflection beyond the critical angle), else out.
                 let outward = if normal.dot(d) > 0.0 { normal } else { -normal };
@@ -318,18 +404,9 @@ fn walk(
                     x = hit - outward * epsilon;
                     continue;
                 }
-                if !(scattered || report_uncollided) {
-                    // A beam's uncollided light goes on along the beam: not the surface's.
-                    break;
+                if order >= orders.first {
+                    on_end(c, e, WalkEnd::Exit(WalkExit { position: hit, outward, order }));
                 }
-                on_exit(
-                    c,
-                    e,
-                    Some(WalkExit {
-                        position: hit,
-                        outward,
-                    }),
-                );
                 break;
             }
         }

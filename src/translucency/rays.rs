@@ -16,6 +16,9 @@ use super::patches::PatchObject;
 pub struct SceneRays {
     bvh: CwBvh,
     triangles: Vec<Triangle>,
+    /// How far [`SceneRays::first_hit_within`] starts its ray behind its origin: 1e-4 of the
+    /// scene's bounding diagonal.
+    back_off: f32,
 }
 
 fn to_a(v: Vec3) -> Vec3A {
@@ -49,7 +52,15 @@ impl SceneRays {
             .collect();
         let mut time = std::time::Duration::ZERO;
         let bvh = build_cwbvh_from_tris(&triangles, BvhBuildParams::fast_build(), &mut time);
-        Self { bvh, triangles }
+        let (low, high) = triangles.iter().fold(
+            (Vec3A::splat(f32::INFINITY), Vec3A::splat(f32::NEG_INFINITY)),
+            |(low, high), t| {
+                (low.min(t.v0.min(t.v1.min(t.v2))), high.max(t.v0.max(t.v1.max(t.v2))))
+            },
+        );
+        let diagonal = (high - low).length();
+        let back_off = if diagonal.is_finite() { 1e-4 * diagonal } else { 0.0 };
+        Self { bvh, triangles, back_off }
     }
 
     /// Whether the ray from `origin` along the unit `direction` is free over `[0, t_max]`.
@@ -69,7 +80,32 @@ impl SceneRays {
         if self.triangles.is_empty() {
             return None;
         }
-        let ray = ray(origin, direction, f32::INFINITY);
+        self.nearest(ray(origin, direction, f32::INFINITY))
+    }
+
+    /// [`first_hit`](Self::first_hit) over `[0, t_max]` only: `None` where nothing is that
+    /// close (the traversal prunes everything further, which a random walk's short free
+    /// flights make cheap). The ray starts 1e-4 of the scene's size behind `origin` (hits
+    /// behind `origin` left out): from within ~1e-5 of a face of a 2-unit cube `first_hit`
+    /// misses that face every time (measured: all of 2000 rays from 1e-6 deep, 1908 from
+    /// 1e-5, none from 1e-4), where a random walk's collisions near the surface start.
+    pub fn first_hit_within(
+        &self,
+        origin: Vec3,
+        direction: Vec3,
+        t_max: f32,
+    ) -> Option<(f32, Vec3)> {
+        if self.triangles.is_empty() {
+            return None;
+        }
+        let back = self.back_off;
+        let mut ray = ray(origin - direction * back, direction, t_max + back);
+        ray.tmin = back;
+        self.nearest(ray).map(|(t, n)| (t - back, n))
+    }
+
+    /// The nearest triangle along `ray`: its distance and unit normal (either side).
+    fn nearest(&self, ray: Ray) -> Option<(f32, Vec3)> {
         let mut hit = RayHit::none();
         let found = self.bvh.ray_traverse(ray, &mut hit, |r, id| {
             self.triangles[self.bvh.primitive_indices[id] as usize].intersect(r)
