@@ -19,7 +19,7 @@
 //!     [--oriented-dipole true|false] [--shape-diffusion true|false]
 //!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks] [--walks 256]
 //!     [--beam-table COSINES,AZIMUTHS] [--single-scattering-oracle]
-//!     [--beam-orders FIRST,LAST] [--late-light profile|profile-less-early|clamped|near-scaled]
+//!     [--beam-orders FIRST,LAST] [--late-light profile|profile-less-early|clamped]
 //!     [--late-walks 1024] [--lit-face-single-scattering-law]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
@@ -59,7 +59,8 @@ use std::{
 
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
-    DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings, random_walk::ScatteringOrders,
+    DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings, beam_table::BeamTableSettings,
+    random_walk::ScatteringOrders,
 };
 use translucent_accuracy_scene::{
     FOV_Y, FRONT_LIGHT, LateLight, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
@@ -219,6 +220,7 @@ enum Scattering {
     Profile,
     Walks,
     BeamWalks,
+    BeamTable,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum, Debug)]
@@ -263,7 +265,6 @@ enum Late {
     Profile,
     ProfileLessEarly,
     Clamped,
-    NearScaled,
 }
 
 fn parse_orders(s: &str) -> Result<(u32, u32), String> {
@@ -325,7 +326,7 @@ fn main() {
     if cli.scattering == Scattering::BeamWalks && (cli.eta != 1.0 || cli.uniform) {
         fail("--scattering beam-walks takes the directional light into an index-matched object only (drop --eta and --uniform)".into());
     }
-    if cli.beam_orders.is_some() && cli.beam_table.is_none() {
+    if cli.beam_orders.is_some() && cli.beam_table.is_none() && cli.scattering != Scattering::BeamTable {
         fail("--beam-orders limits the table's beam walks: it needs --beam-table".into());
     }
     if cli.lit_face_single_scattering_law && cli.beam_orders.is_none_or(|(first, _)| first != 1) {
@@ -336,8 +337,11 @@ fn main() {
     {
         fail("--beam-orders 2,.. and --lit-face-single-scattering-law give single scattering in its own law already: drop --single-scattering-oracle".into());
     }
-    if cli.beam_table.is_some() && cli.scattering != Scattering::BeamWalks {
-        fail("--beam-table snaps the beam walks' directions: it needs --scattering beam-walks".into());
+    if cli.beam_table.is_some() && !matches!(cli.scattering, Scattering::BeamWalks | Scattering::BeamTable) {
+        fail("--beam-table snaps the beam walks' directions: it needs --scattering beam-walks or beam-table".into());
+    }
+    if cli.scattering == Scattering::BeamTable && (cli.eta != 1.0 || cli.uniform || cli.single_scattering_oracle) {
+        fail("--scattering beam-table takes the directional light into an index-matched object and gives single scattering its own law already (drop --eta, --uniform, --single-scattering-oracle)".into());
     }
     if cli.single_scattering_oracle && (cli.eta != 1.0 || cli.uniform) {
         fail("--single-scattering-oracle takes the directional light on an index-matched object only (drop --eta and --uniform)".into());
@@ -457,6 +461,23 @@ fn main() {
     let (source, walked) = match cli.scattering {
         Scattering::Profile => (ScatteringSource::Profile, String::new()),
         Scattering::Walks => (ScatteringSource::Walks(cli.walks), format!("_walks{}", cli.walks)),
+        Scattering::BeamTable => {
+            let (cosines, azimuths) = cli.beam_table.unwrap_or((4, 8));
+            let table = BeamTableSettings {
+                cosines,
+                azimuths,
+                walks: cli.walks,
+                late_walks: cli.late_walks,
+                last_order: cli.beam_orders.map_or(16, |(_, last)| last),
+            };
+            (
+                ScatteringSource::BeamTable(table),
+                format!(
+                    "_beamtable{cosines}x{azimuths}_walks{}_late{}_orders{}",
+                    table.walks, table.late_walks, table.last_order
+                ),
+            )
+        }
         Scattering::BeamWalks => match cli.beam_table {
             None => (ScatteringSource::BeamWalks(cli.walks), format!("_beamwalks{}", cli.walks)),
             Some((cosines, azimuths)) => (
@@ -472,7 +493,6 @@ fn main() {
                         Late::Profile => LateLight::Profile,
                         Late::ProfileLessEarly => LateLight::ProfileLessEarly,
                         Late::Clamped => LateLight::ProfileLessEarlyClamped,
-                        Late::NearScaled => LateLight::ProfileNearScaled,
                     },
                     late_walks: cli.late_walks,
                     lit_face_single_to_law: cli.lit_face_single_scattering_law,
@@ -487,7 +507,6 @@ fn main() {
                             Late::Profile => "profile".to_string(),
                             Late::ProfileLessEarly => format!("lessearly{}", cli.late_walks),
                             Late::Clamped => format!("clamped{}", cli.late_walks),
-                            Late::NearScaled => format!("nearscaled{}", cli.late_walks),
                         }
                     ))
                 ),

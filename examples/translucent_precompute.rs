@@ -31,6 +31,7 @@ use std::{io::Write, path::PathBuf, time::Instant};
 
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
+    beam_table::{BeamTable, BeamTableSettings},
     DiffusionKernel, EnergyTransport, PatchLight, PatchObject, SceneRays, TransportSettings,
     direct_irradiance, resample_into_patches_with_caps, translucent_patch_cap,
 };
@@ -55,6 +56,10 @@ struct Cli {
     /// PNG chart of precompute time and memory against patches
     #[arg(long)]
     chart: Option<PathBuf>,
+    /// Also build the translucent patches' beam table (`beam_table::BeamTable`, default
+    /// settings) and report its time, entries and memory on stderr
+    #[arg(long)]
+    beam_table: bool,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -128,6 +133,27 @@ iterations,solve_ms,threads,shadow_ray_injection_ms";
         let bytes = 4 * (2 * (n + 1))
             + 8 * transport.form_factors.entries()
             + 20 * transport.scattering.entries();
+        if cli.beam_table {
+            let table = BeamTable::build(
+                &patches,
+                &surfaces,
+                &rays,
+                &transport.scattering,
+                BeamTableSettings::default(),
+                None,
+            );
+            let entries = table.early.entries() + table.late.entries();
+            eprintln!(
+                "budget {budget}: beam table of {} translucent patches × {} directions: {} early \
+                 and {} late entries ({:.1} MB as CSR), {:.2} s on {threads} threads",
+                table.media.len(),
+                table.bins(),
+                table.early.entries(),
+                table.late.entries(),
+                (8 * (n + 1) + 16 * entries + 12 * table.late_share.len()) as f32 / 1e6,
+                table.seconds,
+            );
+        }
         let inject_start = Instant::now();
         let direct = direct_irradiance(&patches, &lights, &rays);
         let inject_ms = inject_start.elapsed().as_secs_f32() * 1e3;

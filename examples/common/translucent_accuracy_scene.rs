@@ -11,6 +11,9 @@ use std::{collections::BTreeMap, time::Instant};
 
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
+    beam_table::{
+        BeamTable, ExitPatches, BeamTableSettings, bin_direction, direction_bin, single_scattering_radiance,
+    },
     EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface, SceneRays,
     SparseMatrix, TranslucentMedium, TransportSettings, direct_light,
     diffusion::{diffuse_fresnel_reflectance, single_scattering_shape},
@@ -265,9 +268,15 @@ pub enum ScatteringSource {
         /// scattering through the far side of a thin part stays in the table.
         lit_face_single_to_law: bool,
     },
+    /// The crate's beam table (`beam_table::BeamTable`): for the directional light, each
+    /// patch's nearest table direction's column (only that one walked), single scattering by
+    /// the lit face in its own law per pixel.
+    BeamTable(BeamTableSettings),
 }
 
-/// How a beam's light still inside after the walks' last order leaves, per unit of it.
+/// How a beam's light still inside after the walks' last order leaves, per unit of it: the
+/// variants measured against `beam_table`'s (the profile's column with its near field scaled
+/// down, [`ScatteringSource::BeamTable`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LateLight {
     /// As diffuse light entering the patch does: the profile's column.
@@ -279,9 +288,6 @@ pub enum LateLight {
     /// profile holds less near the entry than the walks' early exits), rescaled to the same
     /// flux.
     ProfileLessEarlyClamped,
-    /// The profile's column with its near field — the patches the early diffuse walks leave
-    /// by — scaled down by the early walks' share of it as a whole, the rest as it is.
-    ProfileNearScaled,
 }
 
 /// `beam` (a unit travel direction) snapped to the nearest of `cosines` × `azimuths`
@@ -289,19 +295,8 @@ pub enum LateLight {
 /// `2π m/azimuths` from a tangent fixed by the normal alone. A beam from behind the surface
 /// stays as it is (it enters nowhere).
 pub fn binned_beam(beam: Vec3, normal: Vec3, cosines: u32, azimuths: u32) -> Vec3 {
-    let mu = -beam.dot(normal);
-    if mu <= 0.0 {
-        return beam;
-    }
-    let (t, b) = normal.any_orthonormal_pair();
-    let along = beam + mu * normal;
-    let azimuth = along.dot(b).atan2(along.dot(t));
-    let step = std::f32::consts::TAU / azimuths as f32;
-    let azimuth = (azimuth / step).round() * step;
-    let k = ((mu * cosines as f32).floor()).min(cosines as f32 - 1.0);
-    let mu = (k + 0.5) / cosines as f32;
-    let sine = (1.0 - mu * mu).max(0.0).sqrt();
-    (sine * (azimuth.cos() * t + azimuth.sin() * b) - mu * normal).normalize()
+    direction_bin(beam, normal, cosines, azimuths)
+        .map_or(beam, |bin| bin_direction(bin, normal, cosines, azimuths))
 }
 
 /// What the accuracy scene swaps in for the plugin's own stages, as oracles of them.
@@ -329,6 +324,7 @@ impl Oracles {
 /// the walks from patch `j`'s samples leaving through each patch `i` (the nearest sample
 /// facing the exit's way), times `T A_j / A_i` — the profile's own normalisation
 /// (`Σ_i A_i K_ij` = what leaves of `T A_j`).
+#[allow(clippy::too_many_arguments)]
 fn walked_scattering(
     patches: &Patches,
     medium: TranslucentMedium,
@@ -348,39 +344,8 @@ fn walked_scattering(
         }
     }
     let p = &patches.patches;
-    // Samples by grid cell of a patch size: the exit's nearest sample is within a cell.
-    let cell = patches.patch_size.max(1e-9);
-    let key = |x: Vec3| (x / cell).floor().as_ivec3();
-    let mut grid: std::collections::HashMap<IVec3, Vec<(Vec3, Vec3, u32)>> = Default::default();
-    for i in 0..p.len() {
-        for s in patches.samples_of(i) {
-            grid.entry(key(s.position)).or_default().push((s.position, s.normal, i as u32));
-        }
-    }
-    let exit_patch = |x: Vec3, outward: Vec3| -> Option<u32> {
-        // The nearest sample facing the exit's way, and the nearest of any: (distance², patch).
-        let mut facing: Option<(f32, u32)> = None;
-        let mut any: Option<(f32, u32)> = None;
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    for &(position, normal, patch) in
-                        grid.get(&(key(x) + IVec3::new(dx, dy, dz))).into_iter().flatten()
-                    {
-                        let d = position.distance_squared(x);
-                        if any.is_none_or(|b| d < b.0) {
-                            any = Some((d, patch));
-                        }
-                        // Not the far side of a thin part.
-                        if normal.dot(outward) > 0.0 && facing.is_none_or(|b| d < b.0) {
-                            facing = Some((d, patch));
-                        }
-                    }
-                }
-            }
-        }
-        facing.or(any).map(|b| b.1)
-    };
+    let exit_patches = ExitPatches::new(patches);
+    let exit_patch = |x: Vec3, outward: Vec3| exit_patches.of(x, outward);
     // What diffuse light gets past the boundary (the profiles' `entrance_transmittance`).
     let entering = (1.0 - diffuse_fresnel_reflectance(medium.index_of_refraction as f64)) as f32;
     let mut rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); p.len()];
@@ -449,30 +414,9 @@ fn walked_scattering(
                 Vec3::ZERO,
             );
             let mut late_column: BTreeMap<u32, Vec3> = profile_columns[j].iter().copied().collect();
-            let early_patches: std::collections::BTreeSet<u32> = early.iter().map(|e| e.0).collect();
             for (i, count) in early {
                 let value = count * (entering / late_walks as f32) * pj.area / p[i as usize].area;
                 *late_column.entry(i).or_default() -= value;
-            }
-            if late == LateLight::ProfileNearScaled {
-                let flux = |m: &BTreeMap<u32, Vec3>, near: bool| -> Vec3 {
-                    m.iter()
-                        .filter(|(i, _)| early_patches.contains(i) == near)
-                        .map(|(&i, &v)| v * p[i as usize].area)
-                        .sum()
-                };
-                let profile_near: BTreeMap<u32, Vec3> = profile_columns[j].iter().copied().collect();
-                let whole_near = flux(&profile_near, true);
-                let late_near = flux(&late_column, true).max(Vec3::ZERO);
-                let f = Vec3::select(
-                    whole_near.cmpgt(Vec3::ZERO),
-                    late_near / whole_near.max(Vec3::splat(1e-30)),
-                    Vec3::ZERO,
-                );
-                late_column = profile_near
-                    .into_iter()
-                    .map(|(i, v)| (i, if early_patches.contains(&i) { v * f } else { v }))
-                    .collect();
             }
             if late == LateLight::ProfileLessEarlyClamped {
                 let flux = |m: &BTreeMap<u32, Vec3>| -> Vec3 {
@@ -549,7 +493,7 @@ pub fn plugin_picture(
         (ScatteringSource::BinnedBeamWalks { walks, cosines, azimuths, .. }, Some(beam)) => {
             Some((walks, Some((beam, Some((cosines, azimuths))))))
         }
-        (ScatteringSource::Profile, _) => None,
+        (ScatteringSource::Profile, _) | (ScatteringSource::BeamTable(_), _) => None,
     };
     if let Some((walks, beam)) = walked {
         let p = &patches.patches;
@@ -601,8 +545,29 @@ pub fn plugin_picture(
             transport.single_scattering.iter_mut().for_each(|s| *s = Vec3::ZERO);
         }
     }
+    let table = match (oracles.scattering, beam) {
+        (ScatteringSource::BeamTable(table_settings), Some(travel)) => {
+            // The walks hold the beam's incidence: no incidence weight on the object.
+            transport.incidence.iter_mut().for_each(|w| *w = None);
+            let only: Vec<Option<u32>> = patches
+                .patches
+                .iter()
+                .map(|q| direction_bin(travel, q.normal, table_settings.cosines, table_settings.azimuths))
+                .collect();
+            let table = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, table_settings, Some(&only));
+            eprintln!("  beam table: {} patch-directions walked in {:.2} s", only.iter().flatten().count(), table.seconds);
+            Some((table, travel))
+        }
+        _ => None,
+    };
     let precompute_s = start.elapsed().as_secs_f32();
     let mut direct = direct_light(&patches, Some(&transport), &lights, &rays);
+    if let Some((table, travel)) = &table {
+        // One directional light of illuminance 1: each patch's shadowed irradiance is its
+        // beam's, all of it the table's.
+        direct.exitance = table.exitance(&patches, |j| [(*travel, direct.irradiance[j])]);
+        direct.tabled = direct.irradiance.clone();
+    }
     for e in &mut direct.irradiance {
         *e += ambient;
     }
@@ -639,6 +604,7 @@ pub fn plugin_picture(
         SceneLighting::Directional(travel)
             if matches!(oracles.scattering, ScatteringSource::BinnedBeamWalks { orders, lit_face_single_to_law, .. }
                 if orders.first >= 2 || lit_face_single_to_law)
+                || matches!(oracles.scattering, ScatteringSource::BeamTable(_))
                 && medium.index_of_refraction == 1.0 =>
         {
             single_scattering_law(&view.hits, pixels, medium, travel, &rays, false)
@@ -679,7 +645,10 @@ fn single_scattering_law(
             if mu0 <= 0.0 || rays.first_hit(hit.point + hit.normal * 1e-5, -travel).is_some() {
                 return pixel;
             }
-            let shape = if lambert_held { single_scattering_shape(mu0 as f64) as f32 } else { 0.0 };
+            if !lambert_held {
+                return pixel + single_scattering_radiance(alpha, 1.0, Vec3::splat(mu0), mu0, mu);
+            }
+            let shape = single_scattering_shape(mu0 as f64) as f32;
             let change = alpha * mu0 / (4.0 * std::f32::consts::PI) * (1.0 / (mu0 + mu) - 2.0 * shape);
             (pixel + change).max(Vec3::ZERO)
         })

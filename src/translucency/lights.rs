@@ -18,8 +18,12 @@ pub struct DirectLight {
     pub irradiance: Vec<Vec3>,
     /// Exitance `S⁰` per patch besides `K E⁰` (may be empty: none): on translucent patches,
     /// the single scattering of each beam at its own incidence less the diffuse mean `K`
-    /// already holds.
+    /// already holds; with a [`BeamTable`](super::beam_table::BeamTable), its exitance for the
+    /// beams it carries.
     pub exitance: Vec<Vec3>,
+    /// The part of `irradiance` per patch that a beam table carries into `exitance` (may be
+    /// empty: none): `K` takes the rest.
+    pub tabled: Vec<Vec3>,
 }
 
 /// A light as the transport injects it (Bevy's conventions: colour × intensity per channel).
@@ -156,6 +160,7 @@ pub fn direct_light(
             Vec::new()
         },
         irradiance: per_patch.into_iter().map(|d| d.0).collect(),
+        tabled: Vec::new(),
     }
 }
 

@@ -20,6 +20,7 @@
 //! (`gather/`).
 //! `docs/translucent.md` says what is measured and what is not built yet.
 
+pub mod beam_table;
 pub mod cache;
 pub mod diffusion;
 mod far_field;

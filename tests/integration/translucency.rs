@@ -1119,6 +1119,29 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
         let reference = reference_picture(name, lighting);
         holds_as_documented(&view, &label, lighting, medium, oriented_dipole, &settings, how, translucent_accuracy_scene::Oracles::NONE, &reference, rel_l1, ratio);
     }
+    // The beam table (`beam_table`, its default 4 × 8 directions; index-matched): each lit
+    // patch's column for its table direction, single scattering by the lit face in its own
+    // law per pixel (`translucent_accuracy --scattering beam-table`). Not in the plugin's
+    // passes yet.
+    let table = translucent_accuracy_scene::Oracles {
+        scattering: translucent_accuracy_scene::ScatteringSource::BeamTable(default()),
+        ..translucent_accuracy_scene::Oracles::NONE
+    };
+    let table_cases = [
+        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0579, [0.992, 0.962, 0.948]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, 0.3435, [0.709, 0.385, 0.335]),
+        (TranslucentPreset::Marble, "marble", "front", front, 0.0478, [0.986, 0.983, 0.993]),
+        (TranslucentPreset::Marble, "marble", "back", back, 0.0782, [0.954, 0.941, 0.949]),
+    ];
+    for (preset, name, lighting, how, rel_l1, ratio) in table_cases {
+        let medium = bevy_mesostructure::translucency::TranslucentMedium {
+            index_of_refraction: 1.0,
+            ..preset.medium()
+        };
+        let reference = reference_picture(name, lighting);
+        let label = format!("{name} (beam table)");
+        holds_as_documented(&view, &label, lighting, medium, false, &default(), how, table, &reference, rel_l1, ratio);
+    }
 }
 
 /// The plugin's picture of `view`'s shape (960 patches on the ball, 904 on the bunny: a
@@ -1179,36 +1202,6 @@ fn holds_as_documented(
 /// what is left; with walks entering as the light's own beam, 0.109 and 0.270 from behind;
 /// with single scattering leaving in its own law as well, 0.083 from the front; with the beam
 /// snapped to a per-patch table of 6 × 12 directions, 0.084.
-/// The beam table's snapping (`--beam-table`): a unit direction into the surface, at one of
-/// the table's incidence cosines, within half a bin of the beam; a beam from behind unchanged.
-#[test]
-fn a_beam_snaps_to_the_nearest_direction_of_the_table() {
-    use translucent_accuracy_scene::binned_beam;
-    let normal = Vec3::new(0.3, 0.9, -0.2).normalize();
-    for (cosines, azimuths) in [(6u32, 12u32), (64, 64)] {
-        for k in 0..200 {
-            let t = k as f32 * 0.37;
-            let beam = Vec3::new(t.sin(), -1.2 - (t * 1.7).cos(), (t * 0.6).cos()).normalize();
-            let snapped = binned_beam(beam, normal, cosines, azimuths);
-            assert!((snapped.length() - 1.0).abs() < 1e-5);
-            let (mu, snapped_mu) = (-beam.dot(normal), -snapped.dot(normal));
-            if mu <= 0.0 {
-                assert_eq!(snapped, beam, "from behind: unchanged");
-                continue;
-            }
-            let bin = (snapped_mu * cosines as f32 - 0.5).round();
-            assert!((snapped_mu * cosines as f32 - 0.5 - bin).abs() < 1e-3, "a table cosine");
-            assert!((snapped_mu - mu).abs() <= 0.5 / cosines as f32 + 1e-5);
-            // Azimuth within half a bin (measured on the tangent plane).
-            let along = |d: Vec3| (d + -d.dot(normal) * normal).normalize_or_zero();
-            if along(beam) != Vec3::ZERO && along(snapped) != Vec3::ZERO {
-                let angle = along(beam).dot(along(snapped)).clamp(-1.0, 1.0).acos();
-                assert!(angle <= std::f32::consts::PI / azimuths as f32 + 1e-3, "azimuth off by {angle}");
-            }
-        }
-    }
-}
-
 #[test]
 fn a_translucent_bunny_matches_mitsuba_as_documented() {
     use bevy_mesostructure::translucency::random_walk::ScatteringOrders;
@@ -1241,22 +1234,10 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         },
         ..beam_walks_and_law
     };
-    // A table of 4 × 8 directions whose walks stop at their 17th scattering — what is still
-    // inside leaves as the late part of the profile's column (its near field scaled down by
-    // 1024 diffuse walks' early exits) — and whose single scattering by the lit face leaves
-    // each lit pixel in its own law: the design `docs/translucent.md` sizes for the plugin.
-    let short_table = Oracles {
-        scattering: ScatteringSource::BinnedBeamWalks {
-            walks: 256,
-            cosines: 4,
-            azimuths: 8,
-            orders: ScatteringOrders { first: 1, last: 16 },
-            late: LateLight::ProfileNearScaled,
-            late_walks: 1024,
-            lit_face_single_to_law: true,
-        },
-        ..own
-    };
+    // The crate's beam table (`beam_table`, default settings: 4 × 8 directions, walks
+    // stopped at their 17th scattering, the rest the profile's late light, single scattering
+    // by the lit face in its own law per pixel). Not in the plugin's passes yet.
+    let beam_table = Oracles { scattering: ScatteringSource::BeamTable(default()), ..own };
     // (medium, lighting, how, the object's walks, oracles, relative L1, mean ratio r/g/b):
     // measured. The last four put oracles in for the plugin's own stages: `K` from 256 random
     // walks a patch and channel (the references' own physics), entering diffusely as `K`
@@ -1274,9 +1255,9 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_walks, 0.2696, [0.806, 0.839, 0.903]),
         (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks_and_law, 0.0828, [0.995, 0.999, 1.028]),
         (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table_and_law, 0.0848, [0.993, 0.998, 1.033]),
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, short_table, 0.0781, [1.016, 1.042, 1.013]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, short_table, 0.2980, [0.792, 0.805, 0.769]),
-        (TranslucentPreset::Marble, "marble", "front", front, true, short_table, 0.0729, [0.987, 0.984, 0.981]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0775, [1.024, 1.056, 1.012]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.2698, [0.842, 0.789, 0.762]),
+        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0742, [0.990, 0.990, 0.988]),
     ];
     for (preset, name, lighting, how, object_exit_share, oracles, rel_l1, ratio) in cases {
         let label = format!(
@@ -1291,6 +1272,10 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
                      orders {}–{})",
                     orders.first,
                     if orders.last == u32::MAX { "all".to_string() } else { orders.last.to_string() }
+                ),
+                ScatteringSource::BeamTable(t) => format!(
+                    " (the beam table, {}×{}, {} walks)",
+                    t.cosines, t.azimuths, t.walks
                 ),
             },
             if oracles.single_scattering_law { " (single scattering in its own law)" } else { "" },

@@ -2,8 +2,9 @@
 //! their closed forms ([`profiles`]), the patches' areas and count ([`patches`]), the form
 //! factors' reciprocity, energy in a closed box and the iteration against a dense solve
 //! ([`energy`]), media and the random walks ([`media`]), the cache and the gather's grid
-//! ([`cache_and_gather`]).
+//! ([`cache_and_gather`]), the beam table ([`beam_table`]).
 
+mod beam_table;
 mod cache_and_gather;
 mod energy;
 mod media;

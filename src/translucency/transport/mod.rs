@@ -427,15 +427,17 @@ impl EnergyTransport {
         self.solve_with(
             &DirectLight {
                 irradiance: direct.to_vec(),
-                exitance: Vec::new(),
+                ..default()
             },
             threshold,
             max_iterations,
         )
     }
 
-    /// [`solve`](Self::solve) from `B = K E⁰ + S⁰`: `direct.exitance` is the exitance the
-    /// direct light leaves besides `K E⁰` (single scattering at each beam's own incidence).
+    /// [`solve`](Self::solve) from `B = K (E⁰ − E_t) + S⁰`: `direct.exitance` is the exitance
+    /// the direct light leaves besides what `K` gives (single scattering at each beam's own
+    /// incidence, a beam table's columns), `direct.tabled` (`E_t`) the irradiance that a beam
+    /// table carries instead of `K`.
     pub fn solve_with(
         &self,
         direct: &DirectLight,
@@ -443,7 +445,12 @@ impl EnergyTransport {
         max_iterations: u32,
     ) -> TransportSolution {
         let mut irradiance = direct.irradiance.clone();
-        let mut delta = self.scattering.mul_vec(&direct.irradiance);
+        let scattered: Vec<Vec3> = if direct.tabled.is_empty() {
+            direct.irradiance.clone()
+        } else {
+            direct.irradiance.iter().zip(&direct.tabled).map(|(e, t)| *e - *t).collect()
+        };
+        let mut delta = self.scattering.mul_vec(&scattered);
         for (d, s) in delta.iter_mut().zip(&direct.exitance) {
             *d += *s;
         }

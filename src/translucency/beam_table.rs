@@ -1,0 +1,531 @@
+//! A per-patch table of beam columns: where a translucent patch gives back the light of a beam
+//! arriving along each of a few directions in its own frame, from random walks in the
+//! object's triangles — the beam-resolved first scatterings that a diffusion profile, whose
+//! sources sit under the entry whatever the light's direction, does not carry
+//! (`docs/translucent.md`: on the Stanford bunny lit from the front, skin 0.160 → 0.078 and
+//! marble 0.089 → 0.073 in relative L1 against Mitsuba).
+//!
+//! Each table direction's column comes from three parts:
+//! - **the walks' low orders**: `walks` beam walks a channel from the patch's samples
+//!   ([`random_walk::walk_ends`]), refracted in, each exit after 1 … `last_order`
+//!   scatterings counted on the patch it leaves by (the nearest sample facing the exit's
+//!   way);
+//! - **single scattering by the lit face is left out**: it leaves each lit pixel in its own
+//!   law ([`single_scattering_radiance`]), limb-brightened where Lambert's law is flat; what
+//!   leaves after one scattering through the far side of a thin part stays in the column;
+//! - **the late light**: the walks still inside after `last_order` scatterings leave as the
+//!   late part of diffuse light entering the patch does — the profile's column (`K`'s, the
+//!   object's shape and totals included) with its near field, the patches that `late_walks`
+//!   diffuse walks leave by within the same orders, scaled down by those early exits' share of
+//!   it — per unit of the diffuse walks' own remainder. Stopping the walks there bounds their
+//!   cost (marble's albedo 0.999 would take hundreds of scatterings) and puts the light that
+//!   crosses an object where the profile, not 256 walks' noise, says.
+//!
+//! Columns are per unit of light that got in: a frame weights each beam by the boundary's
+//! Fresnel transmittance at its own incidence.
+
+use bevy::{platform::collections::HashMap, prelude::*};
+
+use super::{
+    diffusion::{diffuse_fresnel_reflectance, fresnel_reflectance},
+    patches::Patches,
+    random_walk::{EntryPoint, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
+    transport::{PatchSurface, SceneRays, SparseMatrix, parallel_rows},
+};
+
+/// How a beam table is built.
+#[derive(Clone, Copy, Debug, PartialEq, Reflect)]
+pub struct BeamTableSettings {
+    /// Incidence cosines of the table's directions, `(k + ½)/cosines` (1 – 16).
+    pub cosines: u32,
+    /// Azimuths about the patch's normal, `2π m/azimuths` (1 – 32).
+    pub azimuths: u32,
+    /// Beam walks a channel and direction (≥ 1).
+    pub walks: u32,
+    /// Diffuse walks a channel and patch for the late light's near field (≥ 1).
+    pub late_walks: u32,
+    /// Scatterings a walk takes before it leaves as late light (≥ 1).
+    pub last_order: u32,
+}
+
+impl Default for BeamTableSettings {
+    /// 4 × 8 directions (measured as close as 6 × 12 on the bunny and the ball:
+    /// `docs/translucent.md`), 256 walks (128 cost the ball's skin 0.060 → 0.069 in relative
+    /// L1), 1024 late walks (256: 0.060 → 0.080), the 17th scattering on (from the 9th the
+    /// back-lit bunny's skin went 0.286 → 0.316).
+    fn default() -> Self {
+        Self {
+            cosines: 4,
+            azimuths: 8,
+            walks: 256,
+            late_walks: 1024,
+            last_order: 16,
+        }
+    }
+}
+
+impl BeamTableSettings {
+    /// Directions a patch.
+    pub fn bins(&self) -> u32 {
+        self.cosines * self.azimuths
+    }
+
+    /// Why these settings cannot build a table, if they cannot.
+    pub fn invalid_reason(&self) -> Option<&'static str> {
+        if !(1..=16).contains(&self.cosines) || !(1..=32).contains(&self.azimuths) {
+            Some("a beam table takes 1 – 16 cosines and 1 – 32 azimuths")
+        } else if self.walks == 0 || self.late_walks == 0 || self.last_order == 0 {
+            Some("a beam table needs at least one walk, late walk and scattering")
+        } else {
+            None
+        }
+    }
+}
+
+/// The frame a patch's table directions are measured in: a tangent and bitangent fixed by
+/// its normal alone (glam's `any_orthonormal_pair`, Duff et al. 2017; `inject.wgsl` has its
+/// twin).
+fn tangent_frame(normal: Vec3) -> (Vec3, Vec3) {
+    normal.any_orthonormal_pair()
+}
+
+/// The table direction nearest a beam travelling along the unit `travel` onto a patch of
+/// unit `normal`: its incidence cosine `μ = −travel·n` rounded down to `(k + ½)/cosines`'s
+/// bin, its azimuth to the nearest of `azimuths`; `bin = k · azimuths + m`. `None` for a beam
+/// along or behind the surface.
+pub fn direction_bin(travel: Vec3, normal: Vec3, cosines: u32, azimuths: u32) -> Option<u32> {
+    let mu = -travel.dot(normal);
+    if !(mu > 0.0) || cosines == 0 || azimuths == 0 {
+        return None;
+    }
+    let (t, b) = tangent_frame(normal);
+    let along = travel + mu * normal;
+    let step = std::f32::consts::TAU / azimuths as f32;
+    let m = (along.dot(b).atan2(along.dot(t)) / step).round().rem_euclid(azimuths as f32) as u32;
+    let k = ((mu * cosines as f32) as u32).min(cosines - 1);
+    Some(k * azimuths + m.min(azimuths - 1))
+}
+
+/// The travel direction of table direction `bin` onto a patch of unit `normal` (see
+/// [`direction_bin`]).
+pub fn bin_direction(bin: u32, normal: Vec3, cosines: u32, azimuths: u32) -> Vec3 {
+    let (k, m) = (bin / azimuths.max(1), bin % azimuths.max(1));
+    let mu = (k as f32 + 0.5) / cosines.max(1) as f32;
+    let azimuth = std::f32::consts::TAU * m as f32 / azimuths.max(1) as f32;
+    let (t, b) = tangent_frame(normal);
+    let sine = (1.0 - mu * mu).max(0.0).sqrt();
+    (sine * (azimuth.cos() * t + azimuth.sin() * b) - mu * normal).normalize()
+}
+
+/// Single scattering's radiance leaving a half-space of single-scattering albedo `alpha`
+/// (isotropic phase) behind a smooth boundary of index `eta`, lit by a beam of irradiance
+/// `irradiance` (on the surface) at incidence cosine `mu0`, seen at exit cosine `mu`:
+/// `α E T(μ₀) T(μ) / (4π η² (μ₀′ + μ′))`, the primed cosines refracted (Hanrahan and
+/// Krueger 1993; at `η = 1`, `α E / (4π(μ₀ + μ))`). Zero outside `0 < μ₀, μ ≤ 1`.
+pub fn single_scattering_radiance(alpha: Vec3, eta: f32, irradiance: Vec3, mu0: f32, mu: f32) -> Vec3 {
+    if !(mu0 > 0.0 && mu > 0.0) {
+        return Vec3::ZERO;
+    }
+    let eta = if eta.is_finite() { eta.clamp(1.0, 3.0) } else { 1.0 };
+    let inside = |c: f32| (1.0 - (1.0 - c * c) / (eta * eta)).max(0.0).sqrt();
+    let transmitted = |c: f32| (1.0 - fresnel_reflectance(c.min(1.0) as f64, eta as f64)) as f32;
+    alpha * irradiance * (transmitted(mu0) * transmitted(mu))
+        / (4.0 * std::f32::consts::PI * eta * eta * (inside(mu0) + inside(mu)))
+}
+
+/// The fraction of a beam at incidence cosine `mu0` that gets into a medium of index `eta`
+/// (what a table column is per unit of).
+pub fn entering(eta: f32, mu0: f32) -> f32 {
+    (1.0 - fresnel_reflectance(mu0.clamp(0.0, 1.0) as f64, eta.max(1.0) as f64)) as f32
+}
+
+/// The beam table of one scene's translucent patches.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BeamTable {
+    /// What it was built with.
+    pub settings: BeamTableSettings,
+    /// Per patch its slot (its directions are `slot · bins … + bins`), `u32::MAX` for
+    /// patches without a table (opaque, an invalid medium).
+    pub slots: Vec<u32>,
+    /// The walks' low orders — rows: the patches light leaves by; columns: `slot · bins +
+    /// bin`; values: exitance per unit of irradiance that got in, per channel.
+    pub early: SparseMatrix<Vec3>,
+    /// Per direction (`slot · bins + bin`), the share of its walks still inside after the last
+    /// order over the share of diffuse walks', per channel: how much of `late`'s column its
+    /// light takes.
+    pub late_share: Vec<Vec3>,
+    /// The late light, one column per slot: where diffuse light entering the patch leaves
+    /// after the last order (the profile's column, its near field scaled down), per unit of
+    /// the diffuse walks' remainder. One column a patch, not one a direction: the late light
+    /// has forgotten the beam but for its amount.
+    pub late: SparseMatrix<Vec3>,
+    /// Per slot, its medium's single-scattering albedo (rgb) and index of refraction (w).
+    pub media: Vec<Vec4>,
+    /// Wall-clock seconds to build.
+    pub seconds: f32,
+}
+
+/// The patch a walk leaves by: the nearest sample facing the exit's way (not the far side of
+/// a thin part), else the nearest of any, among a grid of the patches' samples.
+pub struct ExitPatches {
+    cell: f32,
+    grid: HashMap<IVec3, Vec<(Vec3, Vec3, u32)>>,
+}
+
+impl ExitPatches {
+    /// The grid of `patches`' samples.
+    pub fn new(patches: &Patches) -> Self {
+        // Samples by grid cell of a patch size: the exit's nearest sample is within a cell.
+        let cell = patches.patch_size.max(1e-9);
+        let mut grid: HashMap<IVec3, Vec<(Vec3, Vec3, u32)>> = HashMap::default();
+        for i in 0..patches.patches.len() {
+            for s in patches.samples_of(i) {
+                grid.entry((s.position / cell).floor().as_ivec3())
+                    .or_default()
+                    .push((s.position, s.normal, i as u32));
+            }
+        }
+        Self { cell, grid }
+    }
+
+    /// The patch a walk leaving at `x` through a boundary of unit `outward` normal leaves
+    /// by; `None` where no sample is within a patch size.
+    pub fn of(&self, x: Vec3, outward: Vec3) -> Option<u32> {
+        let key = (x / self.cell).floor().as_ivec3();
+        // The nearest sample facing the exit's way (not the far side of a thin part), else
+        // the nearest of any: (distance², patch).
+        let (mut facing, mut any): (Option<(f32, u32)>, Option<(f32, u32)>) = (None, None);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let cell = self.grid.get(&(key + IVec3::new(dx, dy, dz)));
+                    for &(position, normal, patch) in cell.into_iter().flatten() {
+                        let d = position.distance_squared(x);
+                        if any.is_none_or(|b| d < b.0) {
+                            any = Some((d, patch));
+                        }
+                        if normal.dot(outward) > 0.0 && facing.is_none_or(|b| d < b.0) {
+                            facing = Some((d, patch));
+                        }
+                    }
+                }
+            }
+        }
+        facing.or(any).map(|b| b.1)
+    }
+}
+
+/// Exitance per unit of light entering patch `j`, by the patch it leaves through.
+type Column = HashMap<u32, Vec3>;
+
+/// One patch's late column and, per direction walked, its early column and late share.
+type PatchColumns = (Option<Column>, Vec<(u32, Column, Vec3)>);
+
+impl BeamTable {
+    /// Directions a patch.
+    pub fn bins(&self) -> u32 {
+        self.settings.bins()
+    }
+
+    /// The table of `patches`' translucent ones (`surfaces[o]` object `o`'s), `profile` the
+    /// transport's `K` (its columns give the late light). With `only`, patch `j` walks only
+    /// the bin `only[j]` (the others stay empty: what one directional light needs, for the
+    /// accuracy tool). Every core.
+    pub fn build(
+        patches: &Patches,
+        surfaces: &[PatchSurface],
+        rays: &SceneRays,
+        profile: &SparseMatrix<Vec3>,
+        settings: BeamTableSettings,
+        only: Option<&[Option<u32>]>,
+    ) -> Self {
+        let start = std::time::Instant::now();
+        let p = &patches.patches;
+        let n = p.len();
+        if let Some(reason) = settings.invalid_reason() {
+            warn!("translucency: {reason} (got {settings:?}); no beam table");
+            return Self { settings, slots: vec![u32::MAX; n], ..default() };
+        }
+        let medium_of = |j: usize| match surfaces.get(p[j].object as usize) {
+            Some(&PatchSurface::Translucent { medium, world_units_per_mm, .. })
+                if medium.invalid_reason().is_none()
+                    && world_units_per_mm.is_finite()
+                    && world_units_per_mm > 0.0 =>
+            {
+                Some((medium, world_units_per_mm))
+            }
+            _ => None,
+        };
+        let mut slots = vec![u32::MAX; n];
+        let mut tabled = Vec::new();
+        let mut media = Vec::new();
+        for (j, slot) in slots.iter_mut().enumerate() {
+            if let Some((medium, _)) = medium_of(j) {
+                *slot = tabled.len() as u32;
+                tabled.push(j);
+                let alpha = medium.single_scattering_albedo();
+                media.push(Vec4::new(
+                    alpha[0] as f32,
+                    alpha[1] as f32,
+                    alpha[2] as f32,
+                    medium.index_of_refraction,
+                ));
+            }
+        }
+        // The profile's columns (it is stored by rows).
+        let mut profile_columns: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
+        for i in 0..profile.rows().min(n) {
+            for (j, v) in profile.row(i) {
+                if j < n {
+                    profile_columns[j].push((i as u32, v));
+                }
+            }
+        }
+        let exits = ExitPatches::new(patches);
+        let bins = settings.bins();
+        let columns: Vec<PatchColumns> = parallel_rows(tabled.len(), |slot| {
+            let j = tabled[slot];
+            let Some((medium, units_per_mm)) = medium_of(j) else {
+                return (None, Vec::new());
+            };
+            let walked: Vec<u32> = match only {
+                Some(only) => only.get(j).copied().flatten().into_iter().collect(),
+                None => (0..bins).collect(),
+            };
+            if walked.is_empty() {
+                return (None, Vec::new());
+            }
+            let column_of = ColumnWalks {
+                patches,
+                rays,
+                exits: &exits,
+                medium,
+                units_per_mm,
+                j,
+                last_order: settings.last_order,
+            };
+            let diffuse_entering =
+                (1.0 - diffuse_fresnel_reflectance(medium.index_of_refraction as f64)) as f32;
+            let late = column_of.late_light(
+                &profile_columns[j],
+                diffuse_entering,
+                settings.late_walks,
+            );
+            let directions = walked
+                .into_iter()
+                .map(|bin| {
+                    let travel = bin_direction(bin, p[j].normal, settings.cosines, settings.azimuths);
+                    let seed = j as u64 * bins as u64 + bin as u64;
+                    let (column, remaining) = column_of.walk(
+                        WalkLaunch::Beam(travel),
+                        settings.walks,
+                        seed,
+                        true,
+                    );
+                    let share = match &late {
+                        Some((_, late_remaining)) => Vec3::select(
+                            late_remaining.cmpgt(Vec3::ZERO),
+                            remaining / late_remaining.max(Vec3::splat(1e-9)),
+                            Vec3::ZERO,
+                        ),
+                        None => Vec3::ZERO,
+                    };
+                    (bin, column, share)
+                })
+                .collect::<Vec<_>>();
+            (late.map(|l| l.0), directions)
+        });
+        let mut early_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
+        let mut late_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
+        let mut late_share = vec![Vec3::ZERO; tabled.len() * bins as usize];
+        for (slot, (late, directions)) in columns.into_iter().enumerate() {
+            for (bin, column, share) in directions {
+                late_share[slot * bins as usize + bin as usize] = share;
+                for (i, v) in column {
+                    if v != Vec3::ZERO {
+                        early_rows[i as usize].push((slot as u32 * bins + bin, v));
+                    }
+                }
+            }
+            for (i, v) in late.into_iter().flatten() {
+                if v != Vec3::ZERO {
+                    late_rows[i as usize].push((slot as u32, v));
+                }
+            }
+        }
+        Self {
+            settings,
+            slots,
+            early: SparseMatrix::from_rows(early_rows),
+            late_share,
+            late: SparseMatrix::from_rows(late_rows),
+            media,
+            seconds: start.elapsed().as_secs_f32(),
+        }
+    }
+
+    /// The exitance the table gives each patch for the beams `beams(j)` yields on patch `j`:
+    /// `(travel, irradiance)`, the irradiance on the surface before the boundary (its
+    /// entering share is weighted here). Patches without a table take none.
+    pub fn exitance<I: IntoIterator<Item = (Vec3, Vec3)>>(
+        &self,
+        patches: &Patches,
+        beams: impl Fn(usize) -> I,
+    ) -> Vec<Vec3> {
+        let bins = self.bins();
+        let mut light = vec![Vec3::ZERO; self.media.len() * bins as usize];
+        for (j, &slot) in self.slots.iter().enumerate() {
+            if slot == u32::MAX {
+                continue;
+            }
+            let normal = patches.patches[j].normal;
+            let eta = self.media[slot as usize].w;
+            for (travel, irradiance) in beams(j) {
+                let Some(bin) =
+                    direction_bin(travel, normal, self.settings.cosines, self.settings.azimuths)
+                else {
+                    continue;
+                };
+                light[(slot * bins + bin) as usize] +=
+                    irradiance * entering(eta, -travel.dot(normal));
+            }
+        }
+        let late_light: Vec<Vec3> = (0..self.media.len())
+            .map(|slot| {
+                let at = slot * bins as usize;
+                (at..at + bins as usize).map(|c| self.late_share[c] * light[c]).sum()
+            })
+            .collect();
+        let mut exitance = self.early.mul_vec(&light);
+        for (b, late) in exitance.iter_mut().zip(self.late.mul_vec(&late_light)) {
+            *b += late;
+        }
+        exitance
+    }
+
+    /// Direction `bin` of patch `j`'s column: the exitance per unit of irradiance that got
+    /// in, by the patch it leaves through (early and late light summed; empty without a
+    /// table).
+    pub fn column(&self, j: usize, bin: u32) -> Vec<(usize, Vec3)> {
+        let Some(&slot) = self.slots.get(j).filter(|&&s| s != u32::MAX) else {
+            return Vec::new();
+        };
+        let (direction, share) = (
+            (slot * self.bins() + bin) as usize,
+            self.late_share[(slot * self.bins() + bin) as usize],
+        );
+        let mut column: std::collections::BTreeMap<usize, Vec3> = Default::default();
+        for i in 0..self.early.rows() {
+            for (c, v) in self.early.row(i) {
+                if c == direction {
+                    *column.entry(i).or_default() += v;
+                }
+            }
+            for (c, v) in self.late.row(i) {
+                if c == slot as usize {
+                    *column.entry(i).or_default() += v * share;
+                }
+            }
+        }
+        column.into_iter().collect()
+    }
+}
+
+/// One patch's walks.
+struct ColumnWalks<'a> {
+    patches: &'a Patches,
+    rays: &'a SceneRays,
+    exits: &'a ExitPatches,
+    medium: super::medium::TranslucentMedium,
+    units_per_mm: f32,
+    j: usize,
+    last_order: u32,
+}
+
+impl ColumnWalks<'_> {
+    /// `walks` walks a channel of `launch` from patch `j`'s samples: the exitance per unit
+    /// of light that got in by exit patch, and the share still inside after the last order.
+    /// With `law_takes_lit_face_single`, what leaves after one scattering by the lit face
+    /// (an exit normal within 60° of the patch's) is left to [`single_scattering_radiance`].
+    fn walk(&self, launch: WalkLaunch, walks: u32, seed: u64, law_takes_lit_face_single: bool) -> (Column, Vec3) {
+        let p = &self.patches.patches;
+        let pj = &p[self.j];
+        let entries: Vec<EntryPoint> = self
+            .patches
+            .samples_of(self.j)
+            .iter()
+            .map(|s| EntryPoint { position: s.position, normal: s.normal, area: s.area })
+            .collect();
+        let share = 1.0 / walks as f32;
+        // A beam's uncollided light goes on along the beam; diffuse light that crosses a thin
+        // part unscattered is the surface's.
+        let first = u32::from(matches!(launch, WalkLaunch::Beam(_)));
+        let orders = ScatteringOrders { first, last: self.last_order };
+        let mut column = Column::default();
+        let mut remaining = Vec3::ZERO;
+        walk_ends(
+            &self.medium,
+            self.units_per_mm,
+            &entries,
+            self.rays,
+            walks as usize,
+            seed,
+            launch,
+            orders,
+            |c, end| match end {
+                WalkEnd::Exit(exit)
+                    if law_takes_lit_face_single
+                        && exit.order == 1
+                        && exit.outward.dot(pj.normal) > 0.5 => {}
+                WalkEnd::Exit(exit) => {
+                    if let Some(i) = self.exits.of(exit.position, exit.outward) {
+                        column.entry(i).or_default()[c] += share * pj.area / p[i as usize].area;
+                    }
+                }
+                // Through a gap in the mesh: lost.
+                WalkEnd::Gap => {}
+                WalkEnd::Remainder => remaining[c] += share,
+            },
+        );
+        (column, remaining)
+    }
+
+    /// The late light per unit of diffuse walks' remainder: the profile's column (per unit
+    /// of light that got in: over `diffuse_entering`) with its near field — where `late_walks`
+    /// diffuse walks leave within the orders — scaled down by their share of it; and that
+    /// remainder. `None` where no diffuse walk outlasts the orders.
+    fn late_light(
+        &self,
+        profile_column: &[(u32, Vec3)],
+        diffuse_entering: f32,
+        late_walks: u32,
+    ) -> Option<(Column, Vec3)> {
+        let p = &self.patches.patches;
+        let seed = u64::MAX - self.j as u64;
+        let (early, remaining) = self.walk(WalkLaunch::Diffuse, late_walks, seed, false);
+        if remaining == Vec3::ZERO {
+            return None;
+        }
+        let flux = |v: Vec3, i: u32| v * p[i as usize].area;
+        let per_entered = 1.0 / diffuse_entering.max(1e-6);
+        let near: Vec3 = profile_column
+            .iter()
+            .filter(|(i, _)| early.contains_key(i))
+            .map(|&(i, v)| flux(v * per_entered, i))
+            .sum();
+        let early_flux: Vec3 = early.iter().map(|(&i, &v)| flux(v, i)).sum();
+        let kept = Vec3::select(
+            near.cmpgt(Vec3::ZERO),
+            (near - early_flux).max(Vec3::ZERO) / near.max(Vec3::splat(1e-30)),
+            Vec3::ZERO,
+        );
+        let column = profile_column
+            .iter()
+            .map(|&(i, v)| {
+                let v = v * per_entered;
+                (i, if early.contains_key(&i) { v * kept } else { v })
+            })
+            .collect();
+        Some((column, remaining))
+    }
+}
