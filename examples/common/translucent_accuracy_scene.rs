@@ -345,7 +345,8 @@ fn walked_scattering(
     }
     let p = &patches.patches;
     let exit_patches = ExitPatches::new(patches);
-    let exit_patch = |x: Vec3, outward: Vec3| exit_patches.of(x, outward);
+    // One object: the ball's or the bunny's.
+    let exit_patch = |x: Vec3, outward: Vec3| exit_patches.of(0, x, outward);
     // What diffuse light gets past the boundary (the profiles' `entrance_transmittance`).
     let entering = (1.0 - diffuse_fresnel_reflectance(medium.index_of_refraction as f64)) as f32;
     let mut rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); p.len()];

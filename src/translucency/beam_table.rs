@@ -166,39 +166,45 @@ pub struct BeamTable {
 }
 
 /// The patch a walk leaves by: the nearest sample facing the exit's way (not the far side of
-/// a thin part), else the nearest of any, among a grid of the patches' samples.
+/// a thin part), else the nearest of any, among a grid of its object's samples (cells of the
+/// object's own patch size: a room's wall patches would make a grid of the largest size
+/// hold a whole small object in a cell).
 pub struct ExitPatches {
-    cell: f32,
-    grid: HashMap<IVec3, Vec<(Vec3, Vec3, u32)>>,
+    grids: Vec<(f32, HashMap<IVec3, Vec<(Vec3, Vec3, u32)>>)>,
 }
 
 impl ExitPatches {
-    /// The grid of `patches`' samples.
+    /// The grids of `patches`' samples, one per object.
     pub fn new(patches: &Patches) -> Self {
-        // Samples by grid cell of a patch size: the exit's nearest sample is within a cell.
-        let cell = patches.patch_size.max(1e-9);
-        let mut grid: HashMap<IVec3, Vec<(Vec3, Vec3, u32)>> = HashMap::default();
-        for i in 0..patches.patches.len() {
+        let objects = patches.object_patch_sizes.len();
+        let mut grids: Vec<(f32, HashMap<IVec3, Vec<(Vec3, Vec3, u32)>>)> = (0..objects)
+            .map(|o| (patches.object_patch_sizes[o].max(1e-9), HashMap::default()))
+            .collect();
+        for (i, q) in patches.patches.iter().enumerate() {
+            let Some((cell, grid)) = grids.get_mut(q.object as usize) else {
+                continue;
+            };
             for s in patches.samples_of(i) {
-                grid.entry((s.position / cell).floor().as_ivec3())
+                grid.entry((s.position / *cell).floor().as_ivec3())
                     .or_default()
                     .push((s.position, s.normal, i as u32));
             }
         }
-        Self { cell, grid }
+        Self { grids }
     }
 
-    /// The patch a walk leaving at `x` through a boundary of unit `outward` normal leaves
-    /// by; `None` where no sample is within a patch size.
-    pub fn of(&self, x: Vec3, outward: Vec3) -> Option<u32> {
-        let key = (x / self.cell).floor().as_ivec3();
+    /// The patch of `object` a walk leaving at `x` through a boundary of unit `outward`
+    /// normal leaves by; `None` where none of its samples is within a patch size.
+    pub fn of(&self, object: u32, x: Vec3, outward: Vec3) -> Option<u32> {
+        let (cell, grid) = self.grids.get(object as usize)?;
+        let key = (x / *cell).floor().as_ivec3();
         // The nearest sample facing the exit's way (not the far side of a thin part), else
         // the nearest of any: (distance², patch).
         let (mut facing, mut any): (Option<(f32, u32)>, Option<(f32, u32)>) = (None, None);
         for dz in -1..=1 {
             for dy in -1..=1 {
                 for dx in -1..=1 {
-                    let cell = self.grid.get(&(key + IVec3::new(dx, dy, dz)));
+                    let cell = grid.get(&(key + IVec3::new(dx, dy, dz)));
                     for &(position, normal, patch) in cell.into_iter().flatten() {
                         let d = position.distance_squared(x);
                         if any.is_none_or(|b| d < b.0) {
@@ -478,7 +484,7 @@ impl ColumnWalks<'_> {
                         && exit.order == 1
                         && exit.outward.dot(pj.normal) > 0.5 => {}
                 WalkEnd::Exit(exit) => {
-                    if let Some(i) = self.exits.of(exit.position, exit.outward) {
+                    if let Some(i) = self.exits.of(pj.object, exit.position, exit.outward) {
                         column.entry(i).or_default()[c] += share * pj.area / p[i as usize].area;
                     }
                 }
