@@ -50,6 +50,11 @@ struct Cli {
     #[arg(long, default_value_t = TranslucencySettings::default().max_iterations,
           value_parser = clap::value_parser!(u32).range(1..=256))]
     max_iterations: u32,
+    /// Carry the lights' beams into the translucent objects by a table of beam columns from
+    /// random walks (`TransportSettings::beam_table`, default settings; ~0.1 s a translucent
+    /// patch on one core to precompute: the default room ~1 min on 2 cores)
+    #[arg(long)]
+    beam_table: bool,
     /// Headless: swing the spot during the warm-up frames, as in a window, so that every frame
     /// injects and iterates anew (for timing; the shots still fix it in front and behind)
     #[arg(long)]
@@ -114,6 +119,7 @@ fn main() {
             transport: TransportSettings {
                 shape_diffusion: cli.shape_diffusion,
                 deep_exit_law: cli.deep_exit_law,
+                beam_table: cli.beam_table.then(default),
                 ..default()
             },
             max_iterations: cli.max_iterations,

@@ -17,7 +17,7 @@ use bevy_mesostructure::translucency::{
     EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface, SceneRays,
     SparseMatrix, TranslucentMedium, TransportSettings, direct_light,
     diffusion::{diffuse_fresnel_reflectance, single_scattering_shape},
-    gather::gathered_radiance,
+    gather::{BeamSingleScattering, gathered_radiance},
     patches::{Patches, world_triangles},
     random_walk::{EntryPoint, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
     resample_into_patches,
@@ -268,9 +268,10 @@ pub enum ScatteringSource {
         /// scattering through the far side of a thin part stays in the table.
         lit_face_single_to_law: bool,
     },
-    /// The crate's beam table (`beam_table::BeamTable`): for the directional light, each
-    /// patch's nearest table direction's column (only that one walked), single scattering by
-    /// the lit face in its own law per pixel.
+    /// The plugin's beam table (`TransportSettings::beam_table`): for the directional light,
+    /// each patch's nearest table direction's column (only that one walked: the same
+    /// columns as the whole table's), single scattering by the lit face in its own law in
+    /// the gather.
     BeamTable(BeamTableSettings),
 }
 
@@ -557,18 +558,21 @@ pub fn plugin_picture(
                 .collect();
             let table = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, table_settings, Some(&only));
             eprintln!("  beam table: {} patch-directions walked in {:.2} s", only.iter().flatten().count(), table.seconds);
-            Some((table, travel))
+            // From here on the plugin's own CPU oracle: the direct light into the table, the
+            // solve, the gather with single scattering's law.
+            transport.beam_table = Some(table);
+            true
         }
-        _ => None,
+        _ => false,
     };
     let precompute_s = start.elapsed().as_secs_f32();
     let mut direct = direct_light(&patches, Some(&transport), &lights, &rays);
-    if let Some((table, travel)) = &table {
-        // One directional light of illuminance 1: each patch's shadowed irradiance is its
-        // beam's, all of it the table's.
-        direct.exitance = table.exitance(&patches, |j| [(*travel, direct.irradiance[j])]);
-        direct.tabled = direct.irradiance.clone();
-    }
+    let media = transport.beam_table.as_ref().map(|t| t.patch_media()).unwrap_or_default();
+    let single = table.then(|| BeamSingleScattering {
+        irradiance: &direct.beam_irradiance,
+        direction: &direct.beam_direction,
+        media: &media,
+    });
     for e in &mut direct.irradiance {
         *e += ambient;
     }
@@ -588,6 +592,7 @@ pub fn plugin_picture(
                     &exit_laws,
                     &direct.irradiance,
                     &solution.exitance,
+                    single.as_ref(),
                     eye,
                     hit.point,
                     hit.normal,
@@ -605,7 +610,6 @@ pub fn plugin_picture(
         SceneLighting::Directional(travel)
             if matches!(oracles.scattering, ScatteringSource::BinnedBeamWalks { orders, lit_face_single_to_law, .. }
                 if orders.first >= 2 || lit_face_single_to_law)
-                || matches!(oracles.scattering, ScatteringSource::BeamTable(_))
                 && medium.index_of_refraction == 1.0 =>
         {
             single_scattering_law(&view.hits, pixels, medium, travel, &rays, false)

@@ -83,10 +83,16 @@ impl BeamTableSettings {
 }
 
 /// The frame a patch's table directions are measured in: a tangent and bitangent fixed by
-/// its normal alone (glam's `any_orthonormal_pair`, Duff et al. 2017; `inject.wgsl` has its
-/// twin).
+/// its normal alone (Duff et al. 2017, "Building an orthonormal basis, revisited", the sign
+/// taken as `z ≥ 0`; `tangent_frame` in `inject.wgsl` is its twin).
 fn tangent_frame(normal: Vec3) -> (Vec3, Vec3) {
-    normal.any_orthonormal_pair()
+    let sign = if normal.z >= 0.0 { 1.0 } else { -1.0 };
+    let a = -1.0 / (sign + normal.z);
+    let b = normal.x * normal.y * a;
+    (
+        Vec3::new(1.0 + sign * normal.x * normal.x * a, sign * b, -sign * normal.x),
+        Vec3::new(b, sign + normal.y * normal.y * a, -normal.y),
+    )
 }
 
 /// The table direction nearest a beam travelling along the unit `travel` onto a patch of
@@ -370,6 +376,36 @@ impl BeamTable {
         }
     }
 
+    /// Where a beam travelling along `travel` onto patch `j` goes in the table's light
+    /// vector (`slot · bins + bin`), and the share of it that gets in (`entering`); `None`
+    /// for a patch without a table or a beam along or behind its surface.
+    pub fn light_index(&self, patches: &Patches, j: usize, travel: Vec3) -> Option<(usize, f32)> {
+        let slot = *self.slots.get(j).filter(|&&s| s != u32::MAX)?;
+        let normal = patches.patches[j].normal;
+        let bin = direction_bin(travel, normal, self.settings.cosines, self.settings.azimuths)?;
+        let eta = self.media[slot as usize].w;
+        Some(((slot * self.bins() + bin) as usize, entering(eta, -travel.dot(normal))))
+    }
+
+    /// The exitance the table gives every patch for `light`, the irradiance that got in per
+    /// `slot · bins + bin` (`light_index`): the early columns' product, and the late columns'
+    /// with each slot's directions summed by their `late_share`.
+    pub fn apply(&self, light: &[Vec3]) -> Vec<Vec3> {
+        let bins = self.bins() as usize;
+        let late_light: Vec<Vec3> = (0..self.media.len())
+            .map(|slot| {
+                (slot * bins..(slot + 1) * bins)
+                    .map(|c| self.late_share[c] * light.get(c).copied().unwrap_or(Vec3::ZERO))
+                    .sum()
+            })
+            .collect();
+        let mut exitance = self.early.mul_vec(light);
+        for (b, late) in exitance.iter_mut().zip(self.late.mul_vec(&late_light)) {
+            *b += late;
+        }
+        exitance
+    }
+
     /// The exitance the table gives each patch for the beams `beams(j)` yields on patch `j`:
     /// `(travel, irradiance)`, the irradiance on the surface before the boundary (its
     /// entering share is weighted here). Patches without a table take none.
@@ -378,35 +414,24 @@ impl BeamTable {
         patches: &Patches,
         beams: impl Fn(usize) -> I,
     ) -> Vec<Vec3> {
-        let bins = self.bins();
-        let mut light = vec![Vec3::ZERO; self.media.len() * bins as usize];
-        for (j, &slot) in self.slots.iter().enumerate() {
-            if slot == u32::MAX {
-                continue;
-            }
-            let normal = patches.patches[j].normal;
-            let eta = self.media[slot as usize].w;
+        let mut light = vec![Vec3::ZERO; self.media.len() * self.bins() as usize];
+        for j in 0..self.slots.len() {
             for (travel, irradiance) in beams(j) {
-                let Some(bin) =
-                    direction_bin(travel, normal, self.settings.cosines, self.settings.azimuths)
-                else {
-                    continue;
-                };
-                light[(slot * bins + bin) as usize] +=
-                    irradiance * entering(eta, -travel.dot(normal));
+                if let Some((at, entering)) = self.light_index(patches, j, travel) {
+                    light[at] += irradiance * entering;
+                }
             }
         }
-        let late_light: Vec<Vec3> = (0..self.media.len())
-            .map(|slot| {
-                let at = slot * bins as usize;
-                (at..at + bins as usize).map(|c| self.late_share[c] * light[c]).sum()
-            })
-            .collect();
-        let mut exitance = self.early.mul_vec(&light);
-        for (b, late) in exitance.iter_mut().zip(self.late.mul_vec(&late_light)) {
-            *b += late;
-        }
-        exitance
+        self.apply(&light)
+    }
+
+    /// Per patch, its medium's `(α, η)` where it has a table, zero elsewhere (what the
+    /// gather's single scattering takes).
+    pub fn patch_media(&self) -> Vec<Vec4> {
+        self.slots
+            .iter()
+            .map(|&s| self.media.get(s as usize).copied().unwrap_or(Vec4::ZERO))
+            .collect()
     }
 
     /// Direction `bin` of patch `j`'s column: the exitance per unit of irradiance that got

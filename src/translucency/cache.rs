@@ -12,11 +12,12 @@ use std::{
 use bevy::prelude::*;
 
 use super::{
+    beam_table::{BeamTable, BeamTableSettings},
     patches::{Patch, PatchSample, Patches},
     transport::{EnergyTransport, PatchSurface, SparseMatrix, TransportReport, TransportSettings},
 };
 
-const MAGIC: &[u8; 8] = b"BMSTRN03";
+const MAGIC: &[u8; 8] = b"BMSTRN04";
 
 /// FNV-1a, 64 bits: the cache's key and the plugin's change signatures.
 #[derive(Clone, Copy)]
@@ -57,7 +58,8 @@ pub fn scene_key(
             settings.cluster_size as f32,
             settings.object_exit_share as u32 as f32,
             settings.shape_diffusion as u32 as f32,
-        ]);
+        ])
+        .bytes(format!("{:?}", settings.beam_table).as_bytes());
     for (positions, indices, surface) in objects {
         h = h.f32s(positions.iter().flat_map(|p| p.to_array()));
         h = indices.iter().fold(h, |h, i| h.bytes(&i.to_le_bytes()));
@@ -242,6 +244,24 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
             ]
             .into_iter(),
         )?;
+        // The beam table, if any: its settings (none: an empty list), slots, media, the late
+        // shares, then the early and late columns.
+        match &transport.beam_table {
+            None => w.u32s(&[])?,
+            Some(t) => {
+                let s = &t.settings;
+                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order])?;
+                w.u32s(&t.slots)?;
+                w.f32s(t.media.iter().flat_map(|m| m.to_array()).collect::<Vec<_>>().into_iter())?;
+                w.f32s(t.late_share.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
+                for m in [&t.early, &t.late] {
+                    w.u32s(&m.row_offsets)?;
+                    w.u32s(&m.columns)?;
+                    w.f32s(m.values.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
+                }
+                w.f32s([t.seconds].into_iter())?;
+            }
+        }
         w.0.flush()?;
     }
     std::fs::rename(&temporary, path)
@@ -323,6 +343,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
     if single_scattering.len() != n || areas.len() != n || counts.len() != 6 || figures.len() != 9 {
         return Err(invalid("transport vectors"));
     }
+    let beam_table = read_beam_table(&mut r, n)?;
     let patches = Patches {
         patches: patches_list,
         patch_size,
@@ -359,7 +380,53 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
             diffusion_kept_mean: Vec3::new(figures[2], figures[3], figures[4]),
             seconds: figures[5],
             object_exit_over_slab_mean: Vec3::new(figures[6], figures[7], figures[8]),
+            beam_table_entries: beam_table
+                .as_ref()
+                .map_or(0, |t| t.early.entries() + t.late.entries()),
         },
+        beam_table,
     };
     Ok((patches, transport))
+}
+
+/// The beam table [`save`] wrote after the transport, checked against `n` patches.
+fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<BeamTable>> {
+    let settings = r.u32s()?;
+    let [cosines, azimuths, walks, late_walks, last_order] = settings[..] else {
+        return if settings.is_empty() { Ok(None) } else { Err(invalid("beam table settings")) };
+    };
+    let settings = BeamTableSettings { cosines, azimuths, walks, late_walks, last_order };
+    if settings.invalid_reason().is_some() {
+        return Err(invalid("beam table settings"));
+    }
+    let slots = r.u32s()?;
+    let media: Vec<Vec4> = r.f32s()?.chunks_exact(4).map(Vec4::from_slice).collect();
+    let late_share = vec3s(&r.f32s()?);
+    let early = read_matrix(r)?;
+    let late = read_matrix(r)?;
+    let seconds = r.f32s()?;
+    let (count, bins) = (media.len(), settings.bins() as usize);
+    if slots.len() != n
+        || slots.iter().any(|&s| s != u32::MAX && s as usize >= count)
+        || late_share.len() != count * bins
+        || !consistent(&early, Some(n), count * bins, 3)
+        || !consistent(&late, Some(n), count, 3)
+        || seconds.len() != 1
+    {
+        return Err(invalid("beam table"));
+    }
+    let matrix = |(row_offsets, columns, values): RawMatrix| SparseMatrix {
+        row_offsets,
+        columns,
+        values: vec3s(&values),
+    };
+    Ok(Some(BeamTable {
+        settings,
+        slots,
+        media,
+        late_share,
+        early: matrix(early),
+        late: matrix(late),
+        seconds: seconds[0],
+    }))
 }

@@ -18,12 +18,22 @@ pub struct DirectLight {
     pub irradiance: Vec<Vec3>,
     /// Exitance `S⁰` per patch besides `K E⁰` (may be empty: none): on translucent patches,
     /// the single scattering of each beam at its own incidence less the diffuse mean `K`
-    /// already holds; with a [`BeamTable`](super::beam_table::BeamTable), its exitance for the
-    /// beams it carries.
+    /// already holds.
     pub exitance: Vec<Vec3>,
-    /// The part of `irradiance` per patch that a beam table carries into `exitance` (may be
-    /// empty: none): `K` takes the rest.
+    /// The part of `irradiance` per patch that the transport's
+    /// [`BeamTable`](super::beam_table::BeamTable) carries (may be empty: none): `K` takes
+    /// the rest.
     pub tabled: Vec<Vec3>,
+    /// That irradiance by table direction (`slot · bins + bin`, `BeamTable::light_index`;
+    /// empty without a table).
+    pub beam_light: Vec<Vec3>,
+    /// Per patch with a table, its beams' irradiance at normal incidence (shadowed), summed:
+    /// what single scattering by the lit face leaves by (`single_scattering_radiance`, in the
+    /// gather). Empty without a table.
+    pub beam_irradiance: Vec<Vec3>,
+    /// Per patch with a table, its beams' travel directions weighted by their irradiance at
+    /// normal incidence (unnormalised; the gather takes the mean). Empty without a table.
+    pub beam_direction: Vec<Vec3>,
 }
 
 /// A light as the transport injects it (Bevy's conventions: colour × intensity per channel).
@@ -78,6 +88,7 @@ pub fn direct_light(
     rays: &SceneRays,
 ) -> DirectLight {
     let diffuse_shape = super::diffusion::diffuse_single_scattering_shape() as f32;
+    let table = transport.and_then(|t| t.beam_table.as_ref());
     let per_patch = parallel_rows(patches.patches.len(), |i| {
         let p = &patches.patches[i];
         let x = p.surface_point + p.normal * (0.05 * patches.size_of(i));
@@ -90,6 +101,10 @@ pub fn direct_light(
             .copied()
             .flatten();
         let (mut irradiance, mut exitance) = (Vec3::ZERO, Vec3::ZERO);
+        // With a beam table: (light index, irradiance that got in), and the beams' normal
+        // irradiance and weighted direction for single scattering's law.
+        let mut beams: Vec<(usize, Vec3)> = Vec::new();
+        let (mut normal_irradiance, mut direction) = (Vec3::ZERO, Vec3::ZERO);
         for light in lights {
             let (e, to_light) = match *light {
                 PatchLight::Directional {
@@ -133,6 +148,19 @@ pub fn direct_light(
                     (position - x).normalize_or_zero(),
                 ),
             };
+            let cos = p.normal.dot(to_light);
+            if let Some((at, entering)) = table
+                .filter(|_| e != Vec3::ZERO)
+                .and_then(|t| t.light_index(patches, i, -to_light))
+            {
+                // The table's column holds the beam's incidence and its scattering.
+                let got_in = e * entering;
+                irradiance += got_in;
+                beams.push((at, got_in));
+                normal_irradiance += e / cos;
+                direction += -to_light * ((e / cos).element_sum());
+                continue;
+            }
             // A beam takes in and gives back by its own incidence, not by the diffuse
             // albedo `K` holds (Chandrasekhar's plane albedo; `IncidenceWeight`).
             let e = match incidence {
@@ -149,19 +177,32 @@ pub fn direct_light(
                 exitance += single * e * (shape - diffuse_shape);
             }
         }
-        (irradiance, exitance)
+        (irradiance, exitance, beams, normal_irradiance, direction)
     });
     let has_single =
         transport.is_some_and(|t| t.single_scattering.iter().any(|s| *s != Vec3::ZERO));
-    DirectLight {
+    let mut direct = DirectLight {
         exitance: if has_single {
             per_patch.iter().map(|d| d.1).collect()
         } else {
             Vec::new()
         },
-        irradiance: per_patch.into_iter().map(|d| d.0).collect(),
-        tabled: Vec::new(),
+        irradiance: per_patch.iter().map(|d| d.0).collect(),
+        ..default()
+    };
+    if let Some(table) = table {
+        direct.beam_light = vec![Vec3::ZERO; table.media.len() * table.bins() as usize];
+        direct.tabled = vec![Vec3::ZERO; per_patch.len()];
+        for (i, (_, _, beams, _, _)) in per_patch.iter().enumerate() {
+            for &(at, got_in) in beams {
+                direct.beam_light[at] += got_in;
+                direct.tabled[i] += got_in;
+            }
+        }
+        direct.beam_irradiance = per_patch.iter().map(|d| d.3).collect();
+        direct.beam_direction = per_patch.iter().map(|d| d.4).collect();
     }
+    direct
 }
 
 fn point_irradiance(

@@ -23,6 +23,11 @@ struct GatherParams {
     // Offsets in `vectors` (vec4s).
     direct: u32,
     exitance: u32,
+    // The beams' normal irradiance and weighted direction, per patch (a beam table's).
+    beam_irradiance: u32,
+    beam_direction: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 struct GatherPatch {
@@ -37,6 +42,9 @@ struct GatherPatch {
     law_r: vec4<f32>,
     law_g: vec4<f32>,
     law_b: vec4<f32>,
+    // Where a beam table carries the patch's beams: its medium's single-scattering albedo and
+    // η, for single scattering by the lit face (zero elsewhere).
+    single: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -83,6 +91,20 @@ fn deep_exit_shape(law: vec4<f32>, eta_in: f32, mu_in: f32) -> f32 {
     let boundary = (1.0 + f_dr) / (1.0 - f_dr);
     let mode = chandrasekhar_h(law.x, inside) / (1.0 - law.y * inside);
     return (1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary) * law.z;
+}
+
+// `single_scattering_radiance` (beam_table.rs): a half-space's single scattering of a beam
+// of irradiance `e` at incidence cosine mu0, seen at exit cosine mu, behind a boundary of
+// index eta: α E T(μ₀) T(μ) / (4π η² (μ₀′ + μ′)).
+fn single_scattering_radiance(alpha: vec3<f32>, eta_in: f32, e: vec3<f32>, mu0: f32, mu: f32) -> vec3<f32> {
+    if !(mu0 > 0.0 && mu > 0.0) {
+        return vec3(0.0);
+    }
+    let eta = clamp(eta_in, 1.0, 3.0);
+    let inside0 = sqrt(max(1.0 - (1.0 - mu0 * mu0) / (eta * eta), 0.0));
+    let inside = sqrt(max(1.0 - (1.0 - mu * mu) / (eta * eta), 0.0));
+    let transmitted = (1.0 - fresnel_reflectance(min(mu0, 1.0), eta)) * (1.0 - fresnel_reflectance(min(mu, 1.0), eta));
+    return alpha * e * transmitted / (4.0 * 3.14159265358979 * eta * eta * (inside0 + inside));
 }
 
 // `ExitLaw::factor` (transport.rs) in one channel: 1 + D (s(μ) − 1), D = g·clamp(1 − A E⁰/B).
@@ -165,6 +187,14 @@ fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
                             exit_factor(record.law_b, record.local_albedo.b, eta, b_i.b, e0.b, mu),
                         );
                         sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) * law / 3.14159265358979;
+                        // Single scattering by the lit face (`BeamSingleScattering::radiance`):
+                        // the patch's beams at this pixel's own incidence.
+                        let travel = vectors[params.beam_direction + i].xyz;
+                        if any(record.single.rgb > vec3(0.0)) && dot(travel, travel) > 0.0 {
+                            let mu0 = dot(n, -normalize(travel));
+                            let e = vectors[params.beam_irradiance + i].rgb * max(mu0, 0.0);
+                            sum += w * single_scattering_radiance(record.single.rgb, record.single.w, e, mu0, mu);
+                        }
                         weights += w;
                     }
                 }

@@ -119,6 +119,7 @@ pub const MAX_GRID_LEVELS: usize = 8;
 /// interpolated, or as photons of that exitance times the patch's area under a kernel of
 /// unit integral; `None` where no patch is near. The CPU twin of `gather.wgsl` (brute force
 /// instead of the hashed grid), the oracle of its tests.
+#[allow(clippy::too_many_arguments)]
 pub fn gathered_radiance(
     method: GatherMethod,
     patches: &super::patches::Patches,
@@ -126,6 +127,7 @@ pub fn gathered_radiance(
     exit_laws: &[ExitLaw],
     direct: &[Vec3],
     exitance: &[Vec3],
+    single: Option<&BeamSingleScattering>,
     eye: Vec3,
     x: Vec3,
     n: Vec3,
@@ -150,6 +152,9 @@ pub fn gathered_radiance(
             let leaving = (exitance[i] - albedo[i] * direct[i]).max(Vec3::ZERO)
                 * law.factor(exitance[i], direct[i], mu);
             sum += w * leaving / std::f32::consts::PI;
+            if let Some(single) = single {
+                sum += w * single.radiance(i, n, mu);
+            }
             weights += w;
         }
     }
@@ -157,6 +162,38 @@ pub fn gathered_radiance(
         GatherMethod::Interpolation => sum / weights,
         GatherMethod::PhotonDensity => sum,
     })
+}
+
+/// What single scattering by the lit face gives the gather where a beam table carries the
+/// beams (`TransportSettings::beam_table`): per patch, its beams' irradiance at normal
+/// incidence and their weighted travel direction (`DirectLight::beam_irradiance`,
+/// `beam_direction`), and its medium's single-scattering albedo and index (`w`; zero
+/// without a table).
+pub struct BeamSingleScattering<'a> {
+    /// Per patch, the beams' irradiance at normal incidence, shadowed.
+    pub irradiance: &'a [Vec3],
+    /// Per patch, the beams' travel directions weighted by that irradiance.
+    pub direction: &'a [Vec3],
+    /// Per patch, `(α, η)` of its medium; zero without a table.
+    pub media: &'a [Vec4],
+}
+
+impl BeamSingleScattering<'_> {
+    /// The single-scattered radiance patch `i`'s beams give a pixel of unit normal `n` seen
+    /// at exit cosine `mu` ([`single_scattering_radiance`](super::beam_table::single_scattering_radiance)
+    /// with the pixel's own incidence cosine; the beams' mean direction: exact for one light).
+    pub fn radiance(&self, i: usize, n: Vec3, mu: f32) -> Vec3 {
+        let (Some(&e), Some(&d), Some(&m)) =
+            (self.irradiance.get(i), self.direction.get(i), self.media.get(i))
+        else {
+            return Vec3::ZERO;
+        };
+        let Some(travel) = d.try_normalize() else {
+            return Vec3::ZERO;
+        };
+        let mu0 = n.dot(-travel);
+        super::beam_table::single_scattering_radiance(m.truncate(), m.w, e * mu0.max(0.0), mu0, mu)
+    }
 }
 
 /// `GatherParams` in `gather.wgsl`.
@@ -167,6 +204,9 @@ struct GatherParams {
     patches: u32,
     direct: u32,
     exitance: u32,
+    beam_irradiance: u32,
+    beam_direction: u32,
+    pad: [u32; 2],
 }
 
 /// The gather radius in patch sizes: about two rings of neighbours.
@@ -269,8 +309,15 @@ fn gather_buffers(
     let centres: Vec<Vec3> = patches.patches.iter().map(|p| p.surface_point).collect();
     let grids = PatchGrid::levels(&centres, &reaches);
     // `GatherPatch` in gather.wgsl: (surface point, reach), (normal, area), (albedo, 0),
-    // (the exit law's local albedo, η), its law per channel.
-    let records: Vec<[f32; 28]> = patches
+    // (the exit law's local albedo, η), its law per channel, (α, η) of its medium where a
+    // beam table carries its beams (single scattering's law; zero elsewhere).
+    let media = scene
+        .transport
+        .beam_table
+        .as_ref()
+        .map(|t| t.patch_media())
+        .unwrap_or_default();
+    let records: Vec<[f32; 32]> = patches
         .patches
         .iter()
         .enumerate()
@@ -278,7 +325,7 @@ fn gather_buffers(
         .zip(&reaches)
         .map(|(((i, p), a), reach)| {
             let law = scene.exit_laws.get(i).copied().unwrap_or_default();
-            let mut record = [0.0; 28];
+            let mut record = [0.0; 32];
             record[..12].copy_from_slice(&[
                 p.surface_point.x,
                 p.surface_point.y,
@@ -298,6 +345,7 @@ fn gather_buffers(
             for (c, channel) in law.channels.iter().enumerate() {
                 record[16 + 4 * c..20 + 4 * c].copy_from_slice(&channel.to_array());
             }
+            record[28..32].copy_from_slice(&media.get(i).copied().unwrap_or(Vec4::ZERO).to_array());
             record
         })
         .collect();
@@ -316,11 +364,15 @@ fn gather_buffers(
     }
     words.push(0);
     let (direct, exitance) = transport.vector_offsets();
+    let beams = transport.beam_offsets();
     let params = GatherParams {
         levels: grids.len() as u32,
         patches: patches.patches.len() as u32,
         direct,
         exitance,
+        beam_irradiance: beams.irradiance,
+        beam_direction: beams.direction,
+        pad: [0; 2],
     };
     let patch_buffer = device.create_buffer_with_data(&BufferInitDescriptor {
         label: Some("translucency_gather_patches"),

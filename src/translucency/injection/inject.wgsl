@@ -54,14 +54,22 @@ struct Injection {
     // Offsets (in vec4s) of E⁰ and S⁰ in the iteration's `vectors`.
     direct: u32,
     direct_exitance: u32,
+    // The beam table's directions a patch (cosines × azimuths; 0 without one) and where its
+    // vectors start in `vectors`: the beams' light by `slot · bins + bin`, the part of E⁰ it
+    // carries, the beams' normal irradiance and weighted direction.
+    cosines: u32,
+    azimuths: u32,
+    beam_light: u32,
+    tabled: u32,
+    beam_irradiance: u32,
+    beam_direction: u32,
     pad0: u32,
-    pad1: u32,
-    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> injection: Injection;
 // Samples: (position, radius), (normal, 0). Patches: (surface point, size),
-// (normal, object), (single-scattering factor, 1 on translucent patches).
+// (normal, object), (single-scattering factor, 1 on translucent patches), (beam-table slot or
+// −1, index of refraction, 0, 0).
 // Tables per object: (incidence weight, single-scattering shape − its diffuse mean) at
 // cosines 0, 1/(n−1), …, 1.
 @group(0) @binding(1) var<storage, read> scene: array<vec4<f32>>;
@@ -249,21 +257,64 @@ fn incidence_entry(object: u32, cos_i: f32) -> vec4<f32> {
     return mix(scene[at], scene[at + 1u], f - f32(i));
 }
 
+// `fresnel_reflectance` (diffusion.rs): unpolarised, light arriving at cos_i onto index eta.
+fn fresnel_reflectance(cos_i: f32, eta: f32) -> f32 {
+    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
+    if sin_t2 >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = sqrt(1.0 - sin_t2);
+    let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    return 0.5 * (rs * rs + rp * rp);
+}
+
+// `direction_bin` (beam_table.rs): the table direction nearest a beam travelling along
+// `travel` onto a surface of normal `n` (incidence cosine `mu` > 0), in the frame of
+// `tangent_frame` (Duff et al. 2017, the sign taken as z ≥ 0).
+fn direction_bin(travel: vec3<f32>, n: vec3<f32>, mu: f32) -> u32 {
+    let sign = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    let t = vec3(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    let s = vec3(b, sign + n.y * n.y * a, -n.y);
+    let along = travel + mu * n;
+    let step = 6.283185307179586 / f32(injection.azimuths);
+    let turns = round(atan2(dot(along, s), dot(along, t)) / step);
+    let m = u32(turns - floor(turns / f32(injection.azimuths)) * f32(injection.azimuths));
+    let k = min(u32(mu * f32(injection.cosines)), injection.cosines - 1u);
+    return k * injection.azimuths + min(m, injection.azimuths - 1u);
+}
+
 @compute @workgroup_size(64)
 fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if i >= injection.patches {
         return;
     }
-    let a = scene[injection.patches_at + 3u * i];
-    let b = scene[injection.patches_at + 3u * i + 1u];
-    let c = scene[injection.patches_at + 3u * i + 2u];
+    let a = scene[injection.patches_at + 4u * i];
+    let b = scene[injection.patches_at + 4u * i + 1u];
+    let c = scene[injection.patches_at + 4u * i + 2u];
+    let table = scene[injection.patches_at + 4u * i + 3u];
     let n = b.xyz;
     let object = u32(b.w);
     // Where the oracle's shadow ray starts, and what its fall-off sees.
     let x = a.xyz + n * (0.05 * a.w);
     var irradiance = vec3(0.0);
     var exitance = vec3(0.0);
+    // The beam table (`lights::direct_light`): a table patch's beams go into its directions'
+    // light instead of E⁰'s part that K takes.
+    let tabled_patch = table.x >= 0.0 && injection.cosines > 0u;
+    let bins = injection.cosines * injection.azimuths;
+    let first = u32(max(table.x, 0.0)) * bins;
+    if tabled_patch {
+        for (var k = 0u; k < bins; k++) {
+            vectors[injection.beam_light + first + k] = vec4(0.0);
+        }
+    }
+    var tabled = vec3(0.0);
+    var normal_irradiance = vec3(0.0);
+    var direction = vec3(0.0);
     for (var l = 0u; l < injection.light_count; l++) {
         let light = injection.lights[l];
         var e = vec3(0.0);
@@ -305,6 +356,17 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
         let m = map_point(light, face, a.xyz + n * max(0.05 * a.w, here.texel_world));
         let slope = min(sqrt(max(1.0 - cos_i * cos_i, 0.0)) / max(cos_i, 1e-3), 8.0);
         e *= seen_share(l, m, m.texel_world * (1.5 + slope));
+        if tabled_patch && cos_i > 0.0 && any(e != vec3(0.0)) {
+            // The table's column holds the beam's incidence and its scattering.
+            let got_in = e * (1.0 - fresnel_reflectance(min(cos_i, 1.0), max(table.y, 1.0)));
+            let at = injection.beam_light + first + direction_bin(-to_light, n, cos_i);
+            vectors[at] += vec4(got_in, 0.0);
+            irradiance += got_in;
+            tabled += got_in;
+            normal_irradiance += e / cos_i;
+            direction += -to_light * dot(e / cos_i, vec3(1.0));
+            continue;
+        }
         // A beam takes in and gives back by its own incidence (`IncidenceWeight`).
         let entry = incidence_entry(object, cos_i);
         e *= entry.xyz;
@@ -314,4 +376,7 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
     irradiance += injection.ambient * c.w;
     vectors[injection.direct + i] = vec4(irradiance, 0.0);
     vectors[injection.direct_exitance + i] = vec4(exitance, 0.0);
+    vectors[injection.tabled + i] = vec4(tabled, 0.0);
+    vectors[injection.beam_irradiance + i] = vec4(normal_irradiance, 0.0);
+    vectors[injection.beam_direction + i] = vec4(direction, 0.0);
 }

@@ -78,7 +78,14 @@ struct Injection {
     tables_at: u32,
     direct: u32,
     direct_exitance: u32,
-    pad: [u32; 3],
+    // The beam table's directions (0 without one) and its vectors (`BeamOffsets`).
+    cosines: u32,
+    azimuths: u32,
+    beam_light: u32,
+    tabled: u32,
+    beam_irradiance: u32,
+    beam_direction: u32,
+    pad: u32,
 }
 
 impl InjectedLight {
@@ -212,6 +219,12 @@ impl GpuInjection {
             // which a GPU may flush to zero.
             scene.push([p.normal.x, p.normal.y, p.normal.z, p.object as f32]);
             scene.push([single.x, single.y, single.z, translucent as u32 as f32]);
+            // The patch's beam-table slot (−1: none; exact as a float below 2²⁴) and index of
+            // refraction.
+            let table = transport.beam_table.as_ref();
+            let slot = table.and_then(|t| t.slots.get(i).copied()).filter(|&s| s != u32::MAX);
+            let eta = slot.and_then(|s| table.map(|t| t.media[s as usize].w)).unwrap_or(1.0);
+            scene.push([slot.map_or(-1.0, |s| s as f32), eta, 0.0, 0.0]);
         }
         let tables_at = scene.len() as u32;
         for object in 0..objects {
@@ -231,6 +244,8 @@ impl GpuInjection {
             (Vec3::ZERO, 1.0)
         };
         let (direct, direct_exitance) = target.direct_offsets();
+        let beams = target.beam_offsets();
+        let table = transport.beam_table.as_ref().map(|t| t.settings);
         let injection = Injection {
             lights: [default_light(); MAX_INJECTED_LIGHTS],
             ambient: [0.0; 3],
@@ -246,7 +261,13 @@ impl GpuInjection {
             tables_at,
             direct,
             direct_exitance,
-            pad: [0; 3],
+            cosines: table.map_or(0, |t| t.cosines),
+            azimuths: table.map_or(0, |t| t.azimuths),
+            beam_light: beams.light,
+            tabled: beams.tabled,
+            beam_irradiance: beams.irradiance,
+            beam_direction: beams.direction,
+            pad: 0,
         };
 
         let uniform = device.create_buffer_with_data(&BufferInitDescriptor {

@@ -33,9 +33,27 @@ struct Layout {
     direct_exitance: u32,
     // `MAX_TAIL_RATIO` (transport/mod.rs): the most the tail ratio is trusted.
     max_tail_ratio: f32,
-    _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // The beam table (`BeamTable` in beam_table.rs): slots and directions a slot; its CSR
+    // arrays (early columns over `beam_light`, late ones over `beam_late`, RGB values) and
+    // each direction's late share (RGB), in `matrices`.
+    slots: u32,
+    bins: u32,
+    early_offsets: u32,
+    early_columns: u32,
+    early_values: u32,
+    late_offsets: u32,
+    late_columns: u32,
+    late_values: u32,
+    late_shares: u32,
+    // Its vectors (in vec4s): the beams' light by `slot · bins + bin`, its per-slot late
+    // sums, the part of E⁰ it carries, the exitance it gives, and the beams' normal
+    // irradiance and direction (the gather's single scattering).
+    beam_light: u32,
+    beam_late: u32,
+    tabled: u32,
+    table_exitance: u32,
+    beam_irradiance: u32,
+    beam_direction: u32,
 }
 
 struct State {
@@ -127,8 +145,49 @@ fn seed(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let e = vectors[packing.direct + i];
     vectors[packing.irradiance + i] = e;
-    vectors[packing.delta_irradiance + i] = e;
+    // K takes what the beam table does not carry (`DirectLight::tabled`).
+    vectors[packing.delta_irradiance + i] = e - vectors[packing.tabled + i];
     vectors[packing.exitance + i] = vec4(0.0);
+}
+
+fn rgb(at: u32) -> vec4<f32> {
+    return vec4(bitcast<f32>(matrices[at]), bitcast<f32>(matrices[at + 1u]),
+                bitcast<f32>(matrices[at + 2u]), 0.0);
+}
+
+// Each slot's late light: its directions' beams weighted by their late shares
+// (`BeamTable::apply`).
+@compute @workgroup_size(64)
+fn table_late(@builtin(global_invocation_id) id: vec3<u32>) {
+    let slot = id.x;
+    if slot >= packing.slots {
+        return;
+    }
+    var sum = vec4(0.0);
+    for (var b = 0u; b < packing.bins; b++) {
+        let c = slot * packing.bins + b;
+        sum += rgb(packing.late_shares + 3u * c) * vectors[packing.beam_light + c];
+    }
+    vectors[packing.beam_late + slot] = sum;
+}
+
+// The exitance the beam table gives each patch: its early columns over the beams' light and
+// its late columns over the slots' late light (`BeamTable::apply`). Once a light change,
+// before the iteration; a thread a row.
+@compute @workgroup_size(64)
+fn table_rows(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= packing.patches {
+        return;
+    }
+    var sum = vec4(0.0);
+    for (var e = matrices[packing.early_offsets + i]; e < matrices[packing.early_offsets + i + 1u]; e++) {
+        sum += rgb(packing.early_values + 3u * e) * vectors[packing.beam_light + matrices[packing.early_columns + e]];
+    }
+    for (var e = matrices[packing.late_offsets + i]; e < matrices[packing.late_offsets + i + 1u]; e++) {
+        sum += rgb(packing.late_values + 3u * e) * vectors[packing.beam_late + matrices[packing.late_columns + e]];
+    }
+    vectors[packing.table_exitance + i] = sum;
 }
 
 var<workgroup> lanes: array<vec4<f32>, 64>;
@@ -190,7 +249,7 @@ fn scatter_rows(local: u32, group: u32, first: bool) {
     var own = 0.0;
     if row < packing.patches && lane == 0u {
         if first {
-            sum += vectors[packing.direct_exitance + row];
+            sum += vectors[packing.direct_exitance + row] + vectors[packing.table_exitance + row];
         }
         vectors[packing.delta_exitance + row] = sum;
         vectors[packing.exitance + row] += sum;

@@ -54,7 +54,38 @@ struct Layout {
     delta_irradiance: u32,
     direct_exitance: u32,
     max_tail_ratio: f32,
-    _pad: [u32; 3],
+    // The beam table (`beam_table.rs`): its slots and directions a slot, its CSR arrays
+    // (early: RGB values over `beam_light`; late: RGB over `beam_late`) and late shares.
+    slots: u32,
+    bins: u32,
+    early_offsets: u32,
+    early_columns: u32,
+    early_values: u32,
+    late_offsets: u32,
+    late_columns: u32,
+    late_values: u32,
+    late_shares: u32,
+    // Its vectors: the beams' light by table direction, its per-slot late sums, the part of
+    // E⁰ it carries, the exitance it gives, and what single scattering needs in the gather.
+    beam_light: u32,
+    beam_late: u32,
+    tabled: u32,
+    table_exitance: u32,
+    beam_irradiance: u32,
+    beam_direction: u32,
+}
+
+/// Where the beam table's vectors start in the iteration's vectors buffer (in `vec4<f32>`s).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BeamOffsets {
+    /// The beams' light that got in, by `slot · bins + bin`.
+    pub light: u32,
+    /// Per patch, the part of `E⁰` the table carries.
+    pub tabled: u32,
+    /// Per patch, the beams' irradiance at normal incidence.
+    pub irradiance: u32,
+    /// Per patch, the beams' travel directions weighted by it.
+    pub direction: u32,
 }
 
 /// `State` in `iterate.wgsl` (indirect arguments first, as dispatches read them).
@@ -94,6 +125,8 @@ pub struct GpuTransport {
     extrapolate: ComputePipeline,
     restrict: ComputePipeline,
     gather: ComputePipeline,
+    table_late: ComputePipeline,
+    table_rows: ComputePipeline,
 }
 
 /// The bind group layout of the translucency's compute passes (the iteration's and the light
@@ -228,13 +261,42 @@ impl GpuTransport {
         layout.c_values = push(&mut words, c.values.iter().map(|v| v.to_bits()));
         layout.areas = push(&mut words, transport.areas.iter().map(|a| a.to_bits()));
 
+        let rgb = |m: &super::transport::SparseMatrix<Vec3>| -> Vec<u32> {
+            m.values.iter().flat_map(|v| v.to_array().map(f32::to_bits)).collect()
+        };
+        let offsets = |m: &super::transport::SparseMatrix<Vec3>| -> Vec<u32> {
+            if m.row_offsets.is_empty() { vec![0; n as usize + 1] } else { m.row_offsets.clone() }
+        };
+        let empty = super::transport::SparseMatrix::<Vec3>::default();
+        let table = transport.beam_table.as_ref();
+        let (early, late) = table.map_or((&empty, &empty), |t| (&t.early, &t.late));
+        layout.slots = table.map_or(0, |t| t.media.len() as u32);
+        layout.bins = table.map_or(0, |t| t.bins());
+        layout.early_offsets = push(&mut words, offsets(early));
+        layout.early_columns = push(&mut words, early.columns.iter().copied());
+        layout.early_values = push(&mut words, rgb(early));
+        layout.late_offsets = push(&mut words, offsets(late));
+        layout.late_columns = push(&mut words, late.columns.iter().copied());
+        layout.late_values = push(&mut words, rgb(late));
+        layout.late_shares = push(
+            &mut words,
+            table.into_iter().flat_map(|t| t.late_share.iter().flat_map(|v| v.to_array().map(f32::to_bits))),
+        );
+        words.push(0);
+
         layout.direct = 0;
         layout.exitance = n;
         layout.irradiance = 2 * n;
         layout.delta_exitance = 3 * n;
         layout.delta_irradiance = 4 * n + clusters;
         layout.direct_exitance = 5 * n + clusters;
-        let vector_count = (6 * n + clusters).max(1) as u64;
+        layout.tabled = 6 * n + clusters;
+        layout.table_exitance = 7 * n + clusters;
+        layout.beam_irradiance = 8 * n + clusters;
+        layout.beam_direction = 9 * n + clusters;
+        layout.beam_light = 10 * n + clusters;
+        layout.beam_late = layout.beam_light + layout.slots * layout.bins;
+        let vector_count = (layout.beam_late + layout.slots).max(1) as u64;
 
         let matrices = device.create_buffer_with_data(&BufferInitDescriptor {
             label: Some("translucency_matrices"),
@@ -322,6 +384,8 @@ impl GpuTransport {
             extrapolate: pipeline("extrapolate", &control),
             restrict: pipeline("cluster_means", &products),
             gather: pipeline("gather", &products),
+            table_late: pipeline("table_late", &products),
+            table_rows: pipeline("table_rows", &products),
         }
     }
 
@@ -330,26 +394,28 @@ impl GpuTransport {
         self.layout.patches
     }
 
-    /// Writes this frame's direct light: irradiance `E⁰` and the exitance `S⁰` besides
-    /// `K E⁰` (one per patch; an empty `exitance` is zero).
+    /// Writes this frame's direct light: irradiance `E⁰`, the exitance `S⁰` besides
+    /// `K E⁰`, and the beam table's vectors (one per patch, the beams' light one per table
+    /// direction; an empty vector is zero).
     pub fn write_direct(&self, queue: &RenderQueue, direct: &super::transport::DirectLight) {
         let n = self.layout.patches as usize;
-        let pack = |v: &[Vec3]| -> Vec<[f32; 4]> {
-            (0..n)
-                .map(|i| v.get(i).map_or([0.0; 4], |e| [e.x, e.y, e.z, 0.0]))
-                .collect()
-        };
         if n > 0 {
-            queue.write_buffer(
-                &self.vectors,
-                self.layout.direct as u64 * 16,
-                bytemuck::cast_slice(&pack(&direct.irradiance)),
-            );
-            queue.write_buffer(
-                &self.vectors,
-                self.layout.direct_exitance as u64 * 16,
-                bytemuck::cast_slice(&pack(&direct.exitance)),
-            );
+            let write = |at: u32, v: &[Vec3], count: usize| {
+                let packed: Vec<[f32; 4]> = (0..count)
+                    .map(|i| v.get(i).map_or([0.0; 4], |e| [e.x, e.y, e.z, 0.0]))
+                    .collect();
+                queue.write_buffer(&self.vectors, at as u64 * 16, bytemuck::cast_slice(&packed));
+            };
+            let l = &self.layout;
+            write(l.direct, &direct.irradiance, n);
+            write(l.direct_exitance, &direct.exitance, n);
+            write(l.tabled, &direct.tabled, n);
+            write(l.beam_irradiance, &direct.beam_irradiance, n);
+            write(l.beam_direction, &direct.beam_direction, n);
+            let lights = (l.slots * l.bins) as usize;
+            if lights > 0 {
+                write(l.beam_light, &direct.beam_light, lights);
+            }
         }
     }
 
@@ -372,6 +438,13 @@ impl GpuTransport {
             let patch_args = 0;
             let cluster_args = 12;
             let scattering_args = 36;
+            if self.layout.slots > 0 {
+                // The beam table's exitance from the beams' light (`BeamTable::apply`).
+                pass.set_pipeline(&self.table_late);
+                pass.dispatch_workgroups(self.layout.slots.div_ceil(WORKGROUP), 1, 1);
+                pass.set_pipeline(&self.table_rows);
+                pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
+            }
             pass.set_pipeline(&self.seed);
             pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
             pass.set_pipeline(&self.scatter_first);
@@ -416,6 +489,20 @@ impl GpuTransport {
     /// (in `vec4<f32>`s): what the light injection writes.
     pub fn direct_offsets(&self) -> (u32, u32) {
         (self.layout.direct, self.layout.direct_exitance)
+    }
+
+    /// Where the beam table's vectors start in the vectors buffer (in `vec4<f32>`s): the
+    /// beams' light by table direction, the part of `E⁰` the table carries, and the beams'
+    /// normal irradiance and weighted direction (what the injection writes and the gather's
+    /// single scattering reads).
+    pub fn beam_offsets(&self) -> BeamOffsets {
+        let l = &self.layout;
+        BeamOffsets {
+            light: l.beam_light,
+            tabled: l.tabled,
+            irradiance: l.beam_irradiance,
+            direction: l.beam_direction,
+        }
     }
 
     /// The buffer holding the iteration's state (`iterations: u32` at byte 24,

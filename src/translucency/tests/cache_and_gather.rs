@@ -24,8 +24,18 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
     ];
     let patches = resample_into_patches(&views, 200);
     let rays = SceneRays::new(&views);
-    let settings = TransportSettings::default();
+    // With a (small) beam table, which the cache keeps too.
+    let table = crate::translucency::beam_table::BeamTableSettings {
+        walks: 4,
+        late_walks: 4,
+        ..default()
+    };
+    let settings = TransportSettings {
+        beam_table: Some(table),
+        ..default()
+    };
     let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
+    assert!(transport.beam_table.as_ref().is_some_and(|t| t.early.entries() > 0));
     let dir = std::env::temp_dir().join(format!("bevy_mesostructure_cache_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("scene.translucency");
@@ -41,6 +51,7 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
     assert_eq!(t.single_scattering, transport.single_scattering);
     assert_eq!(t.areas, transport.areas);
     assert_eq!(t.report, transport.report);
+    assert_eq!(t.beam_table, transport.beam_table);
     // Cut short, or not a cache at all: an error, never a panic or a wrong transport.
     let bytes = std::fs::read(&path).unwrap();
     for cut in [0, 7, 100, bytes.len() / 2, bytes.len() - 1] {
@@ -69,6 +80,13 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
         albedo: Vec3::splat(0.7),
     };
     assert_ne!(base, key(&other, 200));
+    let without = TransportSettings::default();
+    let keyed: Vec<_> = objects
+        .iter()
+        .zip(&surfaces)
+        .map(|(o, s)| (o.0.as_slice(), o.1.as_slice(), *s))
+        .collect();
+    assert_ne!(base, crate::translucency::cache::scene_key(&keyed, 200, &without));
 }
 
 /// The gather's grid keeps each member's own cell beside it (the pass takes a member only
