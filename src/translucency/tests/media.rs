@@ -80,6 +80,24 @@ fn random_walks_find_a_small_ball_gives_off_more_than_a_slab() {
     }
 }
 
+/// An index-matched skin cube 2 m wide (a slab to the walks), its rays, and an entry point on
+/// its top face, away from its edges and from the diagonals its triangles share with the
+/// bottom's (a ray along an edge may slip between two triangles).
+fn skin_cube_top() -> (TranslucentMedium, SceneRays, [crate::translucency::random_walk::EntryPoint; 1]) {
+    let medium = TranslucentMedium {
+        index_of_refraction: 1.0,
+        ..TranslucentPreset::Skin1.medium()
+    };
+    let cube = mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY);
+    let rays = SceneRays::new(&views_of(std::slice::from_ref(&cube)));
+    let cap = [crate::translucency::random_walk::EntryPoint {
+        position: Vec3::new(0.123, 1.0, -0.217),
+        normal: Vec3::Y,
+        area: 1.0,
+    }];
+    (medium, rays, cap)
+}
+
 /// Walks launched as a beam (`WalkLaunch::Beam`) give back what Chandrasekhar's plane albedo
 /// says a half-space gives back of a collimated beam (`collimated_albedo`, Hapke's `H` within
 /// 1 %): into the top of an index-matched skin cube 2 m wide (a slab to the walks), at
@@ -89,20 +107,8 @@ fn random_walks_find_a_small_ball_gives_off_more_than_a_slab() {
 #[test]
 fn beam_walks_give_back_the_plane_albedo() {
     use crate::translucency::diffusion::collimated_albedo;
-    use crate::translucency::random_walk::{EntryPoint, WALKS_PER_CHANNEL, WalkLaunch, walk_exits};
-    let medium = TranslucentMedium {
-        index_of_refraction: 1.0,
-        ..TranslucentPreset::Skin1.medium()
-    };
-    let cube = mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY);
-    let rays = SceneRays::new(&views_of(std::slice::from_ref(&cube)));
-    // Entered on the top face, away from its edges and from the diagonals its triangles share
-    // with the bottom's (a ray along an edge may slip between two triangles).
-    let cap = [EntryPoint {
-        position: Vec3::new(0.123, 1.0, -0.217),
-        normal: Vec3::Y,
-        area: 1.0,
-    }];
+    use crate::translucency::random_walk::{WALKS_PER_CHANNEL, WalkLaunch, walk_exits};
+    let (medium, rays, cap) = skin_cube_top();
     let albedo = medium.single_scattering_albedo();
     for mu in [1.0f32, 0.5] {
         let beam = Vec3::new((1.0 - mu * mu).sqrt(), -mu, 0.0);
@@ -145,19 +151,9 @@ fn beam_walks_give_back_the_plane_albedo() {
 fn walks_split_by_order_give_single_scattering_its_closed_form() {
     use crate::translucency::diffusion::single_scattering_shape;
     use crate::translucency::random_walk::{
-        EntryPoint, ScatteringOrders, WALKS_PER_CHANNEL, WalkEnd, WalkLaunch, walk_ends,
+        ScatteringOrders, WALKS_PER_CHANNEL, WalkEnd, WalkLaunch, walk_ends,
     };
-    let medium = TranslucentMedium {
-        index_of_refraction: 1.0,
-        ..TranslucentPreset::Skin1.medium()
-    };
-    let cube = mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY);
-    let rays = SceneRays::new(&views_of(std::slice::from_ref(&cube)));
-    let cap = [EntryPoint {
-        position: Vec3::new(0.123, 1.0, -0.217),
-        normal: Vec3::Y,
-        area: 1.0,
-    }];
+    let (medium, rays, cap) = skin_cube_top();
     let albedo = medium.single_scattering_albedo();
     let share = 1.0 / WALKS_PER_CHANNEL as f32;
     for mu in [1.0f32, 0.5] {
