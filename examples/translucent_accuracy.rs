@@ -340,8 +340,8 @@ fn main() {
     if cli.beam_table.is_some() && !matches!(cli.scattering, Scattering::BeamWalks | Scattering::BeamTable) {
         fail("--beam-table snaps the beam walks' directions: it needs --scattering beam-walks or beam-table".into());
     }
-    if cli.scattering == Scattering::BeamTable && (cli.eta != 1.0 || cli.uniform || cli.single_scattering_oracle) {
-        fail("--scattering beam-table takes the directional light into an index-matched object and gives single scattering its own law already (drop --eta, --uniform, --single-scattering-oracle)".into());
+    if cli.scattering == Scattering::BeamTable && (cli.uniform || cli.single_scattering_oracle) {
+        fail("--scattering beam-table carries the directional light's beams and gives single scattering its own law already (drop --uniform, --single-scattering-oracle)".into());
     }
     if cli.single_scattering_oracle && (cli.eta != 1.0 || cli.uniform) {
         fail("--single-scattering-oracle takes the directional light on an index-matched object only (drop --eta and --uniform)".into());
