@@ -1267,15 +1267,21 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
         scattering: translucent_accuracy_scene::ScatteringSource::BeamTable(default()),
         ..translucent_accuracy_scene::Oracles::NONE
     };
+    // Behind the presets' dielectric boundary too (η 1.3: the walks refract in and reflect
+    // inside, each beam weighted by its transmittance, the law with Fresnel both ways).
     let table_cases = [
-        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0586, [0.991, 0.961, 0.946]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, 0.3435, [0.709, 0.385, 0.335]),
-        (TranslucentPreset::Marble, "marble", "front", front, 0.0483, [0.985, 0.982, 0.992]),
-        (TranslucentPreset::Marble, "marble", "back", back, 0.0782, [0.954, 0.941, 0.949]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0586, [0.991, 0.961, 0.946]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3435, [0.709, 0.385, 0.335]),
+        (TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0483, [0.985, 0.982, 0.992]),
+        (TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0782, [0.954, 0.941, 0.949]),
+        (TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0821, [0.981, 0.946, 0.937]),
+        (TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.2197, [0.815, 0.628, 1.071]),
+        (TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0699, [0.980, 0.975, 0.967]),
+        (TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0812, [1.008, 0.992, 0.976]),
     ];
-    for (preset, name, lighting, how, rel_l1, ratio) in table_cases {
+    for (preset, name, lighting, how, eta, rel_l1, ratio) in table_cases {
         let medium = bevy_mesostructure::translucency::TranslucentMedium {
-            index_of_refraction: 1.0,
+            index_of_refraction: eta,
             ..preset.medium()
         };
         let reference = reference_picture(name, lighting);
