@@ -1,6 +1,6 @@
 //! The lights' direct contribution to the patches (the CPU oracle of the injection): each
 //! patch's irradiance `E⁰` with one shadow ray, and on translucent patches the single
-//! scattering of each beam at its own incidence.
+//! scattering of each beam at its own incidence, or each beam for the transport's beam table.
 
 use bevy::{math::DVec3, prelude::*};
 
@@ -80,7 +80,8 @@ pub fn direct_irradiance(patches: &Patches, lights: &[PatchLight], rays: &SceneR
 }
 
 /// [`direct_irradiance`], and with `transport` the single-scattering exitance `S⁰` of each
-/// beam at its incidence (see [`DirectLight`]).
+/// beam at its incidence, or — on the patches its beam table covers — each beam's light that
+/// got in by table direction, for the table instead of `K` (see [`DirectLight`]).
 pub fn direct_light(
     patches: &Patches,
     transport: Option<&EnergyTransport>,
