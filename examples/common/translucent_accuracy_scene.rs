@@ -237,7 +237,7 @@ pub enum ScatteringSource {
     /// The plugin's: the diffusion profile of `TransportSettings`.
     Profile,
     /// An oracle of the profile: this many random walks a channel from each patch
-    /// (`random_walk::walk_exits`, the references' own physics), entering diffusely as `K`
+    /// (`random_walk::walk_ends`, the references' own physics), entering diffusely as `K`
     /// assumes, each exit counted on the patch it leaves by. What is left against the
     /// reference is the rest of the pipeline's: the beam's incidence weight, the patches'
     /// resolution, the exit law, the gather.

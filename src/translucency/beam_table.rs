@@ -314,6 +314,11 @@ impl BeamTable {
                 medium,
                 units_per_mm,
                 j,
+                entries: patches
+                    .samples_of(j)
+                    .iter()
+                    .map(|s| EntryPoint { position: s.position, normal: s.normal, area: s.area })
+                    .collect(),
                 last_order: settings.last_order,
             };
             let diffuse_entering =
@@ -406,25 +411,6 @@ impl BeamTable {
         exitance
     }
 
-    /// The exitance the table gives each patch for the beams `beams(j)` yields on patch `j`:
-    /// `(travel, irradiance)`, the irradiance on the surface before the boundary (its
-    /// entering share is weighted here). Patches without a table take none.
-    pub fn exitance<I: IntoIterator<Item = (Vec3, Vec3)>>(
-        &self,
-        patches: &Patches,
-        beams: impl Fn(usize) -> I,
-    ) -> Vec<Vec3> {
-        let mut light = vec![Vec3::ZERO; self.media.len() * self.bins() as usize];
-        for j in 0..self.slots.len() {
-            for (travel, irradiance) in beams(j) {
-                if let Some((at, entering)) = self.light_index(patches, j, travel) {
-                    light[at] += irradiance * entering;
-                }
-            }
-        }
-        self.apply(&light)
-    }
-
     /// Per patch, its medium's `(α, η)` where it has a table, zero elsewhere (what the
     /// gather's single scattering takes).
     pub fn patch_media(&self) -> Vec<Vec4> {
@@ -470,6 +456,8 @@ struct ColumnWalks<'a> {
     medium: super::medium::TranslucentMedium,
     units_per_mm: f32,
     j: usize,
+    /// Patch `j`'s samples, where its walks enter (once for all its directions).
+    entries: Vec<EntryPoint>,
     last_order: u32,
 }
 
@@ -481,12 +469,6 @@ impl ColumnWalks<'_> {
     fn walk(&self, launch: WalkLaunch, walks: u32, seed: u64, law_takes_lit_face_single: bool) -> (Column, Vec3) {
         let p = &self.patches.patches;
         let pj = &p[self.j];
-        let entries: Vec<EntryPoint> = self
-            .patches
-            .samples_of(self.j)
-            .iter()
-            .map(|s| EntryPoint { position: s.position, normal: s.normal, area: s.area })
-            .collect();
         let share = 1.0 / walks as f32;
         // A beam's uncollided light goes on along the beam; diffuse light that crosses a thin
         // part unscattered is the surface's.
@@ -497,7 +479,7 @@ impl ColumnWalks<'_> {
         walk_ends(
             &self.medium,
             self.units_per_mm,
-            &entries,
+            &self.entries,
             self.rays,
             walks as usize,
             seed,

@@ -218,48 +218,6 @@ pub enum WalkLaunch {
     Beam(Vec3),
 }
 
-/// Walks `walks` paths a colour channel into `rays`' triangles from `entries` (drawn by
-/// area; each walk carries a `1 / walks` share of the light that entered) and calls
-/// `on_exit(channel, exit)` for each that leaves; `exit` is `None` where a walk leaves
-/// through a gap in the mesh. A beam's walks from entries facing away from it are not
-/// walked (their share is lost). `false` where the medium, the scale or the entries are
-/// invalid (nothing walked). The same physics as the path-traced references
-/// (`tools/translucent_reference.py`): `translucent_accuracy --scattering walks` builds `K`
-/// from it to measure what the diffusion profile costs.
-#[allow(clippy::too_many_arguments)]
-pub fn walk_exits(
-    medium: &TranslucentMedium,
-    world_units_per_mm: f32,
-    entries: &[EntryPoint],
-    rays: &SceneRays,
-    walks: usize,
-    seed: u64,
-    launch: WalkLaunch,
-    mut on_exit: impl FnMut(usize, Option<WalkExit>),
-) -> bool {
-    let orders = ScatteringOrders {
-        // A beam's uncollided light goes on along the beam: not the surface's.
-        first: u32::from(matches!(launch, WalkLaunch::Beam(_))),
-        last: MAX_EVENTS,
-    };
-    walk(
-        medium,
-        world_units_per_mm,
-        entries,
-        walks,
-        seed,
-        launch,
-        orders,
-        (|x, d, _| rays.first_hit(x, d), false),
-        |c, _, end| match end {
-            WalkEnd::Exit(exit) => on_exit(c, Some(exit)),
-            WalkEnd::Gap => on_exit(c, None),
-            WalkEnd::Remainder => {}
-        },
-    )
-    .is_some()
-}
-
 /// Which orders of scattering a walk reports (`walk_ends`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ScatteringOrders {
@@ -278,18 +236,25 @@ pub struct ScatteringOrders {
 pub enum WalkEnd {
     /// It left through the boundary.
     Exit(WalkExit),
-    /// It left through a gap in the mesh.
+    /// It left through a gap in the mesh (only the object's own walks, whose queries are
+    /// unbounded, tell one apart).
     Gap,
     /// It was still inside after [`ScatteringOrders::last`] scatterings.
     Remainder,
 }
 
-/// [`walk_exits`] for the `orders` given: `on_end(channel, end)` for each walk that leaves
-/// after at least `orders.first` scatterings or is still inside after `orders.last`. The mesh
-/// is queried only as far as each free flight reaches (several times faster for walks of a
-/// few mean free paths), so a walk that left through a gap in the mesh is not told apart: it
-/// scatters on outside until it is absorbed or ends as a [`WalkEnd::Remainder`] — use short
-/// `orders.last` on meshes that may be open.
+/// Walks `walks` paths a colour channel into `rays`' triangles from `entries` (drawn by
+/// area; each walk carries a `1 / walks` share of the light that entered) and calls
+/// `on_end(channel, end)` for each that leaves after at least `orders.first` scatterings or
+/// is still inside after `orders.last`. A beam's walks from entries facing away from it are
+/// not walked (their share is lost). `false` where the medium, the scale or the entries are
+/// invalid (nothing walked). The same physics as the path-traced references
+/// (`tools/translucent_reference.py`): `translucent_accuracy --scattering walks` builds `K`
+/// from it to measure what the diffusion profile costs, and the beam table its columns. The
+/// mesh is queried only as far as each free flight reaches (several times faster for walks
+/// of a few mean free paths), so a walk that left through a gap in the mesh is not told
+/// apart: it scatters on outside until it is absorbed or ends as a [`WalkEnd::Remainder`] —
+/// use short `orders.last` on meshes that may be open.
 #[allow(clippy::too_many_arguments)]
 pub fn walk_ends(
     medium: &TranslucentMedium,

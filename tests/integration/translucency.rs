@@ -85,7 +85,7 @@ fn marble_ball_objects() -> [(Vec<Vec3>, Vec<u32>); 3] {
 /// [`marble_ball_objects`] in 600 patches, their albedos (zero on the ball), transport and
 /// rays.
 fn marble_ball_on_a_floor(
-    kernel: DiffusionKernel,
+    settings: TransportSettings,
 ) -> (Patches, Vec<Vec3>, EnergyTransport, SceneRays) {
     let objects = marble_ball_objects();
     let views: Vec<PatchObject> = objects
@@ -110,14 +110,22 @@ fn marble_ball_on_a_floor(
             albedo: Vec3::new(0.8, 0.1, 0.1),
         },
     ];
-    // The dipole: its single-scattering term exercises the first bounce's extra exitance.
-    let settings = TransportSettings {
-        kernel,
-        ..default()
-    };
     let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
     let albedo = patch_albedos(&patches, &surfaces);
     (patches, albedo, transport, rays)
+}
+
+/// A spot above and beside [`marble_ball_objects`]' ball, aimed at it.
+fn spot_on_the_ball() -> PatchLight {
+    let position = Vec3::new(0.15, 0.25, 0.1);
+    PatchLight::Spot {
+        position,
+        direction: (Vec3::new(0.0, 0.05, 0.0) - position).normalize(),
+        intensity: Vec3::splat(10.0),
+        inner_angle: 0.4,
+        outer_angle: 0.6,
+        range: 10.0,
+    }
 }
 
 #[test]
@@ -128,17 +136,13 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
     let app = bare_app();
     let (device, queue) = device_and_queue(&app);
 
-    let (patches, _, transport, rays) = marble_ball_on_a_floor(DiffusionKernel::Dipole);
+    // The dipole: its single-scattering term exercises the first bounce's extra exitance.
+    let (patches, _, transport, rays) = marble_ball_on_a_floor(TransportSettings {
+        kernel: DiffusionKernel::Dipole,
+        ..default()
+    });
     assert!(transport.report.clusters > 0, "the far field takes part");
-    let position = Vec3::new(0.15, 0.25, 0.1);
-    let lights = [PatchLight::Spot {
-        position,
-        direction: (Vec3::new(0.0, 0.05, 0.0) - position).normalize(),
-        intensity: Vec3::splat(10.0),
-        inner_angle: 0.4,
-        outer_angle: 0.6,
-        range: 10.0,
-    }];
+    let lights = [spot_on_the_ball()];
     // With the single-scattering exitance of the marble's direct light (the first bounce's
     // extra term).
     let direct = direct_light(&patches, Some(&transport), &lights, &rays);
@@ -227,39 +231,14 @@ fn the_gpu_beam_table_matches_the_cpu_oracle() {
     }
     let app = bare_app();
     let (device, queue) = device_and_queue(&app);
-    let objects = marble_ball_objects();
-    let views: Vec<PatchObject> = objects
-        .iter()
-        .map(|o| PatchObject { positions: &o.0, indices: &o.1 })
-        .collect();
-    let patches = resample_into_patches(&views, 600);
-    let rays = SceneRays::new(&views);
-    let surfaces = [
-        PatchSurface::Translucent {
-            medium: TranslucentPreset::Marble.medium(),
-            world_units_per_mm: 0.001,
-            oriented_dipole: false,
-        },
-        PatchSurface::Opaque { albedo: Vec3::splat(0.8) },
-        PatchSurface::Opaque { albedo: Vec3::new(0.8, 0.1, 0.1) },
-    ];
     let table = bevy_mesostructure::translucency::beam_table::BeamTableSettings {
         walks: 16,
         late_walks: 64,
         ..default()
     };
-    let settings = TransportSettings { beam_table: Some(table), ..default() };
-    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
-    let albedo = patch_albedos(&patches, &surfaces);
-    let position = Vec3::new(0.15, 0.25, 0.1);
-    let lights = [PatchLight::Spot {
-        position,
-        direction: (Vec3::new(0.0, 0.05, 0.0) - position).normalize(),
-        intensity: Vec3::splat(10.0),
-        inner_angle: 0.4,
-        outer_angle: 0.6,
-        range: 10.0,
-    }];
+    let (patches, albedo, transport, rays) =
+        marble_ball_on_a_floor(TransportSettings { beam_table: Some(table), ..default() });
+    let lights = [spot_on_the_ball()];
     let direct = direct_light(&patches, Some(&transport), &lights, &rays);
     assert!(direct.beam_light.iter().any(|e| *e != Vec3::ZERO), "the table carries the spot");
     let n = patches.patches.len();
@@ -346,7 +325,8 @@ fn the_gpu_light_injection_matches_the_shadow_rays() {
 
     // The scaled dipole weighs each beam by its incidence; the dipole adds single scattering.
     for kernel in [DiffusionKernel::ScaledDipole, DiffusionKernel::Dipole] {
-        let (patches, albedo, transport, rays) = marble_ball_on_a_floor(kernel);
+        let (patches, albedo, transport, rays) =
+            marble_ball_on_a_floor(TransportSettings { kernel, ..default() });
         let gpu_transport = GpuTransport::new(
             &device,
             &transport,
@@ -356,7 +336,6 @@ fn the_gpu_light_injection_matches_the_shadow_rays() {
             },
             RowLanes::Gpu,
         );
-        let spot_position = Vec3::new(0.15, 0.25, 0.1);
         let cases: [(&str, Vec<PatchLight>); 5] = [
             ("ambient alone", vec![]),
             (
@@ -376,14 +355,7 @@ fn the_gpu_light_injection_matches_the_shadow_rays() {
             ),
             (
                 "spot",
-                vec![PatchLight::Spot {
-                    position: spot_position,
-                    direction: (Vec3::new(0.0, 0.05, 0.0) - spot_position).normalize(),
-                    intensity: Vec3::splat(10.0),
-                    inner_angle: 0.4,
-                    outer_angle: 0.6,
-                    range: 10.0,
-                }],
+                vec![spot_on_the_ball()],
             ),
             (
                 "all three and ambient",
@@ -397,14 +369,7 @@ fn the_gpu_light_injection_matches_the_shadow_rays() {
                         intensity: Vec3::splat(50.0),
                         range: 1.0,
                     },
-                    PatchLight::Spot {
-                        position: spot_position,
-                        direction: (Vec3::new(0.0, 0.05, 0.0) - spot_position).normalize(),
-                        intensity: Vec3::splat(10.0),
-                        inner_angle: 0.4,
-                        outer_angle: 0.6,
-                        range: 10.0,
-                    },
+                    spot_on_the_ball(),
                 ],
             ),
         ];

@@ -180,14 +180,11 @@ fn table_rows(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= packing.patches {
         return;
     }
-    var sum = vec4(0.0);
-    for (var e = matrices[packing.early_offsets + i]; e < matrices[packing.early_offsets + i + 1u]; e++) {
-        sum += rgb(packing.early_values + 3u * e) * vectors[packing.beam_light + matrices[packing.early_columns + e]];
-    }
-    for (var e = matrices[packing.late_offsets + i]; e < matrices[packing.late_offsets + i + 1u]; e++) {
-        sum += rgb(packing.late_values + 3u * e) * vectors[packing.beam_late + matrices[packing.late_columns + e]];
-    }
-    vectors[packing.table_exitance + i] = sum;
+    let early = rgb_row_part(packing.early_offsets, packing.early_columns, packing.early_values,
+                             packing.beam_light, i, 0u, 1u);
+    let late = rgb_row_part(packing.late_offsets, packing.late_columns, packing.late_values,
+                            packing.beam_late, i, 0u, 1u);
+    vectors[packing.table_exitance + i] = early + late;
 }
 
 var<workgroup> lanes: array<vec4<f32>, 64>;
@@ -221,19 +218,22 @@ fn scalar_row_part(offsets: u32, columns: u32, values: u32, row: u32, lane: u32)
     return sum;
 }
 
-// This lane's share of row `row` of K (RGB values) times ΔE.
-fn scattering_row_part(row: u32, lane: u32) -> vec4<f32> {
+// This lane's share (every `lanes`-th entry from `lane`) of row `row` of an RGB CSR matrix
+// (K, the beam table's) times the vector at `vector`.
+fn rgb_row_part(offsets: u32, columns: u32, values: u32, vector: u32,
+                row: u32, lane: u32, lanes: u32) -> vec4<f32> {
     var sum = vec4(0.0);
-    let start = matrices[packing.k_offsets + row];
-    let end = matrices[packing.k_offsets + row + 1u];
-    for (var e = start + lane; e < end; e += SCATTERING_LANES) {
-        let j = matrices[packing.k_columns + e];
-        let v = packing.k_values + 3u * e;
-        let k = vec4(bitcast<f32>(matrices[v]), bitcast<f32>(matrices[v + 1u]),
-                     bitcast<f32>(matrices[v + 2u]), 0.0);
-        sum += k * vectors[packing.delta_irradiance + j];
+    let end = matrices[offsets + row + 1u];
+    for (var e = matrices[offsets + row] + lane; e < end; e += lanes) {
+        sum += rgb(values + 3u * e) * vectors[vector + matrices[columns + e]];
     }
     return sum;
+}
+
+// This lane's share of row `row` of K times ΔE.
+fn scattering_row_part(row: u32, lane: u32) -> vec4<f32> {
+    return rgb_row_part(packing.k_offsets, packing.k_columns, packing.k_values,
+                        packing.delta_irradiance, row, lane, SCATTERING_LANES);
 }
 
 // ΔB = K ΔE (+ S⁰ on the first bounce); B += ΔB; each workgroup's share of

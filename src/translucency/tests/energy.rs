@@ -69,20 +69,9 @@ fn form_factors_are_reciprocal_and_sum_to_one_in_a_closed_box() {
 
 #[test]
 fn a_closed_box_absorbs_exactly_the_light_put_in() {
-    let (objects, patches) = closed_box(1200);
-    let views = views_of(&objects);
-    let rays = SceneRays::new(&views);
     let albedo = 0.6;
-    let surfaces = [PatchSurface::Opaque {
-        albedo: Vec3::splat(albedo),
-    }; 2];
     // A point light of 1 cd in the box sends 4π into the walls and the ball.
-    let lights = [PatchLight::Point {
-        position: Vec3::new(-0.2, 0.5, -0.3),
-        intensity: Vec3::ONE,
-        range: 100.0,
-    }];
-    let direct = direct_irradiance(&patches, &lights, &rays);
+    let (patches, rays, surfaces, direct) = point_lit_closed_box_scene(albedo);
     let mut exitances = Vec::new();
     // Patch-to-patch links everywhere, then the default far-field clusters.
     for (cluster_size, margin) in [(0, 0.015), (4, 0.03)] {
@@ -356,9 +345,9 @@ fn the_oriented_dipole_changes_only_its_own_objects_transport() {
     assert_ne!(key(&flat), key(&second_oriented));
 }
 
-/// The closed box of one grey `albedo` (1200 patches, default transport) and the direct light
-/// of a point light of 1 cd in it (the one of `a_closed_box_absorbs_exactly_the_light_put_in`).
-fn point_lit_closed_box(albedo: f32) -> (EnergyTransport, Vec<Vec3>) {
+/// The closed box of one grey `albedo` (1200 patches), its rays and surfaces, and the direct
+/// light of a point light of 1 cd in it.
+fn point_lit_closed_box_scene(albedo: f32) -> (crate::translucency::patches::Patches, SceneRays, [PatchSurface; 2], Vec<Vec3>) {
     let (objects, patches) = closed_box(1200);
     let views = views_of(&objects);
     let rays = SceneRays::new(&views);
@@ -371,6 +360,13 @@ fn point_lit_closed_box(albedo: f32) -> (EnergyTransport, Vec<Vec3>) {
         range: 100.0,
     }];
     let direct = direct_irradiance(&patches, &lights, &rays);
+    (patches, rays, surfaces, direct)
+}
+
+/// [`point_lit_closed_box_scene`] with the default transport (the box of
+/// `a_closed_box_absorbs_exactly_the_light_put_in`).
+fn point_lit_closed_box(albedo: f32) -> (EnergyTransport, Vec<Vec3>) {
+    let (patches, rays, surfaces, direct) = point_lit_closed_box_scene(albedo);
     let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
     (transport, direct)
 }
