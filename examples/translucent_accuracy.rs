@@ -17,10 +17,11 @@
 //!     [--kernel scaled-dipole|burley|dipole] [--gather interpolation|photons]
 //!     [--object-exit-share true|false] [--beam-incidence true|false]
 //!     [--oriented-dipole true|false] [--shape-diffusion true|false]
-//!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks] [--walks 256]
+//!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks|beam-table] [--walks 256]
 //!     [--beam-table COSINES,AZIMUTHS] [--single-scattering-oracle]
 //!     [--beam-orders FIRST,LAST] [--late-light profile|profile-less-early|clamped]
 //!     [--late-walks 1024] [--lit-face-single-scattering-law]
+//!     [--exit-axis normal|normal-all|flow|flow-all]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
@@ -63,7 +64,7 @@ use bevy_mesostructure::translucency::{
     random_walk::ScatteringOrders,
 };
 use translucent_accuracy_scene::{
-    FOV_Y, FRONT_LIGHT, LateLight, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
+    ExitAxis, FOV_Y, FRONT_LIGHT, LateLight, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
     ShapeView, plugin_picture, score,
 };
 
@@ -111,6 +112,13 @@ struct Cli {
     /// under the directional light; method suffix `_ssoracle`)
     #[arg(long)]
     single_scattering_oracle: bool,
+    /// As an oracle of a directional exit: the axis the deep field's exit law is taken about
+    /// — each patch's normal (the plugin's), or the way its light from elsewhere flows in
+    /// (`flow`: from each source's diffusion source to the patch, weighted by what it gives);
+    /// `-all`: all light from elsewhere takes the law, not the share `1 − ν` (method suffix
+    /// `_exit<axis>`)
+    #[arg(long, value_enum, default_value_t = Axis::Normal)]
+    exit_axis: Axis,
     /// Walks a channel from each patch for `--scattering walks|beam-walks`
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=65536))]
     walks: u32,
@@ -213,6 +221,15 @@ enum Medium {
 enum ShapeArg {
     Ball,
     Bunny,
+}
+
+/// `--exit-axis` ([`ExitAxis`]).
+#[derive(Clone, Copy, clap::ValueEnum, Debug, PartialEq)]
+enum Axis {
+    Normal,
+    NormalAll,
+    Flow,
+    FlowAll,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum, Debug, PartialEq)]
@@ -514,14 +531,21 @@ fn main() {
         },
     };
     let ss_oracle = if cli.single_scattering_oracle { "_ssoracle" } else { "" };
+    let (exit_axis, exit_name) = match cli.exit_axis {
+        Axis::Normal => (ExitAxis::Normal, ""),
+        Axis::NormalAll => (ExitAxis::NormalAll, "_exitnormalall"),
+        Axis::Flow => (ExitAxis::Flow, "_exitflow"),
+        Axis::FlowAll => (ExitAxis::FlowAll, "_exitflowall"),
+    };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}",
         cli.kernel
     )
     .to_lowercase();
     let oracles = Oracles {
         scattering: source,
         single_scattering_law: cli.single_scattering_oracle,
+        exit_axis,
     };
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();

@@ -31,7 +31,15 @@ media (it renders the ball black). This tool runs the walks the other way, from 
 `--part single|grazing-entry` renders one part of the picture: single scattering alone (each
 photon's first collision; index-matched only — behind a dielectric the photons reflected at
 the boundary before their first collision are left out), or the light of the photons that
-entered at a grazing angle (incidence cosine below 0.3). `--uniform` lights the ball by a uniform environment of radiance 1 instead (photons start
+entered at a grazing angle (incidence cosine below 0.3). `--part lambertian-exit`
+(index-matched only) renders what any method that gives light out by Lambert's law would
+show with the exact transport: each photon's exit is counted as flux on the surface point it
+leaves by, seen through its pixel, and the pixel's radiance is that exitance over π (flux ×
+the exit's view cosine / (π · the pixel's solid angle · r²)); the unscattered beam is not
+counted. `--part lobe-exit` gives the same exits out by a lobe instead: per pixel, the von
+Mises–Fisher lobe `exp(k ω·u)` on the outward hemisphere whose flux-weighted mean exit
+direction is the exits' own (fitted on a grid of k and u's angle to the normal), scaled to
+their exitance — what a method that carried each patch's mean exit direction could give. `--uniform` lights the ball by a uniform environment of radiance 1 instead (photons start
 uniformly over the sphere, cosine-distributed inward): against Mitsuba's reference of the
 same scene it checks the dielectric machinery end to end.
 
@@ -174,6 +182,19 @@ def exit_distance(x, w, radius):
     return -b + np.sqrt(np.maximum(b * b - c, 0.0))
 
 
+def scatter_and_roulette(x, weight, power, rng):
+    """Isotropic scattering at every collision, and Russian roulette once a photon keeps
+    less than 1/20 of its start. Returns the survivors' (x, w, weight)."""
+    cz = 2.0 * rng.random(len(x)) - 1.0
+    sz = np.sqrt(np.maximum(0.0, 1.0 - cz * cz))
+    a = 2.0 * math.pi * rng.random(len(x))
+    w = np.stack([sz * np.cos(a), sz * np.sin(a), cz], axis=1)
+    low = weight < power / 20.0
+    survive = ~low | (rng.random(len(x)) < 0.5)
+    weight = np.where(low, weight * 2.0, weight)
+    return x[survive], w[survive], weight[survive]
+
+
 def trace_channel(sigma_t, albedo, args, camera, rng, batch):
     """One channel's picture from `batch` photons (the caller splits the total)."""
     eye, forward, right, up, tan_half = camera
@@ -183,6 +204,8 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
     lu = normalize(np.cross(light, helper))
     lv = np.cross(light, lu)
     image = np.zeros(size * size)
+    # The exits' flux-weighted directions (--part lobe-exit).
+    moments = np.zeros((size * size, 3))
     # Irradiance 1 over the ball's disc πR², shared by the photons.
     power = math.pi * radius * radius / batch
     pixel_area = (2.0 * tan_half / size) ** 2
@@ -238,6 +261,28 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
             bounced_x = at[back] - 1e-9 * radius * n[back]
             bounced_w = w[~inside][back] - 2.0 * cos_i[back][:, None] * n[back]
             bounced_weight = weight[~inside][back]
+        if args.part in ("lambertian-exit", "lobe-exit") and collisions > 0:
+            # Exits after a scattering or more (the unscattered beam goes on along the light,
+            # and no patch method gives it out) on the side the eye sees: radiance =
+            # exitance / π, exitance = flux over the pixel's footprint (its solid angle
+            # a cos³θ at r, over the exit's view cosine).
+            s = x[~inside] + to_boundary[~inside][:, None] * w[~inside]
+            to_eye = eye - s
+            r2 = np.einsum("ij,ij->i", to_eye, to_eye)
+            view_cos = dot(to_eye, s / radius) / np.sqrt(r2)
+            d = -to_eye / np.sqrt(r2)[:, None]
+            cos_theta = d @ forward
+            sx = (d @ right) / cos_theta / tan_half
+            sy = (d @ up) / cos_theta / tan_half
+            px = np.floor((sx + 1.0) * 0.5 * size).astype(np.int64)
+            py = np.floor((1.0 - sy) * 0.5 * size).astype(np.int64)
+            seen = (px >= 0) & (px < size) & (py >= 0) & (py < size) & (cos_theta > 0) & (view_cos > 0)
+            flux = weight[~inside] * view_cos / (math.pi * pixel_area * cos_theta**3 * r2)
+            image += np.bincount((py * size + px)[seen], weights=flux[seen], minlength=size * size)
+            for k in range(3):
+                moments[:, k] += np.bincount((py * size + px)[seen],
+                                             weights=(flux * w[~inside][:, k])[seen],
+                                             minlength=size * size)
         x, w, weight, flight = x[inside], w[inside], weight[inside], flight[inside]
         if not len(x):
             if eta != 1.0 and len(bounced_x):
@@ -247,6 +292,9 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
         x = x + flight[:, None] * w
         weight = weight * albedo
         collisions += 1
+        if args.part in ("lambertian-exit", "lobe-exit"):
+            x, w, weight = scatter_and_roulette(x, weight, power, rng)
+            continue
         # Next-event estimation toward the eye: at every collision, or (--connect-fraction f)
         # at a random share of them, weighted by its inverse (unbiased; the refracted
         # connection's search is most of the cost behind a dielectric): f in the half of the
@@ -277,21 +325,59 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
         seen = (px >= 0) & (px < size) & (py >= 0) & (py < size) & (cos_theta > 0) & connected
         contribution = wc * transmittance / (4.0 * math.pi * pixel_area * cos_theta**3)
         image += np.bincount((py * size + px)[seen], weights=contribution[seen], minlength=size * size)
-        # Isotropic scattering.
-        cz = 2.0 * rng.random(len(x)) - 1.0
-        sz = np.sqrt(np.maximum(0.0, 1.0 - cz * cz))
-        a = 2.0 * math.pi * rng.random(len(x))
-        w = np.stack([sz * np.cos(a), sz * np.sin(a), cz], axis=1)
-        # Russian roulette once a photon keeps less than 1/20 of its start.
-        low = weight < power / 20.0
-        survive = ~low | (rng.random(len(x)) < 0.5)
-        weight = np.where(low, weight * 2.0, weight)
-        x, w, weight = x[survive], w[survive], weight[survive]
+        x, w, weight = scatter_and_roulette(x, weight, power, rng)
         if eta != 1.0 and len(bounced_x):
             x = np.concatenate([x, bounced_x])
             w = np.concatenate([w, bounced_w])
             weight = np.concatenate([weight, bounced_weight])
-    return image.reshape(size, size)
+    return image.reshape(size, size), moments.reshape(size, size, 3)
+
+
+def lobe_exit_radiance(exitance, moments, camera, radius):
+    """Per pixel, the radiance toward the eye of a von Mises–Fisher lobe `A exp(k ω·u)` on
+    the outward hemisphere of the point the pixel's centre sees, with the exits' exitance
+    (`exitance`, over π) and flux-weighted mean exit direction (`moments / exitance`): k and
+    u's angle to the normal from the nearest point of a grid of lobes' mean directions."""
+    eye, forward, right, up, tan_half = camera
+    size = exitance.shape[0]
+    # Hemisphere quadrature about +z, uniform in the cosine and the azimuth.
+    cos_q, az_q = np.meshgrid((np.arange(48) + 0.5) / 48, (np.arange(96) + 0.5) / 96 * 2 * math.pi)
+    cos_q, az_q = cos_q.ravel(), az_q.ravel()
+    sin_q = np.sqrt(1.0 - cos_q**2)
+    omega = np.stack([sin_q * np.cos(az_q), sin_q * np.sin(az_q), cos_q], axis=1)
+    grid = []
+    for k in np.concatenate([[0.0], np.geomspace(0.05, 60.0, 80)]):
+        for angle in np.linspace(0.0, math.pi, 91):
+            u = np.array([math.sin(angle), 0.0, math.cos(angle)])
+            lobe = np.exp(k * (omega @ u - 1.0))
+            flux = lobe * omega[:, 2]
+            mean = (flux[:, None] * omega).sum(axis=0) / flux.sum()
+            # The lobe's exitance over π, per unit of its peak, for the scale.
+            grid.append((k, angle, mean[2], mean[0], flux.sum() * 2.0 / len(lobe)))
+    grid = np.array(grid)
+    column, row = np.meshgrid(np.arange(size), np.arange(size))
+    sx = ((column + 0.5) / size * 2.0 - 1.0) * tan_half
+    sy = (1.0 - (row + 0.5) / size * 2.0) * tan_half
+    d = forward + sx[..., None] * right + sy[..., None] * up
+    d = (d / np.linalg.norm(d, axis=2)[..., None]).reshape(-1, 3)
+    b = d @ eye
+    disc = b * b - (eye @ eye - radius * radius)
+    normal = (eye + (-b - np.sqrt(np.maximum(disc, 0.0)))[:, None] * d) / radius
+    m = exitance.reshape(-1)
+    mean = moments.reshape(-1, 3) / np.maximum(m, 1e-300)[:, None]
+    along = dot(mean, normal)
+    tangent = mean - along[:, None] * normal
+    across = np.linalg.norm(tangent, axis=1)
+    tangent = tangent / np.maximum(across, 1e-12)[:, None]
+    radiance = np.zeros(len(m))
+    for start in range(0, len(m), 1024):
+        part = slice(start, start + 1024)
+        nearest = np.argmin((grid[None, :, 2] - along[part, None]) ** 2
+                            + (grid[None, :, 3] - across[part, None]) ** 2, axis=1)
+        k, angle, scale = grid[nearest, 0], grid[nearest, 1], grid[nearest, 4]
+        u = np.cos(angle)[:, None] * normal[part] + np.sin(angle)[:, None] * tangent[part]
+        radiance[part] = m[part] * np.exp(k * (dot(-d[part], u) - 1.0)) / scale
+    return np.where((disc > 0) & (m > 0), radiance, 0.0).reshape(size, size)
 
 
 def main():
@@ -307,9 +393,13 @@ def main():
                              "the half of the ball away from the eye, rising to all of them "
                              "nearest it, weighted by its inverse (0 < f <= 1: less cost per "
                              "photon, for media whose photons collide hundreds of times)")
-    parser.add_argument("--part", choices=["all", "single", "grazing-entry"], default="all",
-                        help="render only single scattering (each photon's first collision) or "
-                             "only the photons entering at incidence cosines below 0.3")
+    parser.add_argument("--part", choices=["all", "single", "grazing-entry", "lambertian-exit",
+                                           "lobe-exit"],
+                        default="all",
+                        help="render only single scattering (each photon's first collision), "
+                             "only the photons entering at incidence cosines below 0.3, or the "
+                             "exact exitance given out by Lambert's law or by a lobe about its "
+                             "mean exit direction (index-matched only)")
     parser.add_argument("--uniform", action="store_true",
                         help="a uniform environment of radiance 1 instead of the light")
     args = parser.parse_args()
@@ -320,6 +410,8 @@ def main():
         parser.error("--connect-fraction must lie in (0, 1]")
     if not 1.0 <= args.eta <= 3.0:
         parser.error("--eta must lie in 1 – 3")
+    if args.part in ("lambertian-exit", "lobe-exit") and args.eta != 1.0:
+        parser.error(f"--part {args.part} is for an index-matched ball (--eta 1)")
     if args.radius <= 0 or args.size <= 0 or args.photons < 2 or args.batch <= 0:
         parser.error("--radius, --size and --batch must be positive, --photons at least 2")
     if not all(a >= 0 and s > 0 for a, s in zip(args.sigma_a, args.sigma_s)):
@@ -338,16 +430,25 @@ def main():
     batches = 2 * max(1, math.ceil(args.photons / (2 * args.batch)))
     batch = args.photons // batches
     halves = np.zeros((2, args.size, args.size, 3))
+    moments = np.zeros((2, args.size, args.size, 3, 3))
     start = time.time()
     for ch in range(3):
         # Per metre: the coefficients are per millimetre.
         sigma_t = 1000.0 * (args.sigma_a[ch] + args.sigma_s[ch])
         albedo = args.sigma_s[ch] / (args.sigma_a[ch] + args.sigma_s[ch])
         for k in range(batches):
-            halves[k % 2, :, :, ch] += trace_channel(sigma_t, albedo, args, camera, rng, batch)
+            image, moment = trace_channel(sigma_t, albedo, args, camera, rng, batch)
+            halves[k % 2, :, :, ch] += image
+            moments[k % 2, :, :, ch] += moment
         print(f"channel {ch}: {time.time() - start:.0f} s", file=sys.stderr)
     halves /= batches // 2
+    moments /= batches // 2
     image = halves.mean(axis=0)
+    if args.part == "lobe-exit":
+        lobes = lambda e, m: np.stack(
+            [lobe_exit_radiance(e[..., c], m[..., c, :], camera, args.radius) for c in range(3)], axis=2)
+        image = lobes(image, moments.mean(axis=0))
+        halves = np.stack([lobes(halves[h], moments[h]) for h in range(2)])
     ball = image.sum(axis=2) > 0
     noise = np.abs(halves[0] - halves[1])[ball].sum() / max(2.0 * image[ball].sum(), 1e-30)
     import mitsuba as mi

@@ -248,6 +248,46 @@ pub fn deep_exit_shape(law: [f32; 4], eta: f32, mu: f32) -> f32 {
     ((1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary) * law[2] as f64) as f32
 }
 
+/// [`deep_exit_shape`] with the mode's axis along `axis` instead of the normal `n`,
+/// unnormalised (`law[2]` not applied): light leaving towards the unit `towards` (outside)
+/// leaves from inside along its refracted direction `ω_i`, and the deep field's mode, which
+/// decays by `ν` a mean free path against its flux, gives `H(μ_i)/(1 − ν ω_i·a)` there —
+/// `a` the unit direction the light flows along times how much of it flows one way (0 – 1).
+/// With `a = n` this is [`deep_exit_shape`]'s law. Normalise by [`deep_exit_norm_about`].
+pub fn deep_exit_shape_about(law: [f32; 4], eta: f32, n: Vec3, axis: Vec3, towards: Vec3) -> f32 {
+    let eta = f64::from(if eta.is_finite() { eta } else { 1.0 }).clamp(1.0, 3.0);
+    let mu = f64::from(n.dot(towards)).clamp(0.0, 1.0);
+    let tangent = (towards - n * n.dot(towards)).as_dvec3();
+    let inside_mu = (1.0 - tangent.length_squared() / (eta * eta)).max(0.0).sqrt();
+    let inside = tangent / eta + n.as_dvec3() * inside_mu;
+    let f_dr = jensen_internal_diffuse_reflectance(eta);
+    let boundary = (1.0 + f_dr) / (1.0 - f_dr);
+    let flow = (law[1] as f64 * inside.dot(axis.as_dvec3())).min(0.99);
+    let mode = chandrasekhar_h(law[0] as f64, inside_mu) / (1.0 - flow);
+    ((1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary)) as f32
+}
+
+/// `1/N` for [`deep_exit_shape_about`]: `N = 2 ∫∫ s μ dμ dφ/(2π)` over the outward
+/// hemisphere, for an axis `along` the normal and `across` it (its two components), so that
+/// the law keeps the exitance. A 16 × 32 midpoint rule in `μ²` and `φ` (the law is smooth).
+pub fn deep_exit_norm_about(law: [f32; 4], eta: f32, along: f32, across: f32) -> f32 {
+    let (n, axis) = (Vec3::Z, Vec3::new(across, 0.0, along));
+    let (rings, spokes) = (16, 32);
+    let mut sum = 0.0f64;
+    for r in 0..rings {
+        // μ² uniform: cosine-weighted directions, so the mean of s is N.
+        let mu = ((r as f32 + 0.5) / rings as f32).sqrt();
+        let sin = (1.0 - mu * mu).max(0.0).sqrt();
+        for k in 0..spokes {
+            let phi = std::f32::consts::TAU * (k as f32 + 0.5) / spokes as f32;
+            let towards = Vec3::new(sin * phi.cos(), sin * phi.sin(), mu);
+            sum += deep_exit_shape_about(law, eta, n, axis, towards) as f64;
+        }
+    }
+    let norm = sum / (rings * spokes) as f64;
+    if norm > 0.0 { (1.0 / norm) as f32 } else { 1.0 }
+}
+
 /// `1 − μ₀ ln(1 + 1/μ₀)`: the single-scattered exitance per unit irradiance and `α/2`, for a
 /// beam at incidence cosine `μ₀` (see the module docs).
 pub fn single_scattering_shape(mu0: f64) -> f64 {

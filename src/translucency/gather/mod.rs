@@ -132,7 +132,8 @@ pub fn gathered_radiance(
     x: Vec3,
     n: Vec3,
 ) -> Option<Vec3> {
-    let mu = n.dot((eye - x).normalize_or_zero());
+    let towards = (eye - x).normalize_or_zero();
+    let mu = n.dot(towards);
     let (mut sum, mut weights) = (Vec3::ZERO, 0.0);
     for (i, p) in patches.patches.iter().enumerate() {
         let d2 = p.surface_point.distance_squared(x);
@@ -150,7 +151,7 @@ pub fn gathered_radiance(
             }
             let law = exit_laws.get(i).copied().unwrap_or_default();
             let leaving = (exitance[i] - albedo[i] * direct[i]).max(Vec3::ZERO)
-                * law.factor(exitance[i], direct[i], mu);
+                * law.factor_towards(exitance[i], direct[i], n, towards);
             sum += w * leaving / std::f32::consts::PI;
             if let Some(single) = single {
                 sum += w * single.radiance(i, n, mu);

@@ -568,6 +568,7 @@ fn deep_light_leaves_limb_darkened_and_keeps_its_exitance() {
         local_albedo: Vec3::splat(0.8),
         channels: [Vec4::from_array(conservative); 3],
         eta: 1.0,
+        flow: [Vec4::ZERO; 3],
     };
     // All of B from the patch's own light (B = A E⁰): Lambertian.
     let own = law.factor(Vec3::splat(0.8), Vec3::ONE, 1.0);
@@ -582,4 +583,76 @@ fn deep_light_leaves_limb_darkened_and_keeps_its_exitance() {
     // Nothing leaving, or an opaque patch (the default law): Lambertian.
     assert_eq!(law.factor(Vec3::ZERO, Vec3::ONE, mu), Vec3::ONE);
     assert_eq!(ExitLaw::default().factor(Vec3::ONE, Vec3::ZERO, mu), Vec3::ONE);
+}
+
+/// The deep field's law about the way its light flows (`deep_exit_shape_about`,
+/// `ExitLaw::flow`): about the normal it is `deep_exit_shape`'s law; about any axis its
+/// normalisation keeps the exitance; it leans towards the flow; and `factor_towards` falls
+/// back to the normal's law where a patch has no flow.
+#[test]
+fn deep_light_leaves_along_its_flow_and_keeps_its_exitance() {
+    use crate::translucency::diffusion::{
+        deep_exit_law, deep_exit_norm_about, deep_exit_shape, deep_exit_shape_about,
+    };
+    use crate::translucency::transport::ExitLaw;
+    let n = Vec3::Z;
+    let towards = |mu: f32, phi: f32| {
+        let sin = (1.0 - mu * mu).max(0.0).sqrt();
+        Vec3::new(sin * phi.cos(), sin * phi.sin(), mu)
+    };
+    for eta in [1.0f32, 1.3] {
+        for alpha in [0.6779, 0.9585, 0.999] {
+            let law = deep_exit_law(alpha, eta as f64);
+            // About the normal: the normal's law, its own normalisation included.
+            let norm = deep_exit_norm_about(law, eta, 1.0, 0.0);
+            for mu in [0.1f32, 0.5, 0.9] {
+                let about = deep_exit_shape_about(law, eta, n, n, towards(mu, 0.7)) * norm;
+                let normal = deep_exit_shape(law, eta, mu);
+                assert!((about / normal - 1.0).abs() < 0.01, "η {eta} α {alpha} μ {mu}: {about} / {normal}");
+            }
+            // Tilted axes: the exitance kept, by a finer rule than the normalisation's own.
+            for (along, across) in [(0.0f32, 1.0f32), (0.6, 0.8), (-0.5, 0.5), (0.2, 0.1)] {
+                let axis = Vec3::new(across, 0.0, along);
+                let norm = deep_exit_norm_about(law, eta, along, across);
+                let (rings, spokes) = (64, 128);
+                let mut mean = 0.0f64;
+                for r in 0..rings {
+                    let mu = ((r as f32 + 0.5) / rings as f32).sqrt();
+                    for k in 0..spokes {
+                        let phi = std::f32::consts::TAU * (k as f32 + 0.5) / spokes as f32;
+                        mean += (deep_exit_shape_about(law, eta, n, axis, towards(mu, phi)) * norm) as f64;
+                    }
+                }
+                mean /= (rings * spokes) as f64;
+                assert!((mean - 1.0).abs() < 0.01, "η {eta} α {alpha} axis {axis}: exitance {mean}");
+                // Brighter towards the flow than against it, at the same exit cosine.
+                if across > 0.0 && law[1] > 0.1 {
+                    let (with, against) = (
+                        deep_exit_shape_about(law, eta, n, axis, towards(0.5, 0.0)),
+                        deep_exit_shape_about(law, eta, n, axis, towards(0.5, std::f32::consts::PI)),
+                    );
+                    assert!(with > against, "η {eta} α {alpha} axis {axis}: {with} ≤ {against}");
+                }
+            }
+        }
+    }
+    // `factor_towards`: without a flow the normal's law; with one, the law about it.
+    let law = deep_exit_law(0.999, 1.0);
+    let mut exit = ExitLaw {
+        local_albedo: Vec3::splat(0.8),
+        channels: [Vec4::from_array(law); 3],
+        eta: 1.0,
+        flow: [Vec4::ZERO; 3],
+    };
+    let view = towards(0.6, 0.3);
+    let (b, e0) = (Vec3::splat(0.3), Vec3::ZERO);
+    assert_eq!(exit.factor_towards(b, e0, n, view), exit.factor(b, e0, n.dot(view)));
+    let axis = Vec3::new(0.8, 0.0, 0.6);
+    let norm = deep_exit_norm_about(law, 1.0, 0.6, 0.8);
+    exit.flow = [axis.extend(norm); 3];
+    let expected = deep_exit_shape_about(law, 1.0, n, axis, view) * norm;
+    let got = exit.factor_towards(b, e0, n, view);
+    // g = 1 − ν ≈ 0.95 of the light from elsewhere takes the law.
+    let g = law[3];
+    assert!((got - Vec3::splat(1.0 + g * (expected - 1.0))).abs().max_element() < 1e-6, "{got}");
 }

@@ -69,6 +69,11 @@ pub struct ExitLaw {
     pub channels: [Vec4; 3],
     /// The boundary's index of refraction (1: index-matched).
     pub eta: f32,
+    /// Per channel, the axis the deep field's light flows along (`xyz`: its unit direction
+    /// times how much of the light from elsewhere flows one way, 0 – 1) and `1/N` of the law
+    /// about it (`w`, [`deep_exit_norm_about`](super::diffusion::deep_exit_norm_about)); all
+    /// zero (the default): about the patch's normal, [`deep_exit_law`](super::diffusion::deep_exit_law)'s.
+    pub flow: [Vec4; 3],
 }
 
 impl ExitLaw {
@@ -84,6 +89,22 @@ impl ExitLaw {
             }
             let deep = law[3] * (1.0 - self.local_albedo[c] * e0[c] / b[c]).clamp(0.0, 1.0);
             1.0 + deep * (super::diffusion::deep_exit_shape(law, self.eta, mu) - 1.0)
+        }))
+    }
+
+    /// [`factor`](Self::factor) towards the unit `towards` from a point of unit normal `n`,
+    /// the deep field's mode about each channel's [`flow`](Self::flow) axis where it has one.
+    pub fn factor_towards(&self, b: Vec3, e0: Vec3, n: Vec3, towards: Vec3) -> Vec3 {
+        let about_normal = self.factor(b, e0, n.dot(towards));
+        Vec3::from_array(std::array::from_fn(|c| {
+            let (law, flow) = (self.channels[c].to_array(), self.flow[c]);
+            if flow == Vec4::ZERO || law[3] <= 0.0 || b[c] <= 0.0 {
+                return about_normal[c];
+            }
+            let deep = law[3] * (1.0 - self.local_albedo[c] * e0[c] / b[c]).clamp(0.0, 1.0);
+            let shape =
+                super::diffusion::deep_exit_shape_about(law, self.eta, n, flow.truncate(), towards) * flow.w;
+            1.0 + deep * (shape - 1.0)
         }))
     }
 }
@@ -417,6 +438,7 @@ impl EnergyTransport {
                     local_albedo: *total / q.area,
                     channels,
                     eta,
+                    flow: [Vec4::ZERO; 3],
                 },
                 _ => ExitLaw::default(),
             })
