@@ -14,9 +14,9 @@ use bevy_mesostructure::translucency::{
     beam_table::{
         BeamTable, ExitPatches, BeamTableSettings, bin_direction, direction_bin, single_scattering_radiance,
     },
-    DirectLight, EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface,
+    EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface,
     SceneRays, SparseMatrix, TranslucentMedium, TransportSettings, direct_light,
-    diffusion::{deep_exit_norm_about, diffuse_fresnel_reflectance, single_scattering_shape},
+    diffusion::{diffuse_fresnel_reflectance, single_scattering_shape},
     gather::{BeamSingleScattering, gathered_radiance},
     patches::{Patches, world_triangles},
     random_walk::{EntryPoint, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
@@ -331,70 +331,13 @@ pub enum ExitAxis {
     Normal,
     /// The normal, all light from elsewhere (`g = 1`).
     NormalAll,
-    /// The way the light flows in: per channel, each source's contribution to the patch's
-    /// exitance times the unit direction from the source's diffusion source (one reduced mean
-    /// free path under its entry patch) to the patch, summed; weighted by `g`.
+    /// The way the light flows in (`BeamTable::flow`, with the beam table only): per
+    /// channel, each source's contribution to the patch's exitance times the unit direction
+    /// from the source's diffusion source (one reduced mean free path under its entry patch)
+    /// to the patch, summed; weighted by `g`.
     Flow,
     /// That flow, all light from elsewhere.
     FlowAll,
-}
-
-/// Per patch and channel, the way the light from elsewhere flows into it
-/// ([`ExitAxis::Flow`]): `Σ_j c_ij u_ij / Σ_j c_ij`, `c_ij` what patch `j`'s direct light
-/// gives patch `i` (through `K`, and the beam table's early and late columns), `u_ij` the
-/// unit direction to `i` from a reduced mean free path under `j`.
-fn light_flow(
-    patches: &Patches,
-    transport: &EnergyTransport,
-    direct: &DirectLight,
-    medium: TranslucentMedium,
-) -> Vec<[Vec3; 3]> {
-    let p = &patches.patches;
-    let n = p.len();
-    let depth: [f32; 3] = std::array::from_fn(|c| {
-        WORLD_UNITS_PER_MM / (medium.reduced_scattering[c] + medium.absorption[c]).max(1e-6)
-    });
-    let mut flow = vec![[Vec3::ZERO; 3]; n];
-    let mut total = vec![Vec3::ZERO; n];
-    let mut add = |i: usize, j: usize, v: Vec3| {
-        if i == j || j >= n {
-            return;
-        }
-        for c in 0..3 {
-            let source = p[j].surface_point - p[j].normal * depth[c];
-            flow[i][c] += (p[i].surface_point - source).normalize_or_zero() * v[c];
-        }
-        total[i] += v;
-    };
-    for i in 0..transport.scattering.rows().min(n) {
-        for (j, v) in transport.scattering.row(i) {
-            let untabled = direct.irradiance[j] - direct.tabled.get(j).copied().unwrap_or(Vec3::ZERO);
-            add(i, j, v * untabled.max(Vec3::ZERO));
-        }
-    }
-    if let Some(table) = &transport.beam_table {
-        let bins = table.bins() as usize;
-        let mut patch_of = vec![usize::MAX; table.late_share.len() / bins.max(1)];
-        for (j, &slot) in table.slots.iter().enumerate() {
-            if let Some(at) = patch_of.get_mut(slot as usize) {
-                *at = j;
-            }
-        }
-        let light = |col: usize| direct.beam_light.get(col).copied().unwrap_or(Vec3::ZERO);
-        for i in 0..table.early.rows().min(n) {
-            for (col, v) in table.early.row(i) {
-                add(i, patch_of[col / bins], v * light(col));
-            }
-            for (slot, v) in table.late.row(i) {
-                let late: Vec3 = (slot * bins..(slot + 1) * bins).map(|col| table.late_share[col] * light(col)).sum();
-                add(i, patch_of[slot], v * late);
-            }
-        }
-    }
-    flow.into_iter()
-        .zip(total)
-        .map(|(f, t)| std::array::from_fn(|c| if t[c] > 0.0 { f[c] / t[c] } else { Vec3::ZERO }))
-        .collect()
 }
 
 /// `K` of the one translucent object of `patches` from random walks: column `j` the share of
@@ -655,22 +598,20 @@ pub fn plugin_picture(
     let solution = transport.solve_with(&direct, 1e-4, 256);
     let albedo = vec![Vec3::ZERO; patches.patches.len()];
     let mut exit_laws = transport.exit_laws(&patches, &surfaces, settings);
-    if oracles.exit_axis != ExitAxis::Normal {
-        let flows = matches!(oracles.exit_axis, ExitAxis::Flow | ExitAxis::FlowAll)
-            .then(|| light_flow(&patches, &transport, &direct, medium));
-        let all = matches!(oracles.exit_axis, ExitAxis::NormalAll | ExitAxis::FlowAll);
-        for (i, law) in exit_laws.iter_mut().enumerate() {
-            for c in 0..3 {
-                if all && law.channels[c] != Vec4::ZERO {
-                    law.channels[c].w = 1.0;
-                }
-                let Some(flows) = &flows else { continue };
-                let axis = flows[i][c];
-                let normal = patches.patches[i].normal;
-                let along = axis.dot(normal);
-                let across = (axis - normal * along).length();
-                let norm = deep_exit_norm_about(law.channels[c].to_array(), law.eta, along, across);
-                law.flow[c] = axis.extend(norm);
+    if matches!(oracles.exit_axis, ExitAxis::NormalAll | ExitAxis::FlowAll) {
+        // All light from elsewhere takes the law, not the share `g` in the mode.
+        for law in &mut exit_laws {
+            law.channels.iter_mut().filter(|c| **c != Vec4::ZERO).for_each(|c| c.w = 1.0);
+        }
+    }
+    if matches!(oracles.exit_axis, ExitAxis::Flow | ExitAxis::FlowAll) {
+        // The beam table's light only: the light a directional light gives a translucent
+        // patch is all the table's.
+        if let Some(table) = &transport.beam_table {
+            let depths = EnergyTransport::source_depths(&patches, &surfaces);
+            let flows = table.flow(&patches, &direct.beam_light, &depths);
+            for ((law, flow), q) in exit_laws.iter_mut().zip(flows).zip(&patches.patches) {
+                law.set_flow(q.normal, flow);
             }
         }
     }

@@ -411,6 +411,56 @@ impl BeamTable {
         exitance
     }
 
+    /// Per patch and channel, the way the light the table gives it flows in (what
+    /// [`ExitLaw::flow`](super::transport::ExitLaw::flow) takes about): `Σ_j c_ij u_ij / Σ_j c_ij`
+    /// over the other patches `j`, `c_ij` what `j`'s beams (`light`, as for [`apply`](Self::apply))
+    /// give patch `i` through the early and late columns, `u_ij` the unit direction to `i`'s
+    /// surface point from `j`'s diffusion source (`source_depths[j]` under its surface point,
+    /// per channel). Its length, 0 – 1, is how much of that light flows one way; zero where
+    /// none comes from elsewhere.
+    pub fn flow(&self, patches: &Patches, light: &[Vec3], source_depths: &[Vec3]) -> Vec<[Vec3; 3]> {
+        let p = &patches.patches;
+        let n = p.len();
+        let bins = self.bins() as usize;
+        let mut patch_of = vec![usize::MAX; self.media.len()];
+        for (j, &slot) in self.slots.iter().enumerate() {
+            if let Some(at) = patch_of.get_mut(slot as usize) {
+                *at = j;
+            }
+        }
+        let beam = |c: usize| light.get(c).copied().unwrap_or(Vec3::ZERO);
+        let late_light: Vec<Vec3> = (0..self.media.len())
+            .map(|slot| (slot * bins..(slot + 1) * bins).map(|c| self.late_share[c] * beam(c)).sum())
+            .collect();
+        (0..n)
+            .map(|i| {
+                let (mut flow, mut total) = ([Vec3::ZERO; 3], Vec3::ZERO);
+                let mut add = |j: usize, given: Vec3| {
+                    if j == i || j >= n {
+                        return;
+                    }
+                    let depth = source_depths.get(j).copied().unwrap_or(Vec3::ZERO);
+                    for c in 0..3 {
+                        let source = p[j].surface_point - p[j].normal * depth[c];
+                        flow[c] += (p[i].surface_point - source).normalize_or_zero() * given[c];
+                    }
+                    total += given;
+                };
+                if i < self.early.rows() {
+                    for (column, v) in self.early.row(i) {
+                        add(patch_of[column / bins], v * beam(column));
+                    }
+                }
+                if i < self.late.rows() {
+                    for (slot, v) in self.late.row(i) {
+                        add(patch_of[slot], v * late_light[slot]);
+                    }
+                }
+                std::array::from_fn(|c| if total[c] > 0.0 { flow[c] / total[c] } else { Vec3::ZERO })
+            })
+            .collect()
+    }
+
     /// Per patch, its medium's `(α, η)` where it has a table, zero elsewhere (what the
     /// gather's single scattering takes).
     pub fn patch_media(&self) -> Vec<Vec4> {

@@ -66,6 +66,7 @@ pub struct TranslucencyPlugin;
 impl Plugin for TranslucencyPlugin {
     fn build(&self, app: &mut App) {
         crate::warn_once::install(app);
+        bevy::shader::load_shader_library!(app, "boundary.wgsl");
         bevy::asset::embedded_asset!(app, "gather/gather.wgsl");
         app.register_type::<Translucent>()
             .register_type::<RadiosityReceiver>()
@@ -144,3 +145,15 @@ pub use transport::{
     TransportReport, TransportSettings, TransportSolution, direct_irradiance, direct_light,
     patch_albedos,
 };
+
+/// `boundary.wgsl` (the translucency's shared boundary functions: Fresnel's reflectance)
+/// appended to a raw wgpu shader's `source`, its naga_oil import path line taken out: the
+/// injection's shader is not a Bevy asset and cannot `#import` it as the gather does.
+pub(crate) fn with_boundary(source: &str) -> String {
+    let boundary: String = include_str!("boundary.wgsl")
+        .lines()
+        .filter(|line| !line.starts_with("#define_import_path"))
+        .map(|line| format!("{line}\n"))
+        .collect();
+    format!("{source}\n{boundary}")
+}

@@ -13,6 +13,7 @@
 
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_render::view::View
+#import bevy_mesostructure::translucency::boundary::fresnel_reflectance
 
 struct GatherParams {
     // Grids by reach (`PatchGrid::levels`): per grid four words at the start of `grid` (cell
@@ -67,18 +68,6 @@ fn chandrasekhar_h(alpha: f32, mu_in: f32) -> f32 {
     let gamma = sqrt(1.0 - alpha);
     let r0 = (1.0 - gamma) / (1.0 + gamma);
     return 1.0 / (1.0 - alpha * mu * (r0 + 0.5 * (1.0 - 2.0 * r0 * mu) * log((1.0 + mu) / mu)));
-}
-
-// `fresnel_reflectance` (diffusion.rs): unpolarised, light arriving at cos_i onto index eta.
-fn fresnel_reflectance(cos_i: f32, eta: f32) -> f32 {
-    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
-    if sin_t2 >= 1.0 {
-        return 1.0;
-    }
-    let cos_t = sqrt(1.0 - sin_t2);
-    let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
-    let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-    return 0.5 * (rs * rs + rp * rp);
 }
 
 // `deep_exit_shape` (diffusion.rs): the deep field's exit radiance over Lambert's at cosine mu

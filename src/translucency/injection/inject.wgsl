@@ -257,18 +257,6 @@ fn incidence_entry(object: u32, cos_i: f32) -> vec4<f32> {
     return mix(scene[at], scene[at + 1u], f - f32(i));
 }
 
-// `fresnel_reflectance` (diffusion.rs): unpolarised, light arriving at cos_i onto index eta.
-fn fresnel_reflectance(cos_i: f32, eta: f32) -> f32 {
-    let sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta);
-    if sin_t2 >= 1.0 {
-        return 1.0;
-    }
-    let cos_t = sqrt(1.0 - sin_t2);
-    let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
-    let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-    return 0.5 * (rs * rs + rp * rp);
-}
-
 // `direction_bin` (beam_table.rs): the table direction nearest a beam travelling along
 // `travel` onto a surface of normal `n` (incidence cosine `mu` > 0), in the frame of
 // `tangent_frame` (Duff et al. 2017, the sign taken as z ≥ 0).

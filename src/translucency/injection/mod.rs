@@ -295,7 +295,7 @@ impl GpuInjection {
         );
         let module = device.create_and_validate_shader_module(ShaderModuleDescriptor {
             label: Some("translucency_inject"),
-            source: ShaderSource::Wgsl(include_str!("inject.wgsl").into()),
+            source: ShaderSource::Wgsl(super::with_boundary(include_str!("inject.wgsl")).into()),
         });
         let pipeline_layout = device.create_pipeline_layout(&PipelineLayoutDescriptor {
             label: Some("translucency_injection"),

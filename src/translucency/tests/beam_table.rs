@@ -132,3 +132,47 @@ fn a_beam_table_column_gives_back_the_plane_albedo() {
     // Every patch of the cube has its table, every direction its walks.
     assert_eq!(full.early.columns.iter().map(|&c| c / full.bins()).max(), Some(p.len() as u32 - 1));
 }
+
+/// The way a table's light flows (`BeamTable::flow`, what `ExitLaw::set_flow` takes the deep
+/// field's law about): on a 2 cm skin cube lit on its top face's centre, the patches round
+/// the lit one receive light flowing out of the face and away from it; the lit patch's own
+/// light is left out; every flow's length is at most 1.
+#[test]
+fn a_beam_tables_light_flows_away_from_where_it_entered() {
+    let medium = TranslucentPreset::Skin1.medium();
+    let cube = mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY);
+    let objects = [cube];
+    let views = views_of(&objects);
+    let patches = resample_into_patches(&views, 600);
+    let rays = SceneRays::new(&views);
+    // 0.1 world units a millimetre: a patch ~1.5 mm, within skin's reach.
+    let surfaces = [PatchSurface::Translucent { medium, world_units_per_mm: 0.1, oriented_dipole: false }];
+    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
+    let p = &patches.patches;
+    let top = (0..p.len())
+        .filter(|&i| p[i].normal.y > 0.99)
+        .min_by(|&a, &b| p[a].centre.xz().length().total_cmp(&p[b].centre.xz().length()))
+        .expect("a top patch");
+    let settings = BeamTableSettings { walks: 512, late_walks: 256, ..default() };
+    let bin = direction_bin(Vec3::NEG_Y, p[top].normal, settings.cosines, settings.azimuths).unwrap();
+    let mut only = vec![None; p.len()];
+    only[top] = Some(bin);
+    let table = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, settings, Some(&only));
+    let mut light = vec![Vec3::ZERO; p.len() * table.bins() as usize];
+    light[(table.slots[top] * table.bins() + bin) as usize] = Vec3::ONE;
+    let depths = EnergyTransport::source_depths(&patches, &surfaces);
+    let expected = Vec3::splat(0.1) / (medium.reduced_scattering + medium.absorption);
+    assert!((depths[top] - expected).abs().max_element() < 1e-6, "{} against {expected}", depths[top]);
+    let flows = table.flow(&patches, &light, &depths);
+    assert_eq!(flows[top], [Vec3::ZERO; 3]);
+    let mut round = 0;
+    for (i, flow) in flows.iter().enumerate().filter(|&(i, _)| i != top && p[i].normal.y > 0.99) {
+        let away = (p[i].surface_point - p[top].surface_point).normalize();
+        for axis in flow.iter().filter(|a| **a != Vec3::ZERO) {
+            assert!(axis.length() <= 1.0 + 1e-5 && axis.y > 0.0 && axis.dot(away) > 0.0, "patch {i}: {axis}");
+            round += 1;
+        }
+    }
+    eprintln!("{round} patch channels of the top face receive the lit patch's light");
+    assert!(round >= 150, "{round}");
+}

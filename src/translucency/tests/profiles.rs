@@ -649,7 +649,11 @@ fn deep_light_leaves_along_its_flow_and_keeps_its_exitance() {
     assert_eq!(exit.factor_towards(b, e0, n, view), exit.factor(b, e0, n.dot(view)));
     let axis = Vec3::new(0.8, 0.0, 0.6);
     let norm = deep_exit_norm_about(law, 1.0, 0.6, 0.8);
-    exit.flow = [axis.extend(norm); 3];
+    // `set_flow`: the axis and its normalisation; a zero flow keeps the normal's law.
+    exit.set_flow(n, [Vec3::ZERO; 3]);
+    assert_eq!(exit.flow, [Vec4::ZERO; 3]);
+    exit.set_flow(n, [axis; 3]);
+    assert_eq!(exit.flow, [axis.extend(norm); 3]);
     let expected = deep_exit_shape_about(law, 1.0, n, axis, view) * norm;
     let got = exit.factor_towards(b, e0, n, view);
     // g = 1 − ν ≈ 0.95 of the light from elsewhere takes the law.

@@ -92,6 +92,23 @@ impl ExitLaw {
         }))
     }
 
+    /// Takes the deep field's law about `flow` (per channel, as [`BeamTable::flow`](super::beam_table::BeamTable::flow)
+    /// gives it) for a patch of unit `normal`: each channel's axis and the normalisation that
+    /// keeps its exitance ([`deep_exit_norm_about`](super::diffusion::deep_exit_norm_about)).
+    /// Lambert's channels (`g` = 0) and a zero flow keep the normal's law.
+    pub fn set_flow(&mut self, normal: Vec3, flow: [Vec3; 3]) {
+        for c in 0..3 {
+            let (law, axis) = (self.channels[c].to_array(), flow[c]);
+            self.flow[c] = if law[3] > 0.0 && axis != Vec3::ZERO {
+                let along = axis.dot(normal);
+                let across = (axis - normal * along).length();
+                axis.extend(super::diffusion::deep_exit_norm_about(law, self.eta, along, across))
+            } else {
+                Vec4::ZERO
+            };
+        }
+    }
+
     /// [`factor`](Self::factor) towards the unit `towards` from a point of unit normal `n`,
     /// the deep field's mode about each channel's [`flow`](Self::flow) axis where it has one.
     pub fn factor_towards(&self, b: Vec3, e0: Vec3, n: Vec3, towards: Vec3) -> Vec3 {
@@ -441,6 +458,27 @@ impl EnergyTransport {
                     flow: [Vec4::ZERO; 3],
                 },
                 _ => ExitLaw::default(),
+            })
+            .collect()
+    }
+
+    /// Per patch, where diffuse light entering it acts as a source: a reduced mean free path
+    /// `1/(σa + σs′)` under its surface, per channel, in world units (zero on opaque patches
+    /// and invalid media) — what [`BeamTable::flow`](super::beam_table::BeamTable::flow) measures
+    /// directions from.
+    pub fn source_depths(patches: &Patches, surfaces: &[PatchSurface]) -> Vec<Vec3> {
+        patches
+            .patches
+            .iter()
+            .map(|q| match surfaces.get(q.object as usize) {
+                Some(&PatchSurface::Translucent { medium, world_units_per_mm, .. })
+                    if medium.invalid_reason().is_none()
+                        && world_units_per_mm.is_finite()
+                        && world_units_per_mm > 0.0 =>
+                {
+                    world_units_per_mm / (medium.reduced_scattering + medium.absorption).max(Vec3::splat(1e-6))
+                }
+                _ => Vec3::ZERO,
             })
             .collect()
     }
