@@ -97,16 +97,17 @@ impl ExitLaw {
     /// keeps its exitance ([`deep_exit_norm_about`](super::diffusion::deep_exit_norm_about)).
     /// Lambert's channels (`g` = 0) and a zero flow keep the normal's law.
     pub fn set_flow(&mut self, normal: Vec3, flow: [Vec3; 3]) {
-        for c in 0..3 {
+        let eta = self.eta;
+        self.flow = std::array::from_fn(|c| {
             let (law, axis) = (self.channels[c].to_array(), flow[c]);
-            self.flow[c] = if law[3] > 0.0 && axis != Vec3::ZERO {
+            if law[3] > 0.0 && axis != Vec3::ZERO {
                 let along = axis.dot(normal);
                 let across = (axis - normal * along).length();
-                axis.extend(super::diffusion::deep_exit_norm_about(law, self.eta, along, across))
+                axis.extend(super::diffusion::deep_exit_norm_about(law, eta, along, across))
             } else {
                 Vec4::ZERO
-            };
-        }
+            }
+        });
     }
 
     /// [`factor`](Self::factor) towards the unit `towards` from a point of unit normal `n`,
