@@ -21,7 +21,7 @@
 //!     [--beam-table COSINES,AZIMUTHS] [--single-scattering-oracle]
 //!     [--beam-orders FIRST,LAST] [--late-light profile|profile-less-early|clamped]
 //!     [--late-walks 1024] [--lit-face-single-scattering-law]
-//!     [--exit-axis normal|normal-all|flow|flow-all]
+//!     [--exit-axis plugin|normal|normal-all|flow-all]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
@@ -112,12 +112,12 @@ struct Cli {
     /// under the directional light; method suffix `_ssoracle`)
     #[arg(long)]
     single_scattering_oracle: bool,
-    /// As an oracle of a directional exit: the axis the deep field's exit law is taken about
-    /// — each patch's normal (the plugin's), or the way its light from elsewhere flows in
-    /// (`flow`: from each source's diffusion source to the patch, weighted by what it gives);
-    /// `-all`: all light from elsewhere takes the law, not the share `1 − ν` (method suffix
-    /// `_exit<axis>`)
-    #[arg(long, value_enum, default_value_t = Axis::Normal)]
+    /// The axis the deep field's exit law is taken about: the plugin's (with the beam table
+    /// the way each patch's light from elsewhere flows in, from each source's diffusion source
+    /// weighted by what it gives — method suffix `_exitflow` —, else the normal), or as
+    /// oracles the normal even with the table, and `-all`: all light from elsewhere takes the
+    /// law, not the share `1 − ν` (suffixes `_exitnormalall`, `_exitflowall`)
+    #[arg(long, value_enum, default_value_t = Axis::Plugin)]
     exit_axis: Axis,
     /// Walks a channel from each patch for `--scattering walks|beam-walks`
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=65536))]
@@ -226,9 +226,9 @@ enum ShapeArg {
 /// `--exit-axis` ([`ExitAxis`]).
 #[derive(Clone, Copy, clap::ValueEnum, Debug, PartialEq)]
 enum Axis {
+    Plugin,
     Normal,
     NormalAll,
-    Flow,
     FlowAll,
 }
 
@@ -531,10 +531,11 @@ fn main() {
         },
     };
     let ss_oracle = if cli.single_scattering_oracle { "_ssoracle" } else { "" };
+    let table = cli.scattering == Scattering::BeamTable;
     let (exit_axis, exit_name) = match cli.exit_axis {
+        Axis::Plugin => (ExitAxis::Plugin, if table { "_exitflow" } else { "" }),
         Axis::Normal => (ExitAxis::Normal, ""),
         Axis::NormalAll => (ExitAxis::NormalAll, "_exitnormalall"),
-        Axis::Flow => (ExitAxis::Flow, "_exitflow"),
         Axis::FlowAll => (ExitAxis::FlowAll, "_exitflowall"),
     };
     let method = format!(

@@ -320,23 +320,23 @@ impl Oracles {
     pub const NONE: Self = Self {
         scattering: ScatteringSource::Profile,
         single_scattering_law: false,
-        exit_axis: ExitAxis::Normal,
+        exit_axis: ExitAxis::Plugin,
     };
 }
 
 /// About which axis light from elsewhere leaves a translucent patch in the deep field's law.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ExitAxis {
-    /// The patch's normal (the plugin's own law), weighted by `g = 1 − ν`.
+    /// The plugin's: with the beam table, the way the table's light flows in
+    /// (`EnergyTransport::exit_laws_along_flow`: each source's contribution to the patch's
+    /// exitance times the unit direction from its diffusion source, a reduced mean free path
+    /// under its entry patch, summed); the normal without one. Weighted by `g = 1 − ν`.
+    Plugin,
+    /// The patch's normal, even with the table (the table's law before the flow).
     Normal,
     /// The normal, all light from elsewhere (`g = 1`).
     NormalAll,
-    /// The way the light flows in (`BeamTable::flow`, with the beam table only): per
-    /// channel, each source's contribution to the patch's exitance times the unit direction
-    /// from the source's diffusion source (one reduced mean free path under its entry patch)
-    /// to the patch, summed; weighted by `g`.
-    Flow,
-    /// That flow, all light from elsewhere.
+    /// The table's flow, all light from elsewhere.
     FlowAll,
 }
 
@@ -604,16 +604,9 @@ pub fn plugin_picture(
             law.channels.iter_mut().filter(|c| **c != Vec4::ZERO).for_each(|c| c.w = 1.0);
         }
     }
-    if matches!(oracles.exit_axis, ExitAxis::Flow | ExitAxis::FlowAll) {
-        // The beam table's light only: the light a directional light gives a translucent
-        // patch is all the table's.
-        if let Some(table) = &transport.beam_table {
-            let depths = EnergyTransport::source_depths(&patches, &surfaces);
-            let flows = table.flow(&patches, &direct.beam_light, &depths);
-            for ((law, flow), q) in exit_laws.iter_mut().zip(flows).zip(&patches.patches) {
-                law.set_flow(q.normal, flow);
-            }
-        }
+    if matches!(oracles.exit_axis, ExitAxis::Plugin | ExitAxis::FlowAll) {
+        let depths = EnergyTransport::source_depths(&patches, &surfaces);
+        exit_laws = transport.exit_laws_along_flow(&patches, &exit_laws, &direct, &depths);
     }
     let eye = view.shape.eye();
     let pixels = view

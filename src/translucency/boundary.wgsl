@@ -1,8 +1,9 @@
 #define_import_path bevy_mesostructure::translucency::boundary
 
-// What the translucency's shaders share about a medium's boundary: imported by the gather
-// (a Bevy shader), appended to the raw wgpu shaders of the injection (`with_boundary` in
-// translucency/mod.rs, this file's first line taken out).
+// What the translucency's shaders share about a medium's boundary and the light leaving
+// through it: imported by the gather (a Bevy shader), appended to the raw wgpu shaders of the
+// injection and the iteration (`with_boundary` in translucency/mod.rs, this file's first line
+// taken out).
 
 // `fresnel_reflectance` (diffusion.rs): unpolarised, light arriving at cos_i onto index eta.
 fn fresnel_reflectance(cos_i: f32, eta: f32) -> f32 {
@@ -14,4 +15,65 @@ fn fresnel_reflectance(cos_i: f32, eta: f32) -> f32 {
     let rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     let rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
     return 0.5 * (rs * rs + rp * rp);
+}
+
+// `jensen_internal_diffuse_reflectance` (diffusion.rs): F_dr for light inside a medium of
+// index eta (Jensen et al. 2001's fit).
+fn internal_diffuse_reflectance(eta: f32) -> f32 {
+    return -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta;
+}
+
+// `chandrasekhar_h` (diffusion.rs): Hapke's closed form of H(μ) for albedo `alpha`.
+fn chandrasekhar_h(alpha: f32, mu_in: f32) -> f32 {
+    let mu = clamp(mu_in, 1e-6, 1.0);
+    let gamma = sqrt(1.0 - alpha);
+    let r0 = (1.0 - gamma) / (1.0 + gamma);
+    return 1.0 / (1.0 - alpha * mu * (r0 + 0.5 * (1.0 - 2.0 * r0 * mu) * log((1.0 + mu) / mu)));
+}
+
+// `deep_exit_shape` (diffusion.rs): the deep field's exit radiance over Lambert's at cosine mu
+// behind a boundary of index eta: (1 − F(μ)) (1 + (H(μ_i)/(1 − ν μ_i) − 1)/A) / N.
+fn deep_exit_shape(law: vec4<f32>, eta_in: f32, mu_in: f32) -> f32 {
+    let eta = clamp(eta_in, 1.0, 3.0);
+    let mu = clamp(mu_in, 0.0, 1.0);
+    let inside = sqrt(max(1.0 - (1.0 - mu * mu) / (eta * eta), 0.0));
+    let f_dr = internal_diffuse_reflectance(eta);
+    let boundary = (1.0 + f_dr) / (1.0 - f_dr);
+    let mode = chandrasekhar_h(law.x, inside) / (1.0 - law.y * inside);
+    return (1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary) * law.z;
+}
+
+// `deep_exit_shape_about` (diffusion.rs): the same law with the mode's axis along `axis` (the
+// way the light flows, its length how much of it flows one way) instead of the normal `n`,
+// towards the unit `towards`, unnormalised: (1 − F(μ)) (1 + (H(μ_i)/(1 − ν ω_i·a) − 1)/A).
+fn deep_exit_shape_about(law: vec4<f32>, eta_in: f32, n: vec3<f32>, axis: vec3<f32>,
+                         towards: vec3<f32>) -> f32 {
+    let eta = clamp(eta_in, 1.0, 3.0);
+    let mu = clamp(dot(n, towards), 0.0, 1.0);
+    let tangent = towards - n * dot(n, towards);
+    let inside_mu = sqrt(max(1.0 - dot(tangent, tangent) / (eta * eta), 0.0));
+    let inside = tangent / eta + n * inside_mu;
+    let f_dr = internal_diffuse_reflectance(eta);
+    let boundary = (1.0 + f_dr) / (1.0 - f_dr);
+    let flow = min(law.y * dot(inside, axis), 0.99);
+    let mode = chandrasekhar_h(law.x, inside_mu) / (1.0 - flow);
+    return (1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary);
+}
+
+// `deep_exit_norm_about` (diffusion.rs): 1/N of `deep_exit_shape_about` for an axis `along`
+// the normal and `across` it, by the same 16 × 32 midpoint rule in μ² and φ.
+fn deep_exit_norm_about(law: vec4<f32>, eta: f32, along: f32, across: f32) -> f32 {
+    let n = vec3(0.0, 0.0, 1.0);
+    let axis = vec3(across, 0.0, along);
+    var sum = 0.0;
+    for (var r = 0u; r < 16u; r += 1u) {
+        let mu = sqrt((f32(r) + 0.5) / 16.0);
+        let sine = sqrt(max(1.0 - mu * mu, 0.0));
+        for (var k = 0u; k < 32u; k += 1u) {
+            let phi = 6.28318530717959 * (f32(k) + 0.5) / 32.0;
+            sum += deep_exit_shape_about(law, eta, n, axis, vec3(sine * cos(phi), sine * sin(phi), mu));
+        }
+    }
+    let norm = sum / 512.0;
+    return select(1.0, 1.0 / norm, norm > 0.0);
 }

@@ -146,9 +146,10 @@ pub use transport::{
     patch_albedos,
 };
 
-/// `boundary.wgsl` (the translucency's shared boundary functions: Fresnel's reflectance)
-/// appended to a raw wgpu shader's `source`, its naga_oil import path line taken out: the
-/// injection's shader is not a Bevy asset and cannot `#import` it as the gather does.
+/// `boundary.wgsl` (the translucency's shared boundary functions: Fresnel's reflectance, the
+/// deep field's exit law) appended to a raw wgpu shader's `source`, its naga_oil import path line taken out: the
+/// injection's and the iteration's shaders are not Bevy assets and cannot `#import` it as the
+/// gather does.
 pub(crate) fn with_boundary(source: &str) -> String {
     let boundary: String = include_str!("boundary.wgsl")
         .lines()

@@ -219,6 +219,9 @@ pub struct TranslucencyScene {
     pub albedo: Vec<Vec3>,
     /// How each patch's light leaves it ([`ExitLaw`](super::transport::ExitLaw)).
     pub exit_laws: Vec<super::transport::ExitLaw>,
+    /// Per patch, where light entering it acts as a source
+    /// ([`EnergyTransport::source_depths`]): what the beam table's light flow is measured from.
+    pub source_depths: Vec<Vec3>,
     /// The entity of each object (`Patch::object` indexes it).
     pub entities: Vec<Entity>,
 }
@@ -518,7 +521,8 @@ pub(crate) fn run_precompute(
             transport.incidence = EnergyTransport::incidence_weights(&surfaces, &transport_settings);
             let albedo = super::transport::patch_albedos(&patches, &surfaces);
             let exit_laws = transport.exit_laws(&patches, &surfaces, &transport_settings);
-            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, entities }, notes)
+            let source_depths = EnergyTransport::source_depths(&patches, &surfaces);
+            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, source_depths, entities }, notes)
         }));
         *status = TranslucencyStatus::Precomputing {
             since: Instant::now(),

@@ -13,7 +13,9 @@
 
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_render::view::View
-#import bevy_mesostructure::translucency::boundary::fresnel_reflectance
+#import bevy_mesostructure::translucency::boundary::{
+    deep_exit_shape, deep_exit_shape_about, fresnel_reflectance,
+}
 
 struct GatherParams {
     // Grids by reach (`PatchGrid::levels`): per grid four words at the start of `grid` (cell
@@ -27,8 +29,10 @@ struct GatherParams {
     // The beams' normal irradiance and weighted direction, per patch (a beam table's).
     beam_irradiance: u32,
     beam_direction: u32,
-    pad0: u32,
-    pad1: u32,
+    // Per patch and channel, the way its light from elsewhere flows (`ExitLaw::flow`: axis,
+    // 1/N), three vec4s a patch; `has_flow` 0: none, the normal's law.
+    flow: u32,
+    has_flow: u32,
 }
 
 struct GatherPatch {
@@ -62,26 +66,6 @@ fn bucket(cell: vec3<i32>, mask: u32) -> u32 {
     return ((c.x * 73856093u) ^ (c.y * 19349663u) ^ (c.z * 83492791u)) & mask;
 }
 
-// `chandrasekhar_h` (diffusion.rs): Hapke's closed form of H(μ) for albedo `alpha`.
-fn chandrasekhar_h(alpha: f32, mu_in: f32) -> f32 {
-    let mu = clamp(mu_in, 1e-6, 1.0);
-    let gamma = sqrt(1.0 - alpha);
-    let r0 = (1.0 - gamma) / (1.0 + gamma);
-    return 1.0 / (1.0 - alpha * mu * (r0 + 0.5 * (1.0 - 2.0 * r0 * mu) * log((1.0 + mu) / mu)));
-}
-
-// `deep_exit_shape` (diffusion.rs): the deep field's exit radiance over Lambert's at cosine mu
-// behind a boundary of index eta: (1 − F(μ)) (1 + (H(μ_i)/(1 − ν μ_i) − 1)/A) / N.
-fn deep_exit_shape(law: vec4<f32>, eta_in: f32, mu_in: f32) -> f32 {
-    let eta = clamp(eta_in, 1.0, 3.0);
-    let mu = clamp(mu_in, 0.0, 1.0);
-    let inside = sqrt(max(1.0 - (1.0 - mu * mu) / (eta * eta), 0.0));
-    let f_dr = -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta;
-    let boundary = (1.0 + f_dr) / (1.0 - f_dr);
-    let mode = chandrasekhar_h(law.x, inside) / (1.0 - law.y * inside);
-    return (1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary) * law.z;
-}
-
 // `single_scattering_radiance` (beam_table.rs): a half-space's single scattering of a beam
 // of irradiance `e` at incidence cosine mu0, seen at exit cosine mu, behind a boundary of
 // index eta: α E T(μ₀) T(μ) / (4π η² (μ₀′ + μ′)).
@@ -96,13 +80,27 @@ fn single_scattering_radiance(alpha: vec3<f32>, eta_in: f32, e: vec3<f32>, mu0: 
     return alpha * e * transmitted / (4.0 * 3.14159265358979 * eta * eta * (inside0 + inside));
 }
 
-// `ExitLaw::factor` (transport.rs) in one channel: 1 + D (s(μ) − 1), D = g·clamp(1 − A E⁰/B).
-fn exit_factor(law: vec4<f32>, local_albedo: f32, eta: f32, b: f32, e0: f32, mu: f32) -> f32 {
+// `ExitLaw::factor_towards` (transport.rs) in one channel: 1 + D (s − 1),
+// D = g·clamp(1 − A E⁰/B), s the deep law about the channel's `flow` where it has one (axis,
+// 1/N), else about the normal at the exit cosine mu.
+fn exit_factor(law: vec4<f32>, flow: vec4<f32>, local_albedo: f32, eta: f32, b: f32, e0: f32,
+               n: vec3<f32>, towards: vec3<f32>, mu: f32) -> f32 {
     if law.w <= 0.0 || b <= 0.0 {
         return 1.0;
     }
     let deep = law.w * clamp(1.0 - local_albedo * e0 / b, 0.0, 1.0);
+    if any(flow != vec4(0.0)) {
+        return 1.0 + deep * (deep_exit_shape_about(law, eta, n, flow.xyz, towards) * flow.w - 1.0);
+    }
     return 1.0 + deep * (deep_exit_shape(law, eta, mu) - 1.0);
+}
+
+// Patch `i`'s flow in `channel` (zero without one).
+fn patch_flow(i: u32, channel: u32) -> vec4<f32> {
+    if params.has_flow == 0u {
+        return vec4(0.0);
+    }
+    return vectors[params.flow + 3u * i + channel];
 }
 
 // The light the patches give the pixel `p` (centre `position`), times the exposure; `w` = 0
@@ -117,8 +115,9 @@ fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
     let world = view.world_from_clip * ndc;
     let x = world.xyz / world.w;
     let n = normalize(textureLoad(normal_prepass, p, 0).xyz * 2.0 - 1.0);
-    // The exit cosine towards the camera.
-    let mu = clamp(dot(n, normalize(view.world_position - x)), 0.0, 1.0);
+    // The exit direction and cosine towards the camera.
+    let towards = normalize(view.world_position - x);
+    let mu = clamp(dot(n, towards), 0.0, 1.0);
 
     var sum = vec3(0.0);
     var weights = 0.0;
@@ -171,9 +170,12 @@ fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
                         let e0 = vectors[params.direct + i].rgb;
                         let eta = record.local_albedo.w;
                         let law = vec3(
-                            exit_factor(record.law_r, record.local_albedo.r, eta, b_i.r, e0.r, mu),
-                            exit_factor(record.law_g, record.local_albedo.g, eta, b_i.g, e0.g, mu),
-                            exit_factor(record.law_b, record.local_albedo.b, eta, b_i.b, e0.b, mu),
+                            exit_factor(record.law_r, patch_flow(i, 0u), record.local_albedo.r, eta,
+                                        b_i.r, e0.r, n, towards, mu),
+                            exit_factor(record.law_g, patch_flow(i, 1u), record.local_albedo.g, eta,
+                                        b_i.g, e0.g, n, towards, mu),
+                            exit_factor(record.law_b, patch_flow(i, 2u), record.local_albedo.b, eta,
+                                        b_i.b, e0.b, n, towards, mu),
                         );
                         sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) * law / 3.14159265358979;
                         // Single scattering by the lit face (`BeamSingleScattering::radiance`):

@@ -18,7 +18,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{
     injection::GpuInjection,
-    iteration::{GpuTransport, IterationLimits, RowLanes},
+    iteration::{FlowFrame, GpuTransport, IterationLimits, RowLanes},
     plugin::{GatherMethod, TranslucencyFrame, TranslucencyScene},
     transport::ExitLaw,
 };
@@ -207,7 +207,8 @@ struct GatherParams {
     exitance: u32,
     beam_irradiance: u32,
     beam_direction: u32,
-    pad: [u32; 2],
+    flow: u32,
+    has_flow: u32,
 }
 
 /// The gather radius in patch sizes: about two rings of neighbours.
@@ -254,7 +255,12 @@ pub fn prepare_translucency(
             threshold: frame.settings.iteration_threshold.clamp(1e-6, 0.5),
             max_iterations: frame.settings.max_iterations.clamp(1, 256),
         };
-        let transport = GpuTransport::new(&device, &scene.transport, limits, row_lanes);
+        // With a beam table, the deep law's axis follows the table's light each frame.
+        let frames = match scene.transport.beam_table {
+            Some(_) => FlowFrame::of(&scene.patches, &scene.exit_laws, &scene.source_depths),
+            None => Vec::new(),
+        };
+        let transport = GpuTransport::with_flow(&device, &scene.transport, limits, row_lanes, &frames);
         gpu.gather = Some(gather_buffers(&device, scene, &transport));
         gpu.transport = Some(transport);
         gpu.injection = None;
@@ -373,7 +379,8 @@ fn gather_buffers(
         exitance,
         beam_irradiance: beams.irradiance,
         beam_direction: beams.direction,
-        pad: [0; 2],
+        flow: transport.flow_offset().unwrap_or(0),
+        has_flow: u32::from(transport.flow_offset().is_some()),
     };
     let patch_buffer = device.create_buffer_with_data(&BufferInitDescriptor {
         label: Some("translucency_gather_patches"),

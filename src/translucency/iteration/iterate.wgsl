@@ -54,6 +54,15 @@ struct Layout {
     table_exitance: u32,
     beam_irradiance: u32,
     beam_direction: u32,
+    // The way the table's light flows into each patch (`BeamTable::flow`, `ExitLaw::set_flow`),
+    // where `flow` is 1: each slot's patch (words in `matrices`), each patch's frame (24
+    // words in `matrices`: surface point, normal and η, the diffusion source's depth per
+    // channel, the deep law per channel (α, ν, 1/N, g)), and the flow out (three vec4s a
+    // patch in `vectors`: axis, 1/N).
+    flow: u32,
+    slot_patches: u32,
+    frames: u32,
+    table_flow: u32,
 }
 
 struct State {
@@ -185,6 +194,75 @@ fn table_rows(@builtin(global_invocation_id) id: vec3<u32>) {
     let late = rgb_row_part(packing.late_offsets, packing.late_columns, packing.late_values,
                             packing.beam_late, i, 0u, 1u);
     vectors[packing.table_exitance + i] = early + late;
+    if packing.flow == 1u {
+        table_flow_of(i);
+    }
+}
+
+fn frame_vec4(i: u32, k: u32) -> vec4<f32> {
+    let at = packing.frames + 24u * i + 4u * k;
+    return vec4(bitcast<f32>(matrices[at]), bitcast<f32>(matrices[at + 1u]),
+                bitcast<f32>(matrices[at + 2u]), bitcast<f32>(matrices[at + 3u]));
+}
+
+// What patch `j`'s beams give patch `i` (`given`, RGB), flowing from `j`'s diffusion source
+// to `i`: into each channel's sum of directions (`BeamTable::flow`).
+struct FlowSums {
+    r: vec3<f32>,
+    g: vec3<f32>,
+    b: vec3<f32>,
+    total: vec3<f32>,
+}
+
+fn add_flow(sums: ptr<function, FlowSums>, x: vec3<f32>, i: u32, j: u32, given: vec3<f32>) {
+    if j == i || j >= packing.patches {
+        return;
+    }
+    let point = frame_vec4(j, 0u).xyz;
+    let normal = frame_vec4(j, 1u).xyz;
+    let depth = frame_vec4(j, 2u).xyz;
+    let to_r = x - (point - normal * depth.x);
+    let to_g = x - (point - normal * depth.y);
+    let to_b = x - (point - normal * depth.z);
+    (*sums).r += select(vec3(0.0), normalize(to_r), dot(to_r, to_r) > 0.0) * given.x;
+    (*sums).g += select(vec3(0.0), normalize(to_g), dot(to_g, to_g) > 0.0) * given.y;
+    (*sums).b += select(vec3(0.0), normalize(to_b), dot(to_b, to_b) > 0.0) * given.z;
+    (*sums).total += given;
+}
+
+// `ExitLaw::set_flow` in one channel: the axis and 1/N of the deep law about it (zero where
+// the channel is Lambert's or no light comes from elsewhere).
+fn flow_out(sum: vec3<f32>, total: f32, law: vec4<f32>, normal: vec3<f32>, eta: f32) -> vec4<f32> {
+    if total <= 0.0 || law.w <= 0.0 {
+        return vec4(0.0);
+    }
+    let axis = sum / total;
+    if all(axis == vec3(0.0)) {
+        return vec4(0.0);
+    }
+    let along = dot(axis, normal);
+    let across = length(axis - normal * along);
+    return vec4(axis, deep_exit_norm_about(law, eta, along, across));
+}
+
+// Patch `i`'s flow from the table's early and late rows (`BeamTable::flow`).
+fn table_flow_of(i: u32) {
+    let x = frame_vec4(i, 0u).xyz;
+    var sums = FlowSums(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    for (var k = matrices[packing.early_offsets + i]; k < matrices[packing.early_offsets + i + 1u]; k += 1u) {
+        let column = matrices[packing.early_columns + k];
+        let given = rgb(packing.early_values + 3u * k).rgb * vectors[packing.beam_light + column].rgb;
+        add_flow(&sums, x, i, matrices[packing.slot_patches + column / packing.bins], given);
+    }
+    for (var k = matrices[packing.late_offsets + i]; k < matrices[packing.late_offsets + i + 1u]; k += 1u) {
+        let slot = matrices[packing.late_columns + k];
+        let given = rgb(packing.late_values + 3u * k).rgb * vectors[packing.beam_late + slot].rgb;
+        add_flow(&sums, x, i, matrices[packing.slot_patches + slot], given);
+    }
+    let normal = frame_vec4(i, 1u);
+    vectors[packing.table_flow + 3u * i] = flow_out(sums.r, sums.total.x, frame_vec4(i, 3u), normal.xyz, normal.w);
+    vectors[packing.table_flow + 3u * i + 1u] = flow_out(sums.g, sums.total.y, frame_vec4(i, 4u), normal.xyz, normal.w);
+    vectors[packing.table_flow + 3u * i + 2u] = flow_out(sums.b, sums.total.z, frame_vec4(i, 5u), normal.xyz, normal.w);
 }
 
 var<workgroup> lanes: array<vec4<f32>, 64>;

@@ -8,7 +8,7 @@
 //! below the threshold: the CPU never waits for the GPU to know when to stop.
 
 use bevy::{
-    math::Vec3,
+    math::{Vec3, Vec4},
     render::{
         render_resource::{
             BindGroup, BindGroupEntries, BindGroupLayout, BindGroupLayoutEntries, Buffer,
@@ -73,6 +73,67 @@ struct Layout {
     table_exitance: u32,
     beam_irradiance: u32,
     beam_direction: u32,
+    // The table's light flow (`BeamTable::flow`): on or not, each slot's patch and each
+    // patch's frame (`FlowFrame`) in `matrices`, the flow out (3 vec4s a patch) in `vectors`.
+    flow: u32,
+    slot_patches: u32,
+    frames: u32,
+    table_flow: u32,
+}
+
+/// What the iteration needs of a patch to give the deep field's exit law its axis each frame
+/// the light changes (`BeamTable::flow`, `ExitLaw::set_flow`): `frames` in `iterate.wgsl`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FlowFrame {
+    /// The patch's surface point.
+    pub point: Vec3,
+    /// Its unit normal.
+    pub normal: Vec3,
+    /// Its boundary's index of refraction.
+    pub eta: f32,
+    /// Where light entering it acts as a source, per channel
+    /// ([`EnergyTransport::source_depths`](super::transport::EnergyTransport::source_depths)).
+    pub source_depth: Vec3,
+    /// Its deep law per channel, `(α, ν, 1/N, g)` ([`ExitLaw::channels`](super::transport::ExitLaw::channels)).
+    pub law: [Vec4; 3],
+}
+
+impl FlowFrame {
+    /// Each patch's frame: `patches`' points and normals, `exit_laws`' index and laws,
+    /// `source_depths`.
+    pub fn of(
+        patches: &super::patches::Patches,
+        exit_laws: &[super::transport::ExitLaw],
+        source_depths: &[Vec3],
+    ) -> Vec<Self> {
+        patches
+            .patches
+            .iter()
+            .enumerate()
+            .map(|(i, q)| {
+                let law = exit_laws.get(i).copied().unwrap_or_default();
+                Self {
+                    point: q.surface_point,
+                    normal: q.normal,
+                    eta: law.eta,
+                    source_depth: source_depths.get(i).copied().unwrap_or(Vec3::ZERO),
+                    law: law.channels,
+                }
+            })
+            .collect()
+    }
+
+    fn words(&self) -> [u32; 24] {
+        let v = [
+            self.point.extend(0.0),
+            self.normal.extend(self.eta),
+            self.source_depth.extend(0.0),
+            self.law[0],
+            self.law[1],
+            self.law[2],
+        ];
+        std::array::from_fn(|k| v[k / 4][k % 4].to_bits())
+    }
 }
 
 /// Where the beam table's vectors start in the iteration's vectors buffer (in `vec4<f32>`s).
@@ -225,6 +286,19 @@ impl GpuTransport {
         limits: IterationLimits,
         row_lanes: RowLanes,
     ) -> Self {
+        Self::with_flow(device, transport, limits, row_lanes, &[])
+    }
+
+    /// The same, and where `transport` has a beam table and `frames` one [`FlowFrame`] a
+    /// patch, each frame's flow of the table's light into each patch (the deep law's axes
+    /// the gather reads: [`flow_offset`](Self::flow_offset)).
+    pub fn with_flow(
+        device: &RenderDevice,
+        transport: &EnergyTransport,
+        limits: IterationLimits,
+        row_lanes: RowLanes,
+        frames: &[FlowFrame],
+    ) -> Self {
         let n = transport.areas.len() as u32;
         let clusters = transport.cluster_means.rows() as u32;
         let (f, k, c) = (
@@ -282,6 +356,18 @@ impl GpuTransport {
             &mut words,
             table.into_iter().flat_map(|t| t.late_share.iter().flat_map(|v| v.to_array().map(f32::to_bits))),
         );
+        let flow = table.is_some() && frames.len() == n as usize && n > 0;
+        if let Some(t) = table.filter(|_| flow) {
+            let mut patch_of = vec![0u32; t.media.len()];
+            for (j, &slot) in t.slots.iter().enumerate() {
+                if let Some(at) = patch_of.get_mut(slot as usize) {
+                    *at = j as u32;
+                }
+            }
+            layout.flow = 1;
+            layout.slot_patches = push(&mut words, patch_of);
+            layout.frames = push(&mut words, frames.iter().flat_map(FlowFrame::words));
+        }
         words.push(0);
 
         layout.direct = 0;
@@ -296,7 +382,9 @@ impl GpuTransport {
         layout.beam_direction = 9 * n + clusters;
         layout.beam_light = 10 * n + clusters;
         layout.beam_late = layout.beam_light + layout.slots * layout.bins;
-        let vector_count = (layout.beam_late + layout.slots).max(1) as u64;
+        layout.table_flow = layout.beam_late + layout.slots;
+        let flows = if layout.flow == 1 { 3 * n } else { 0 };
+        let vector_count = (layout.table_flow + flows).max(1) as u64;
 
         let matrices = device.create_buffer_with_data(&BufferInitDescriptor {
             label: Some("translucency_matrices"),
@@ -351,7 +439,7 @@ impl GpuTransport {
         );
         let module = device.create_and_validate_shader_module(ShaderModuleDescriptor {
             label: Some("translucency_iterate"),
-            source: ShaderSource::Wgsl(include_str!("iterate.wgsl").into()),
+            source: ShaderSource::Wgsl(super::with_boundary(include_str!("iterate.wgsl")).into()),
         });
         // The products see only group 0; `seed` and `decide` also the state.
         let products = device.create_pipeline_layout(&PipelineLayoutDescriptor {
@@ -503,6 +591,18 @@ impl GpuTransport {
             irradiance: l.beam_irradiance,
             direction: l.beam_direction,
         }
+    }
+
+    /// Where each patch's flow starts in the vectors buffer (in `vec4<f32>`s, three a patch:
+    /// per channel the deep law's axis and `1/N`, as [`ExitLaw::flow`](super::transport::ExitLaw::flow));
+    /// `None` without a beam table or frames.
+    pub fn flow_offset(&self) -> Option<u32> {
+        (self.layout.flow == 1).then_some(self.layout.table_flow)
+    }
+
+    /// The buffer holding every vector (what a test reads back).
+    pub fn vectors(&self) -> &Buffer {
+        &self.vectors
     }
 
     /// The buffer holding the iteration's state (`iterations: u32` at byte 24,

@@ -463,6 +463,28 @@ impl EnergyTransport {
             .collect()
     }
 
+    /// `exit_laws` as the plugin's gather takes them for `direct`: with a beam table, each
+    /// patch's deep law about the way the table's light flows into it
+    /// ([`BeamTable::flow`](super::beam_table::BeamTable::flow) of `direct.beam_light` from
+    /// `source_depths`, [`ExitLaw::set_flow`]; what `table_rows` in `iterate.wgsl` gives the
+    /// GPU's gather); unchanged without a table.
+    pub fn exit_laws_along_flow(
+        &self,
+        patches: &Patches,
+        exit_laws: &[ExitLaw],
+        direct: &DirectLight,
+        source_depths: &[Vec3],
+    ) -> Vec<ExitLaw> {
+        let mut laws = exit_laws.to_vec();
+        if let Some(table) = &self.beam_table {
+            let flows = table.flow(patches, &direct.beam_light, source_depths);
+            for ((law, flow), q) in laws.iter_mut().zip(flows).zip(&patches.patches) {
+                law.set_flow(q.normal, flow);
+            }
+        }
+        laws
+    }
+
     /// Per patch, where diffuse light entering it acts as a source: a reduced mean free path
     /// `1/(σa + σs′)` under its surface, per channel, in world units (zero on opaque patches
     /// and invalid media) — what [`BeamTable::flow`](super::beam_table::BeamTable::flow) measures
