@@ -88,23 +88,8 @@ fn a_beam_table_column_gives_back_the_plane_albedo() {
         index_of_refraction: 1.0,
         ..TranslucentPreset::Skin1.medium()
     };
-    let cube = mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY);
-    let objects = [cube];
-    let views = views_of(&objects);
-    let patches = resample_into_patches(&views, 100);
-    let rays = SceneRays::new(&views);
-    let surfaces = [PatchSurface::Translucent {
-        medium,
-        world_units_per_mm: 0.001,
-        oriented_dipole: false,
-    }];
-    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
+    let (patches, surfaces, rays, transport, top) = lit_cube(medium, 0.001, 100);
     let p = &patches.patches;
-    // The top face's patch nearest its centre.
-    let top = (0..p.len())
-        .filter(|&i| p[i].normal.y > 0.99)
-        .min_by(|&a, &b| p[a].centre.xz().length().total_cmp(&p[b].centre.xz().length()))
-        .expect("a top patch");
     let settings = BeamTableSettings { walks: 4096, ..default() };
     let travel = Vec3::NEG_Y;
     let bin = direction_bin(travel, p[top].normal, settings.cosines, settings.azimuths).unwrap();
@@ -140,19 +125,9 @@ fn a_beam_table_column_gives_back_the_plane_albedo() {
 #[test]
 fn a_beam_tables_light_flows_away_from_where_it_entered() {
     let medium = TranslucentPreset::Skin1.medium();
-    let cube = mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY);
-    let objects = [cube];
-    let views = views_of(&objects);
-    let patches = resample_into_patches(&views, 600);
-    let rays = SceneRays::new(&views);
     // 0.1 world units a millimetre: a patch ~1.5 mm, within skin's reach.
-    let surfaces = [PatchSurface::Translucent { medium, world_units_per_mm: 0.1, oriented_dipole: false }];
-    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
+    let (patches, surfaces, rays, transport, top) = lit_cube(medium, 0.1, 600);
     let p = &patches.patches;
-    let top = (0..p.len())
-        .filter(|&i| p[i].normal.y > 0.99)
-        .min_by(|&a, &b| p[a].centre.xz().length().total_cmp(&p[b].centre.xz().length()))
-        .expect("a top patch");
     let settings = BeamTableSettings { walks: 512, late_walks: 256, ..default() };
     let bin = direction_bin(Vec3::NEG_Y, p[top].normal, settings.cosines, settings.azimuths).unwrap();
     let mut only = vec![None; p.len()];
@@ -175,4 +150,26 @@ fn a_beam_tables_light_flows_away_from_where_it_entered() {
     }
     eprintln!("{round} patch channels of the top face receive the lit patch's light");
     assert!(round >= 150, "{round}");
+}
+
+/// A 2-unit cube of `medium` at `world_units_per_mm`, in `budget` patches, its transport
+/// (default settings), and the top face's patch nearest its centre (where a beam is shone).
+fn lit_cube(
+    medium: TranslucentMedium,
+    world_units_per_mm: f32,
+    budget: usize,
+) -> (crate::translucency::Patches, [PatchSurface; 1], SceneRays, EnergyTransport, usize) {
+    let cube = mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY);
+    let objects = [cube];
+    let views = views_of(&objects);
+    let patches = resample_into_patches(&views, budget);
+    let rays = SceneRays::new(&views);
+    let surfaces = [PatchSurface::Translucent { medium, world_units_per_mm, oriented_dipole: false }];
+    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
+    let p = &patches.patches;
+    let top = (0..p.len())
+        .filter(|&i| p[i].normal.y > 0.99)
+        .min_by(|&a, &b| p[a].centre.xz().length().total_cmp(&p[b].centre.xz().length()))
+        .expect("a top patch");
+    (patches, surfaces, rays, transport, top)
 }
