@@ -396,19 +396,35 @@ impl BeamTable {
     /// `slot · bins + bin` (`light_index`): the early columns' product, and the late columns'
     /// with each slot's directions summed by their `late_share`.
     pub fn apply(&self, light: &[Vec3]) -> Vec<Vec3> {
+        let mut exitance = self.early.mul_vec(light);
+        for (b, late) in exitance.iter_mut().zip(self.late.mul_vec(&self.late_light(light))) {
+            *b += late;
+        }
+        exitance
+    }
+
+    /// Per slot, its late light for `light` (as [`apply`](Self::apply) takes it): its
+    /// directions' beams summed by their `late_share` (`table_late` in `iterate.wgsl`).
+    fn late_light(&self, light: &[Vec3]) -> Vec<Vec3> {
         let bins = self.bins() as usize;
-        let late_light: Vec<Vec3> = (0..self.media.len())
+        (0..self.media.len())
             .map(|slot| {
                 (slot * bins..(slot + 1) * bins)
                     .map(|c| self.late_share[c] * light.get(c).copied().unwrap_or(Vec3::ZERO))
                     .sum()
             })
-            .collect();
-        let mut exitance = self.early.mul_vec(light);
-        for (b, late) in exitance.iter_mut().zip(self.late.mul_vec(&late_light)) {
-            *b += late;
+            .collect()
+    }
+
+    /// Per slot, the patch it is the table of (the inverse of [`slots`](Self::slots)).
+    pub fn slot_patches(&self) -> Vec<u32> {
+        let mut patch_of = vec![u32::MAX; self.media.len()];
+        for (j, &slot) in self.slots.iter().enumerate() {
+            if let Some(at) = patch_of.get_mut(slot as usize) {
+                *at = j as u32;
+            }
         }
-        exitance
+        patch_of
     }
 
     /// Per patch and channel, the way the light the table gives it flows in (what
@@ -422,16 +438,9 @@ impl BeamTable {
         let p = &patches.patches;
         let n = p.len();
         let bins = self.bins() as usize;
-        let mut patch_of = vec![usize::MAX; self.media.len()];
-        for (j, &slot) in self.slots.iter().enumerate() {
-            if let Some(at) = patch_of.get_mut(slot as usize) {
-                *at = j;
-            }
-        }
+        let patch_of = self.slot_patches();
         let beam = |c: usize| light.get(c).copied().unwrap_or(Vec3::ZERO);
-        let late_light: Vec<Vec3> = (0..self.media.len())
-            .map(|slot| (slot * bins..(slot + 1) * bins).map(|c| self.late_share[c] * beam(c)).sum())
-            .collect();
+        let late_light = self.late_light(light);
         (0..n)
             .map(|i| {
                 let (mut flow, mut total) = ([Vec3::ZERO; 3], Vec3::ZERO);
@@ -448,12 +457,12 @@ impl BeamTable {
                 };
                 if i < self.early.rows() {
                     for (column, v) in self.early.row(i) {
-                        add(patch_of[column / bins], v * beam(column));
+                        add(patch_of[column / bins] as usize, v * beam(column));
                     }
                 }
                 if i < self.late.rows() {
                     for (slot, v) in self.late.row(i) {
-                        add(patch_of[slot], v * late_light[slot]);
+                        add(patch_of[slot] as usize, v * late_light[slot]);
                     }
                 }
                 std::array::from_fn(|c| if total[c] > 0.0 { flow[c] / total[c] } else { Vec3::ZERO })

@@ -358,14 +358,8 @@ impl GpuTransport {
         );
         let flow = table.is_some() && frames.len() == n as usize && n > 0;
         if let Some(t) = table.filter(|_| flow) {
-            let mut patch_of = vec![0u32; t.media.len()];
-            for (j, &slot) in t.slots.iter().enumerate() {
-                if let Some(at) = patch_of.get_mut(slot as usize) {
-                    *at = j as u32;
-                }
-            }
             layout.flow = 1;
-            layout.slot_patches = push(&mut words, patch_of);
+            layout.slot_patches = push(&mut words, t.slot_patches());
             layout.frames = push(&mut words, frames.iter().flat_map(FlowFrame::words));
         }
         words.push(0);

@@ -83,13 +83,19 @@ impl ExitLaw {
     /// field's mode (the same arithmetic as `gather.wgsl`).
     pub fn factor(&self, b: Vec3, e0: Vec3, mu: f32) -> Vec3 {
         Vec3::from_array(std::array::from_fn(|c| {
-            let law = self.channels[c].to_array();
-            if law[3] <= 0.0 || b[c] <= 0.0 {
-                return 1.0;
-            }
-            let deep = law[3] * (1.0 - self.local_albedo[c] * e0[c] / b[c]).clamp(0.0, 1.0);
-            1.0 + deep * (super::diffusion::deep_exit_shape(law, self.eta, mu) - 1.0)
+            self.channel_factor(c, b, e0, |law| super::diffusion::deep_exit_shape(law, self.eta, mu))
         }))
+    }
+
+    /// One channel's `1 + D (s − 1)`, `s` the law's shape from `shape` (not evaluated where
+    /// the channel is Lambert's or nothing leaves).
+    fn channel_factor(&self, c: usize, b: Vec3, e0: Vec3, shape: impl FnOnce([f32; 4]) -> f32) -> f32 {
+        let law = self.channels[c].to_array();
+        if law[3] <= 0.0 || b[c] <= 0.0 {
+            return 1.0;
+        }
+        let deep = law[3] * (1.0 - self.local_albedo[c] * e0[c] / b[c]).clamp(0.0, 1.0);
+        1.0 + deep * (shape(law) - 1.0)
     }
 
     /// Takes the deep field's law about `flow` (per channel, as [`BeamTable::flow`](super::beam_table::BeamTable::flow)
@@ -113,16 +119,15 @@ impl ExitLaw {
     /// [`factor`](Self::factor) towards the unit `towards` from a point of unit normal `n`,
     /// the deep field's mode about each channel's [`flow`](Self::flow) axis where it has one.
     pub fn factor_towards(&self, b: Vec3, e0: Vec3, n: Vec3, towards: Vec3) -> Vec3 {
-        let about_normal = self.factor(b, e0, n.dot(towards));
         Vec3::from_array(std::array::from_fn(|c| {
-            let (law, flow) = (self.channels[c].to_array(), self.flow[c]);
-            if flow == Vec4::ZERO || law[3] <= 0.0 || b[c] <= 0.0 {
-                return about_normal[c];
-            }
-            let deep = law[3] * (1.0 - self.local_albedo[c] * e0[c] / b[c]).clamp(0.0, 1.0);
-            let shape =
-                super::diffusion::deep_exit_shape_about(law, self.eta, n, flow.truncate(), towards) * flow.w;
-            1.0 + deep * (shape - 1.0)
+            let flow = self.flow[c];
+            self.channel_factor(c, b, e0, |law| {
+                if flow == Vec4::ZERO {
+                    super::diffusion::deep_exit_shape(law, self.eta, n.dot(towards))
+                } else {
+                    super::diffusion::deep_exit_shape_about(law, self.eta, n, flow.truncate(), towards) * flow.w
+                }
+            })
         }))
     }
 }
