@@ -230,6 +230,7 @@ enum Axis {
     Normal,
     NormalAll,
     FlowAll,
+    Lobe,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum, Debug, PartialEq)]
@@ -486,6 +487,7 @@ fn main() {
                 walks: cli.walks,
                 late_walks: cli.late_walks,
                 last_order: cli.beam_orders.map_or(16, |(_, last)| last),
+                exit_directions: cli.exit_axis == Axis::Lobe,
             };
             (
                 ScatteringSource::BeamTable(table),
@@ -537,6 +539,7 @@ fn main() {
         Axis::Normal => (ExitAxis::Normal, ""),
         Axis::NormalAll => (ExitAxis::NormalAll, "_exitnormalall"),
         Axis::FlowAll => (ExitAxis::FlowAll, "_exitflowall"),
+        Axis::Lobe => (ExitAxis::Lobe, "_exitlobe"),
     };
     let method = format!(
         "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}",

@@ -338,6 +338,9 @@ pub enum ExitAxis {
     NormalAll,
     /// The table's flow, all light from elsewhere.
     FlowAll,
+    /// With the beam table, a lobe fitted to the mean direction the table's early light
+    /// leaves along (`EnergyTransport::exit_laws_along_lobes`).
+    Lobe,
 }
 
 /// `K` of the one translucent object of `patches` from random walks: column `j` the share of
@@ -604,9 +607,12 @@ pub fn plugin_picture(
             law.channels.iter_mut().filter(|c| **c != Vec4::ZERO).for_each(|c| c.w = 1.0);
         }
     }
-    if matches!(oracles.exit_axis, ExitAxis::Plugin | ExitAxis::FlowAll) {
+    if matches!(oracles.exit_axis, ExitAxis::Plugin | ExitAxis::FlowAll | ExitAxis::Lobe) {
         let depths = EnergyTransport::source_depths(&patches, &surfaces);
         exit_laws = transport.exit_laws_along_flow(&patches, &exit_laws, &direct, &depths);
+    }
+    if oracles.exit_axis == ExitAxis::Lobe {
+        exit_laws = transport.exit_laws_along_lobes(&patches, &exit_laws, &direct, &solution.exitance);
     }
     let eye = view.shape.eye();
     let pixels = view

@@ -46,6 +46,12 @@ pub struct BeamTableSettings {
     pub late_walks: u32,
     /// Scatterings a walk takes before it leaves as late light (≥ 1).
     pub last_order: u32,
+    /// Keep the mean direction each entry's light leaves along ([`BeamTable::early_leaving`],
+    /// 12 more floats an entry): what the exit lobes are fitted to
+    /// ([`EnergyTransport::exit_laws_along_lobes`](super::transport::EnergyTransport::exit_laws_along_lobes)),
+    /// measured on the CPU path only (`translucent_accuracy --exit-axis lobe`; the GPU
+    /// gather does not take them yet).
+    pub exit_directions: bool,
 }
 
 impl Default for BeamTableSettings {
@@ -60,6 +66,7 @@ impl Default for BeamTableSettings {
             walks: 256,
             late_walks: 1024,
             last_order: 16,
+            exit_directions: false,
         }
     }
 }
@@ -156,6 +163,12 @@ pub struct BeamTable {
     /// The walks' low orders — rows: the patches light leaves by; columns: `slot · bins +
     /// bin`; values: exitance per unit of irradiance that got in, per channel.
     pub early: SparseMatrix<Vec3>,
+    /// With [`BeamTableSettings::exit_directions`] (else empty): per entry of `early` (in its
+    /// order), per channel, the mean direction its light leaves along outside (`xyz`, the
+    /// exitance-weighted mean of the walks' leaving directions: length 1 for light all
+    /// leaving one way, ⅔ along the normal for Lambert's law) and how many walks it holds
+    /// (`w`, for the mean's noise).
+    pub early_leaving: Vec<[Vec4; 3]>,
     /// Per direction (`slot · bins + bin`), the share of its walks still inside after the last
     /// order over the share of diffuse walks', per channel: how much of `late`'s column its
     /// light takes.
@@ -230,8 +243,13 @@ impl ExitPatches {
 /// Exitance per unit of light entering patch `j`, by the patch it leaves through.
 type Column = HashMap<u32, Vec3>;
 
-/// One patch's late column and, per direction walked, its early column and late share.
-type PatchColumns = (Option<Column>, Vec<(u32, Column, Vec3)>);
+/// A [`Column`]'s first moments in the directions its light leaves along: per channel
+/// `Σ exitance · ω` and (`w`) how many walks left, by the patch it leaves through.
+type Moments = HashMap<u32, [Vec4; 3]>;
+
+/// One patch's late column and, per direction walked, its early column, their moments and
+/// its late share.
+type PatchColumns = (Option<Column>, Vec<(u32, Column, Moments, Vec3)>);
 
 impl BeamTable {
     /// Directions a patch.
@@ -320,6 +338,7 @@ impl BeamTable {
                     .map(|s| EntryPoint { position: s.position, normal: s.normal, area: s.area })
                     .collect(),
                 last_order: settings.last_order,
+                directions: settings.exit_directions,
             };
             let diffuse_entering =
                 (1.0 - diffuse_fresnel_reflectance(medium.index_of_refraction as f64)) as f32;
@@ -333,7 +352,7 @@ impl BeamTable {
                 .map(|bin| {
                     let travel = bin_direction(bin, p[j].normal, settings.cosines, settings.azimuths);
                     let seed = j as u64 * bins as u64 + bin as u64;
-                    let (column, remaining) = column_of.walk(
+                    let (column, moments, remaining) = column_of.walk(
                         WalkLaunch::Beam(travel),
                         settings.walks,
                         seed,
@@ -347,20 +366,26 @@ impl BeamTable {
                         ),
                         None => Vec3::ZERO,
                     };
-                    (bin, column, share)
+                    (bin, column, moments, share)
                 })
                 .collect::<Vec<_>>();
             (late.map(|l| l.0), directions)
         });
-        let mut early_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
+        let mut early_rows: Vec<Vec<(u32, (Vec3, [Vec4; 3]))>> = vec![Vec::new(); n];
         let mut late_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
         let mut late_share = vec![Vec3::ZERO; tabled.len() * bins as usize];
         for (slot, (late, directions)) in columns.into_iter().enumerate() {
-            for (bin, column, share) in directions {
+            for (bin, column, moments, share) in directions {
                 late_share[slot * bins as usize + bin as usize] = share;
                 for (i, v) in column {
                     if v != Vec3::ZERO {
-                        early_rows[i as usize].push((slot as u32 * bins + bin, v));
+                        // The mean direction it leaves along, per channel (the moment over
+                        // the exitance): length 1 for light all leaving one way.
+                        let moment = moments.get(&i).copied().unwrap_or([Vec4::ZERO; 3]);
+                        let leaving = std::array::from_fn(|c| {
+                            if v[c] > 0.0 { (moment[c].truncate() / v[c]).extend(moment[c].w) } else { Vec4::ZERO }
+                        });
+                        early_rows[i as usize].push((slot as u32 * bins + bin, (v, leaving)));
                     }
                 }
             }
@@ -370,10 +395,16 @@ impl BeamTable {
                 }
             }
         }
+        let early = SparseMatrix::from_rows(early_rows);
         Self {
             settings,
             slots,
-            early: SparseMatrix::from_rows(early_rows),
+            early_leaving: if settings.exit_directions { early.values.iter().map(|v| v.1).collect() } else { Vec::new() },
+            early: SparseMatrix {
+                row_offsets: early.row_offsets,
+                columns: early.columns,
+                values: early.values.into_iter().map(|v| v.0).collect(),
+            },
             late_share,
             late: SparseMatrix::from_rows(late_rows),
             media,
@@ -470,6 +501,36 @@ impl BeamTable {
             .collect()
     }
 
+    /// Per patch `i`, the early light the table gives it for `light` (as for
+    /// [`apply`](Self::apply)) from the patches `j` with `counted(i, j)` and, per channel, its
+    /// first moment in the directions it leaves along (`xyz`: `Σ exitance · ω`, from
+    /// [`early_leaving`](Self::early_leaving)) with `w = Σ exitance²/walks`, what the mean's
+    /// noise grows with.
+    pub fn early_moments(&self, light: &[Vec3], counted: impl Fn(usize, usize) -> bool) -> Vec<(Vec3, [Vec4; 3])> {
+        let beam = |c: usize| light.get(c).copied().unwrap_or(Vec3::ZERO);
+        let patch_of = self.slot_patches();
+        let bins = self.bins() as usize;
+        (0..self.early.rows())
+            .map(|i| {
+                let range = self.early.row_offsets[i] as usize..self.early.row_offsets[i + 1] as usize;
+                let (mut exitance, mut moment) = (Vec3::ZERO, [Vec4::ZERO; 3]);
+                for e in range {
+                    let column = self.early.columns[e] as usize;
+                    if !counted(i, patch_of[column / bins] as usize) {
+                        continue;
+                    }
+                    let given = self.early.values[e] * beam(column);
+                    exitance += given;
+                    for c in 0..3 {
+                        let l = self.early_leaving.get(e).map_or(Vec4::ZERO, |l| l[c]);
+                        moment[c] += (given[c] * l.truncate()).extend(given[c] * given[c] / l.w.max(1.0));
+                    }
+                }
+                (exitance, moment)
+            })
+            .collect()
+    }
+
     /// Per patch, its medium's `(α, η)` where it has a table, zero elsewhere (what the
     /// gather's single scattering takes).
     pub fn patch_media(&self) -> Vec<Vec4> {
@@ -518,14 +579,17 @@ struct ColumnWalks<'a> {
     /// Patch `j`'s samples, where its walks enter (once for all its directions).
     entries: Vec<EntryPoint>,
     last_order: u32,
+    /// Whether to take the exits' moments.
+    directions: bool,
 }
 
 impl ColumnWalks<'_> {
     /// `walks` walks a channel of `launch` from patch `j`'s samples: the exitance per unit
-    /// of light that got in by exit patch, and the share still inside after the last order.
+    /// of light that got in by exit patch, its first moment in the directions it leaves along
+    /// (per channel, `Σ exitance · ω`), and the share still inside after the last order.
     /// With `law_takes_lit_face_single`, what leaves after one scattering by the lit face
     /// (an exit normal within 60° of the patch's) is left to [`single_scattering_radiance`].
-    fn walk(&self, launch: WalkLaunch, walks: u32, seed: u64, law_takes_lit_face_single: bool) -> (Column, Vec3) {
+    fn walk(&self, launch: WalkLaunch, walks: u32, seed: u64, law_takes_lit_face_single: bool) -> (Column, Moments, Vec3) {
         let p = &self.patches.patches;
         let pj = &p[self.j];
         let share = 1.0 / walks as f32;
@@ -534,6 +598,7 @@ impl ColumnWalks<'_> {
         let first = u32::from(matches!(launch, WalkLaunch::Beam(_)));
         let orders = ScatteringOrders { first, last: self.last_order };
         let mut column = Column::default();
+        let mut moments = Moments::default();
         let mut remaining = Vec3::ZERO;
         walk_ends(
             &self.medium,
@@ -551,7 +616,11 @@ impl ColumnWalks<'_> {
                         && exit.outward.dot(pj.normal) > 0.5 => {}
                 WalkEnd::Exit(exit) => {
                     if let Some(i) = self.exits.of(pj.object, exit.position, exit.outward) {
-                        column.entry(i).or_default()[c] += share * pj.area / p[i as usize].area;
+                        let exitance = share * pj.area / p[i as usize].area;
+                        column.entry(i).or_default()[c] += exitance;
+                        if self.directions {
+                            moments.entry(i).or_insert([Vec4::ZERO; 3])[c] += (exitance * exit.leaving).extend(1.0);
+                        }
                     }
                 }
                 // Through a gap in the mesh: lost.
@@ -559,7 +628,7 @@ impl ColumnWalks<'_> {
                 WalkEnd::Remainder => remaining[c] += share,
             },
         );
-        (column, remaining)
+        (column, moments, remaining)
     }
 
     /// The late light per unit of diffuse walks' remainder: the profile's column (per unit
@@ -574,7 +643,7 @@ impl ColumnWalks<'_> {
     ) -> Option<(Column, Vec3)> {
         let p = &self.patches.patches;
         let seed = u64::MAX - self.j as u64;
-        let (early, remaining) = self.walk(WalkLaunch::Diffuse, late_walks, seed, false);
+        let (early, _, remaining) = self.walk(WalkLaunch::Diffuse, late_walks, seed, false);
         if remaining == Vec3::ZERO {
             return None;
         }

@@ -17,7 +17,7 @@ use super::{
     transport::{EnergyTransport, PatchSurface, SparseMatrix, TransportReport, TransportSettings},
 };
 
-const MAGIC: &[u8; 8] = b"BMSTRN04";
+const MAGIC: &[u8; 8] = b"BMSTRN05";
 
 /// FNV-1a, 64 bits: the cache's key and the plugin's change signatures.
 #[derive(Clone, Copy)]
@@ -245,12 +245,12 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
             .into_iter(),
         )?;
         // The beam table, if any: its settings (none: an empty list), slots, media, the late
-        // shares, then the early and late columns.
+        // shares, the early and late columns, then the early entries' leaving directions.
         match &transport.beam_table {
             None => w.u32s(&[])?,
             Some(t) => {
                 let s = &t.settings;
-                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order])?;
+                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order, u32::from(s.exit_directions)])?;
                 w.u32s(&t.slots)?;
                 w.f32s(t.media.iter().flat_map(|m| m.to_array()).collect::<Vec<_>>().into_iter())?;
                 w.f32s(t.late_share.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
@@ -259,6 +259,7 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
                     w.u32s(&m.columns)?;
                     w.f32s(m.values.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
                 }
+                w.f32s(t.early_leaving.iter().flatten().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
                 w.f32s([t.seconds].into_iter())?;
             }
         }
@@ -392,10 +393,17 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
 /// The beam table [`save`] wrote after the transport, checked against `n` patches.
 fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<BeamTable>> {
     let settings = r.u32s()?;
-    let [cosines, azimuths, walks, late_walks, last_order] = settings[..] else {
+    let [cosines, azimuths, walks, late_walks, last_order, exit_directions] = settings[..] else {
         return if settings.is_empty() { Ok(None) } else { Err(invalid("beam table settings")) };
     };
-    let settings = BeamTableSettings { cosines, azimuths, walks, late_walks, last_order };
+    let settings = BeamTableSettings {
+        cosines,
+        azimuths,
+        walks,
+        late_walks,
+        last_order,
+        exit_directions: exit_directions != 0,
+    };
     if settings.invalid_reason().is_some() {
         return Err(invalid("beam table settings"));
     }
@@ -404,6 +412,7 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
     let late_share = vec3s(&r.f32s()?);
     let early = read_matrix(r)?;
     let late = read_matrix(r)?;
+    let leaving: Vec<Vec4> = r.f32s()?.chunks_exact(4).map(Vec4::from_slice).collect();
     let seconds = r.f32s()?;
     let (count, bins) = (media.len(), settings.bins() as usize);
     if slots.len() != n
@@ -411,6 +420,7 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
         || late_share.len() != count * bins
         || !consistent(&early, Some(n), count * bins, 3)
         || !consistent(&late, Some(n), count, 3)
+        || leaving.len() != if settings.exit_directions { early.1.len() * 3 } else { 0 }
         || seconds.len() != 1
     {
         return Err(invalid("beam table"));
@@ -425,6 +435,7 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
         slots,
         media,
         late_share,
+        early_leaving: leaving.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
         early: matrix(early),
         late: matrix(late),
         seconds: seconds[0],

@@ -23,6 +23,7 @@
 pub mod beam_table;
 pub mod cache;
 pub mod diffusion;
+pub mod exit_lobe;
 mod far_field;
 pub mod gather;
 pub mod injection;

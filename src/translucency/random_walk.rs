@@ -203,6 +203,9 @@ pub struct WalkExit {
     /// How many times the walk scattered before it left (0: a diffuse launch's light that
     /// left unscattered).
     pub order: u32,
+    /// The unit direction it leaves along, outside: its travel refracted out by the boundary
+    /// (what the beam table's exit lobes are fitted to).
+    pub leaving: Vec3,
 }
 
 /// How walks enter the medium.
@@ -370,7 +373,8 @@ fn walk(
                     continue;
                 }
                 if order >= orders.first {
-                    on_end(c, e, WalkEnd::Exit(WalkExit { position: hit, outward, order }));
+                    let leaving = refracted_out(d, outward, eta as f32);
+                    on_end(c, e, WalkEnd::Exit(WalkExit { position: hit, outward, order, leaving }));
                 }
                 break;
             }
@@ -399,6 +403,16 @@ fn refracted(direction: Vec3, normal: Vec3, eta: f32) -> Option<Vec3> {
     let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
     let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
     Some((direction / eta + (cos_i / eta - cos_t) * normal).normalize())
+}
+
+/// The direction light travelling along the unit `direction` inside leaves along past a
+/// boundary of outward unit normal `outward` into the outside, `eta` the inside's relative
+/// index (Snell's law; the caller has taken total internal reflection as a reflection).
+fn refracted_out(direction: Vec3, outward: Vec3, eta: f32) -> Vec3 {
+    let along = direction.dot(outward);
+    let tangent = (direction - along * outward) * eta.max(1.0);
+    let normal = (1.0 - tangent.length_squared()).max(0.0).sqrt();
+    (tangent + normal * outward).normalize_or(outward)
 }
 
 /// A direction uniform over the sphere (isotropic scattering).

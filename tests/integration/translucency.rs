@@ -1281,6 +1281,20 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
         exit_axis: translucent_accuracy_scene::ExitAxis::Normal,
         ..table
     };
+    // Exit lobes (`translucent_accuracy --exit-axis lobe --walks 1024`, an oracle of the CPU
+    // path): a table of 1024 walks a direction keeping the mean direction each entry's light
+    // leaves along, each patch's light from more than two patch sizes away given out by the
+    // von Mises–Fisher lobe of its mean; the same table with the plugin's flow law beside it.
+    let table_1024 = translucent_accuracy_scene::Oracles {
+        scattering: translucent_accuracy_scene::ScatteringSource::BeamTable(
+            bevy_mesostructure::translucency::beam_table::BeamTableSettings { walks: 1024, exit_directions: true, ..default() },
+        ),
+        ..table
+    };
+    let table_lobe = translucent_accuracy_scene::Oracles {
+        exit_axis: translucent_accuracy_scene::ExitAxis::Lobe,
+        ..table_1024
+    };
     // Behind the presets' dielectric boundary too (η 1.3: the walks refract in and reflect
     // inside, each beam weighted by its transmittance, the law with Fresnel both ways).
     // With the table, the deep field's law is taken about the way each patch's light flows
@@ -1298,6 +1312,9 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
         (table, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0788, [1.012, 0.999, 0.986]),
         (table_normal, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3435, [0.709, 0.385, 0.335]),
         (table_normal, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0782, [0.954, 0.941, 0.949]),
+        (table_lobe, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1676, [0.927, 0.810, 1.173]),
+        (table_lobe, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0507, [0.994, 0.965, 0.952]),
+        (table_1024, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2525, [0.787, 0.497, 0.377]),
     ];
     for (oracles, preset, name, lighting, how, eta, rel_l1, ratio) in table_cases {
         let medium = bevy_mesostructure::translucency::TranslucentMedium {
@@ -1305,7 +1322,15 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
             ..preset.medium()
         };
         let reference = reference_picture(name, lighting);
-        let label = if oracles == table { format!("{name} (beam table)") } else { format!("{name} (beam table, the normal's law)") };
+        let label = if oracles == table {
+            format!("{name} (beam table)")
+        } else if oracles == table_normal {
+            format!("{name} (beam table, the normal's law)")
+        } else if oracles == table_lobe {
+            format!("{name} (beam table, 1024 walks, exit lobes)")
+        } else {
+            format!("{name} (beam table, 1024 walks)")
+        };
         holds_as_documented(&view, &label, lighting, medium, false, &default(), how, oracles, &reference, rel_l1, ratio);
     }
 }

@@ -152,6 +152,53 @@ fn a_beam_tables_light_flows_away_from_where_it_entered() {
     assert!(round >= 150, "{round}");
 }
 
+/// With its exit directions, a table knows the way its light leaves: on the lit face of a
+/// skin cube, light that came from the lit patch leaves outward (no mean longer than one)
+/// and, over the face, leaning away from the lit patch; the lobe fitted to that lean is
+/// brighter away from the lit patch than back towards it.
+#[test]
+fn a_beam_tables_light_leaves_leaning_away_from_where_it_entered() {
+    let medium = TranslucentPreset::Skin1.medium();
+    let (patches, surfaces, rays, transport, top) = lit_cube(medium, 0.1, 600);
+    let p = &patches.patches;
+    let settings = BeamTableSettings { walks: 4096, late_walks: 256, exit_directions: true, ..default() };
+    let bin = direction_bin(Vec3::NEG_Y, p[top].normal, settings.cosines, settings.azimuths).unwrap();
+    let mut only = vec![None; p.len()];
+    only[top] = Some(bin);
+    let table = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, settings, Some(&only));
+    assert_eq!(table.early_leaving.len(), table.early.entries());
+    let mut light = vec![Vec3::ZERO; p.len() * table.bins() as usize];
+    light[(table.slots[top] * table.bins() + bin) as usize] = Vec3::ONE;
+    let moments = table.early_moments(&light, |_, _| true);
+    // Over the lit face but the lit patch, per channel: the exitance, and its moment's
+    // components away from the lit patch and along the normal.
+    let (mut exitance, mut away_from, mut outward) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+    let mut patch_channels = 0;
+    for (i, (early, moment)) in moments.iter().enumerate() {
+        if i == top || p[i].normal.y < 0.99 {
+            continue;
+        }
+        let away = (p[i].surface_point - p[top].surface_point).normalize();
+        for c in (0..3).filter(|&c| early[c] > 0.0) {
+            let mean = moment[c].truncate() / early[c];
+            assert!(mean.length() <= 1.0 + 1e-5 && mean.y > 0.0, "patch {i} channel {c}: {mean}");
+            exitance[c] += early[c];
+            away_from[c] += moment[c].truncate().dot(away);
+            outward[c] += moment[c].y;
+            patch_channels += 1;
+        }
+    }
+    let (lean, up) = (away_from / exitance, outward / exitance);
+    eprintln!("{patch_channels} patch channels of the lit face: mean leaving direction away {lean:.3}, outward {up:.3}");
+    let fits = crate::translucency::exit_lobe::LobeFits::get();
+    for c in 0..3 {
+        assert!(lean[c] > 0.1 && up[c] > 0.3, "channel {c}: away {} outward {}", lean[c], up[c]);
+        let lobe = fits.lobe(Vec3::Y, Vec3::new(lean[c], up[c], 0.0));
+        let grazing = |x: f32| Vec3::new(x, 0.3, 0.0).normalize();
+        assert!(lobe.factor(grazing(1.0)) > 1.2 * lobe.factor(grazing(-1.0)), "channel {c}: {lobe:?}");
+    }
+}
+
 /// A 2-unit cube of `medium` at `world_units_per_mm`, in `budget` patches, its transport
 /// (default settings), and the top face's patch nearest its centre (where a beam is shone).
 fn lit_cube(

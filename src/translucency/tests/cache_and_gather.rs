@@ -24,10 +24,11 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
     ];
     let patches = resample_into_patches(&views, 200);
     let rays = SceneRays::new(&views);
-    // With a (small) beam table, which the cache keeps too.
+    // With a (small) beam table, which the cache keeps too, its exit directions included.
     let table = crate::translucency::beam_table::BeamTableSettings {
         walks: 4,
         late_walks: 4,
+        exit_directions: true,
         ..default()
     };
     let settings = TransportSettings {
@@ -35,7 +36,7 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
         ..default()
     };
     let transport = EnergyTransport::build(&patches, &surfaces, &rays, &settings);
-    assert!(transport.beam_table.as_ref().is_some_and(|t| t.early.entries() > 0));
+    assert!(transport.beam_table.as_ref().is_some_and(|t| t.early.entries() > 0 && t.early_leaving.len() == t.early.entries()));
     let dir = std::env::temp_dir().join(format!("bevy_mesostructure_cache_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("scene.translucency");

@@ -569,6 +569,7 @@ fn deep_light_leaves_limb_darkened_and_keeps_its_exitance() {
         channels: [Vec4::from_array(conservative); 3],
         eta: 1.0,
         flow: [Vec4::ZERO; 3],
+        ..Default::default()
     };
     // All of B from the patch's own light (B = A E⁰): Lambertian.
     let own = law.factor(Vec3::splat(0.8), Vec3::ONE, 1.0);
@@ -643,6 +644,7 @@ fn deep_light_leaves_along_its_flow_and_keeps_its_exitance() {
         channels: [Vec4::from_array(law); 3],
         eta: 1.0,
         flow: [Vec4::ZERO; 3],
+        ..Default::default()
     };
     let view = towards(0.6, 0.3);
     let (b, e0) = (Vec3::splat(0.3), Vec3::ZERO);
@@ -659,4 +661,53 @@ fn deep_light_leaves_along_its_flow_and_keeps_its_exitance() {
     // g = 1 − ν ≈ 0.95 of the light from elsewhere takes the law.
     let g = law[3];
     assert!((got - Vec3::splat(1.0 + g * (expected - 1.0))).abs().max_element() < 1e-6, "{got}");
+}
+
+/// The exitance-weighted mean direction of `factor` over the outward hemisphere of +z, and
+/// its cosine-weighted mean (1 for a law that keeps the exitance): a 64 × 128 rule.
+fn hemisphere_moments(factor: impl Fn(Vec3) -> f32) -> (Vec3, f32) {
+    let (rings, spokes) = (64, 128);
+    let (mut sum, mut total) = (Vec3::ZERO, 0.0f64);
+    for r in 0..rings {
+        let mu = ((r as f32 + 0.5) / rings as f32).sqrt();
+        let sin = (1.0 - mu * mu).max(0.0).sqrt();
+        for k in 0..spokes {
+            let phi = std::f32::consts::TAU * (k as f32 + 0.5) / spokes as f32;
+            let omega = Vec3::new(sin * phi.cos(), sin * phi.sin(), mu);
+            let f = factor(omega);
+            sum += f * omega;
+            total += f as f64;
+        }
+    }
+    (sum / total as f32, (total / (rings * spokes) as f64) as f32)
+}
+
+/// A lobe fitted to a mean direction has that mean and keeps the exitance; Lambert's mean,
+/// `⅔ n`, gives Lambert's law back.
+#[test]
+fn an_exit_lobe_has_the_mean_it_was_fitted_to_and_keeps_its_exitance() {
+    use crate::translucency::exit_lobe::LobeFits;
+    let fits = LobeFits::get();
+    let n = Vec3::Z;
+    let (mut worst_mean, mut worst_norm) = (0.0f32, 0.0f32);
+    for kappa in [0.5f32, 2.0, 8.0, 20.0] {
+        for degrees in [0.0f32, 30.0, 60.0, 85.0] {
+            let theta = degrees.to_radians();
+            let axis = Vec3::new(theta.sin(), 0.0, theta.cos());
+            let (mean, _) = hemisphere_moments(|w| (kappa * (w.dot(axis) - 1.0)).exp());
+            let lobe = fits.lobe(n, mean);
+            let (fitted, kept) = hemisphere_moments(|w| lobe.factor(w));
+            worst_mean = worst_mean.max(fitted.distance(mean));
+            worst_norm = worst_norm.max((kept - 1.0).abs());
+        }
+    }
+    eprintln!("exit lobes: mean within {worst_mean:.4}, exitance within {worst_norm:.4}");
+    assert!(worst_mean < 0.02 && worst_norm < 0.01, "{worst_mean} {worst_norm}");
+    let lambert = fits.lobe(n, n * (2.0 / 3.0));
+    for w in [Vec3::Z, Vec3::new(0.8, 0.0, 0.6), Vec3::new(0.0, -0.99, 0.141)] {
+        assert!((lambert.factor(w.normalize()) - 1.0).abs() < 0.03, "{}", lambert.factor(w.normalize()));
+    }
+    // No mean, or not a finite one: Lambert's law.
+    assert_eq!(fits.lobe(n, Vec3::ZERO).factor(Vec3::X), 1.0);
+    assert_eq!(fits.lobe(n, Vec3::NAN).factor(Vec3::Z), 1.0);
 }
