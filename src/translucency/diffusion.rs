@@ -273,19 +273,25 @@ pub fn deep_exit_shape_about(law: [f32; 4], eta: f32, n: Vec3, axis: Vec3, towar
 pub fn deep_exit_norm_about(law: [f32; 4], eta: f32, along: f32, across: f32) -> f32 {
     let (n, axis) = (Vec3::Z, Vec3::new(across, 0.0, along));
     let (rings, spokes) = (16, 32);
-    let mut sum = 0.0f64;
-    for r in 0..rings {
-        // μ² uniform: cosine-weighted directions, so the mean of s is N.
-        let mu = ((r as f32 + 0.5) / rings as f32).sqrt();
-        let sin = (1.0 - mu * mu).max(0.0).sqrt();
-        for k in 0..spokes {
-            let phi = std::f32::consts::TAU * (k as f32 + 0.5) / spokes as f32;
-            let towards = Vec3::new(sin * phi.cos(), sin * phi.sin(), mu);
-            sum += deep_exit_shape_about(law, eta, n, axis, towards) as f64;
-        }
-    }
+    let sum: f64 = cosine_weighted_directions(rings, spokes)
+        .map(|towards| deep_exit_shape_about(law, eta, n, axis, towards) as f64)
+        .sum();
     let norm = sum / (rings * spokes) as f64;
     if norm > 0.0 { (1.0 / norm) as f32 } else { 1.0 }
+}
+
+/// Directions over the outward hemisphere of +z whose plain mean is a cosine-weighted mean:
+/// `rings` rings at the midpoints of `μ²` by `spokes` azimuths (the midpoint rule of
+/// [`deep_exit_norm_about`] here and in `boundary.wgsl`).
+pub fn cosine_weighted_directions(rings: u32, spokes: u32) -> impl Iterator<Item = Vec3> {
+    (0..rings).flat_map(move |r| {
+        let mu = ((r as f32 + 0.5) / rings as f32).sqrt();
+        let sin = (1.0 - mu * mu).max(0.0).sqrt();
+        (0..spokes).map(move |k| {
+            let phi = std::f32::consts::TAU * (k as f32 + 0.5) / spokes as f32;
+            Vec3::new(sin * phi.cos(), sin * phi.sin(), mu)
+        })
+    })
 }
 
 /// `1 − μ₀ ln(1 + 1/μ₀)`: the single-scattered exitance per unit irradiance and `α/2`, for a

@@ -615,16 +615,7 @@ fn deep_light_leaves_along_its_flow_and_keeps_its_exitance() {
             for (along, across) in [(0.0f32, 1.0f32), (0.6, 0.8), (-0.5, 0.5), (0.2, 0.1)] {
                 let axis = Vec3::new(across, 0.0, along);
                 let norm = deep_exit_norm_about(law, eta, along, across);
-                let (rings, spokes) = (64, 128);
-                let mut mean = 0.0f64;
-                for r in 0..rings {
-                    let mu = ((r as f32 + 0.5) / rings as f32).sqrt();
-                    for k in 0..spokes {
-                        let phi = std::f32::consts::TAU * (k as f32 + 0.5) / spokes as f32;
-                        mean += (deep_exit_shape_about(law, eta, n, axis, towards(mu, phi)) * norm) as f64;
-                    }
-                }
-                mean /= (rings * spokes) as f64;
+                let (_, mean) = hemisphere_moments(|w| deep_exit_shape_about(law, eta, n, axis, w) * norm);
                 assert!((mean - 1.0).abs() < 0.01, "η {eta} α {alpha} axis {axis}: exitance {mean}");
                 // Brighter towards the flow than against it, at the same exit cosine.
                 if across > 0.0 && law[1] > 0.1 {
@@ -668,16 +659,10 @@ fn deep_light_leaves_along_its_flow_and_keeps_its_exitance() {
 fn hemisphere_moments(factor: impl Fn(Vec3) -> f32) -> (Vec3, f32) {
     let (rings, spokes) = (64, 128);
     let (mut sum, mut total) = (Vec3::ZERO, 0.0f64);
-    for r in 0..rings {
-        let mu = ((r as f32 + 0.5) / rings as f32).sqrt();
-        let sin = (1.0 - mu * mu).max(0.0).sqrt();
-        for k in 0..spokes {
-            let phi = std::f32::consts::TAU * (k as f32 + 0.5) / spokes as f32;
-            let omega = Vec3::new(sin * phi.cos(), sin * phi.sin(), mu);
-            let f = factor(omega);
-            sum += f * omega;
-            total += f as f64;
-        }
+    for omega in crate::translucency::diffusion::cosine_weighted_directions(rings, spokes) {
+        let f = factor(omega);
+        sum += f * omega;
+        total += f as f64;
     }
     (sum / total as f32, (total / (rings * spokes) as f64) as f32)
 }

@@ -136,18 +136,13 @@ impl ExitLaw {
     pub fn mean_leaving(&self, b: Vec3, e0: Vec3, normal: Vec3) -> [Vec3; 3] {
         let (t, s) = normal.any_orthonormal_pair();
         let (mut sum, mut weight) = ([Vec3::ZERO; 3], Vec3::ZERO);
-        for r in 0..16 {
-            let mu = ((r as f32 + 0.5) / 16.0).sqrt();
-            let sin = (1.0 - mu * mu).max(0.0).sqrt();
-            for k in 0..32 {
-                let phi = std::f32::consts::TAU * (k as f32 + 0.5) / 32.0;
-                let towards = sin * phi.cos() * t + sin * phi.sin() * s + mu * normal;
-                let f = self.factor_towards(b, e0, normal, towards);
-                for c in 0..3 {
-                    sum[c] += f[c] * towards;
-                }
-                weight += f;
+        for w in super::diffusion::cosine_weighted_directions(16, 32) {
+            let towards = w.x * t + w.y * s + w.z * normal;
+            let f = self.factor_towards(b, e0, normal, towards);
+            for c in 0..3 {
+                sum[c] += f[c] * towards;
             }
+            weight += f;
         }
         std::array::from_fn(|c| if weight[c] > 0.0 { sum[c] / weight[c] } else { normal * (2.0 / 3.0) })
     }
