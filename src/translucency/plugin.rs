@@ -343,6 +343,17 @@ pub(crate) fn run_precompute(
         });
         settings.patch_budget = capped;
     }
+    if let Some(table) = settings.transport.beam_table.as_mut().filter(|t| t.exit_directions) {
+        // The exit lobes are an oracle of the CPU path: the GPU gather does not take them, so
+        // keeping the directions would cost the table 5× its memory for nothing on screen.
+        warned.warn("translucency-exit-directions", || {
+            "translucency: BeamTableSettings::exit_directions is for the CPU oracle \
+             (translucent_accuracy --exit-axis lobe); the plugin's gather does not use it, so \
+             it is turned off"
+                .to_string()
+        });
+        table.exit_directions = false;
+    }
     let mut list: Vec<Participant> = participants.iter().collect();
     list.sort_by_key(|p| p.0);
     // The signature: entities, meshes, transforms, media and albedos.

@@ -878,11 +878,19 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     let mut app = bare_app_with(|app| {
         app.add_plugins(TranslucencyPlugin);
     });
-    // A budget below the least (16); a NaN medium, a zero scale and a good one.
-    app.insert_resource(TranslucencySettings {
+    // A budget below the least (16); a beam table asking for the CPU oracle's exit
+    // directions; a NaN medium, a zero scale and a good one.
+    let mut settings = TranslucencySettings {
         patch_budget: 0,
         ..default()
+    };
+    settings.transport.beam_table = Some(bevy_mesostructure::translucency::beam_table::BeamTableSettings {
+        walks: 4,
+        late_walks: 4,
+        exit_directions: true,
+        ..default()
     });
+    app.insert_resource(settings);
     sun(&mut app, Vec3::new(-1.0, -1.0, -1.0), 2000.0);
     let ball = mesh(&mut app, Sphere::new(0.05).mesh().ico(2).unwrap());
     let material = app
@@ -947,6 +955,7 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         &format!("translucency-medium-{bad}"),
         "translucency-units-",
         "translucency-msaa",
+        "translucency-exit-directions",
     ] {
         assert!(
             causes.iter().any(|c| c.starts_with(key)),
@@ -956,6 +965,10 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     assert_eq!(
         app.world().resource::<TranslucencySettings>().patch_budget,
         16
+    );
+    assert_eq!(
+        app.world().resource::<TranslucencySettings>().transport.beam_table.map(|t| t.exit_directions),
+        Some(false)
     );
     // The good ball shows its copy without diffuse; the bad one keeps its own material.
     let shown = |app: &mut App, e: Entity| {
