@@ -50,7 +50,9 @@ pub struct BeamTableSettings {
     /// 12 more floats an entry): what the exit lobes are fitted to
     /// ([`EnergyTransport::exit_laws_along_lobes`](super::transport::EnergyTransport::exit_laws_along_lobes)),
     /// measured on the CPU path only (`translucent_accuracy --exit-axis lobe`; the GPU
-    /// gather does not take them yet, and the plugin turns this off with a warning).
+    /// gather does not take them yet, and the plugin turns this off with a warning; not
+    /// reflected, so the example's tuning panel does not offer it).
+    #[reflect(ignore)]
     pub exit_directions: bool,
 }
 

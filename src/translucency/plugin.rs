@@ -345,7 +345,8 @@ pub(crate) fn run_precompute(
     }
     if let Some(table) = settings.transport.beam_table.as_mut().filter(|t| t.exit_directions) {
         // The exit lobes are an oracle of the CPU path: the GPU gather does not take them, so
-        // keeping the directions would cost the table 5× its memory for nothing on screen.
+        // keeping the directions would cost each early entry 15 floats instead of 3 for nothing on
+        // screen.
         warned.warn("translucency-exit-directions", || {
             "translucency: BeamTableSettings::exit_directions is for the CPU oracle \
              (translucent_accuracy --exit-axis lobe); the plugin's gather does not use it, so \
