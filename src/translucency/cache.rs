@@ -250,7 +250,7 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
             None => w.u32s(&[])?,
             Some(t) => {
                 let s = &t.settings;
-                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order, u32::from(s.exit_directions)])?;
+                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order, u32::from(s.exit_directions), s.seed])?;
                 w.u32s(&t.slots)?;
                 w.f32s(t.media.iter().flat_map(|m| m.to_array()).collect::<Vec<_>>().into_iter())?;
                 w.f32s(t.late_share.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
@@ -393,7 +393,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
 /// The beam table [`save`] wrote after the transport, checked against `n` patches.
 fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<BeamTable>> {
     let settings = r.u32s()?;
-    let [cosines, azimuths, walks, late_walks, last_order, exit_directions] = settings[..] else {
+    let [cosines, azimuths, walks, late_walks, last_order, exit_directions, seed] = settings[..] else {
         return if settings.is_empty() { Ok(None) } else { Err(invalid("beam table settings")) };
     };
     let settings = BeamTableSettings {
@@ -403,6 +403,7 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
         late_walks,
         last_order,
         exit_directions: exit_directions != 0,
+        seed,
     };
     if settings.invalid_reason().is_some() {
         return Err(invalid("beam table settings"));

@@ -371,8 +371,8 @@ pub(crate) fn run_precompute(
             settings.transport.deep_exit_law as u32 as f32,
         ]),
         // The beam table's settings (none: all zero).
-        hash_f32s(settings.transport.beam_table.map_or([0.0; 5], |t| {
-            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order].map(|v| v as f32)
+        hash_f32s(settings.transport.beam_table.map_or([0.0; 6], |t| {
+            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order, t.seed].map(|v| v as f32)
         })),
     ];
     for (entity, mesh, material, transform, translucent, _) in &list {
