@@ -88,15 +88,12 @@ fn a_beam_table_column_gives_back_the_plane_albedo() {
         index_of_refraction: 1.0,
         ..TranslucentPreset::Skin1.medium()
     };
-    let (patches, surfaces, rays, transport, top) = lit_cube(medium, 0.001, 100);
-    let p = &patches.patches;
+    let cube = LitCube::new(medium, 0.001, 100);
+    let (p, top) = (&cube.patches.patches, cube.top);
     let settings = BeamTableSettings { walks: 4096, ..default() };
-    let travel = Vec3::NEG_Y;
-    let bin = direction_bin(travel, p[top].normal, settings.cosines, settings.azimuths).unwrap();
+    let bin = cube.bin(settings);
     let mu = -bin_direction(bin, p[top].normal, settings.cosines, settings.azimuths).dot(p[top].normal);
-    let mut only = vec![None; p.len()];
-    only[top] = Some(bin);
-    let table = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, settings, Some(&only));
+    let table = cube.table(settings, false);
     let given_back: Vec3 =
         table.column(top, bin).into_iter().map(|(i, v)| v * p[i].area / p[top].area).sum();
     let alpha = medium.single_scattering_albedo();
@@ -110,8 +107,7 @@ fn a_beam_table_column_gives_back_the_plane_albedo() {
 
     // One walk for every use: few walks, every patch and direction.
     let few = BeamTableSettings { walks: 8, late_walks: 8, ..default() };
-    let full = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, few, None);
-    let alone = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, few, Some(&only));
+    let (full, alone) = (cube.table(few, true), cube.table(few, false));
     assert!(!alone.column(top, bin).is_empty());
     assert_eq!(full.column(top, bin), alone.column(top, bin));
     // Every patch of the cube has its table, every direction its walks.
@@ -126,19 +122,14 @@ fn a_beam_table_column_gives_back_the_plane_albedo() {
 fn a_beam_tables_light_flows_away_from_where_it_entered() {
     let medium = TranslucentPreset::Skin1.medium();
     // 0.1 world units a millimetre: a patch ~1.5 mm, within skin's reach.
-    let (patches, surfaces, rays, transport, top) = lit_cube(medium, 0.1, 600);
-    let p = &patches.patches;
-    let settings = BeamTableSettings { walks: 512, late_walks: 256, ..default() };
-    let bin = direction_bin(Vec3::NEG_Y, p[top].normal, settings.cosines, settings.azimuths).unwrap();
-    let mut only = vec![None; p.len()];
-    only[top] = Some(bin);
-    let table = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, settings, Some(&only));
-    let mut light = vec![Vec3::ZERO; p.len() * table.bins() as usize];
-    light[(table.slots[top] * table.bins() + bin) as usize] = Vec3::ONE;
-    let depths = EnergyTransport::source_depths(&patches, &surfaces);
+    let cube = LitCube::new(medium, 0.1, 600);
+    let (patches, p, top) = (&cube.patches, &cube.patches.patches, cube.top);
+    let table = cube.table(BeamTableSettings { walks: 512, late_walks: 256, ..default() }, false);
+    let light = cube.light(&table);
+    let depths = EnergyTransport::source_depths(patches, &cube.surfaces);
     let expected = Vec3::splat(0.1) / (medium.reduced_scattering + medium.absorption);
     assert!((depths[top] - expected).abs().max_element() < 1e-6, "{} against {expected}", depths[top]);
-    let flows = table.flow(&patches, &light, &depths);
+    let flows = table.flow(patches, &light, &depths);
     assert_eq!(flows[top], [Vec3::ZERO; 3]);
     let mut round = 0;
     for (i, flow) in flows.iter().enumerate().filter(|&(i, _)| i != top && p[i].normal.y > 0.99) {
@@ -159,16 +150,11 @@ fn a_beam_tables_light_flows_away_from_where_it_entered() {
 #[test]
 fn a_beam_tables_light_leaves_leaning_away_from_where_it_entered() {
     let medium = TranslucentPreset::Skin1.medium();
-    let (patches, surfaces, rays, transport, top) = lit_cube(medium, 0.1, 600);
-    let p = &patches.patches;
-    let settings = BeamTableSettings { walks: 4096, late_walks: 256, exit_directions: true, ..default() };
-    let bin = direction_bin(Vec3::NEG_Y, p[top].normal, settings.cosines, settings.azimuths).unwrap();
-    let mut only = vec![None; p.len()];
-    only[top] = Some(bin);
-    let table = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, settings, Some(&only));
+    let cube = LitCube::new(medium, 0.1, 600);
+    let (p, top) = (&cube.patches.patches, cube.top);
+    let table = cube.table(BeamTableSettings { walks: 4096, late_walks: 256, exit_directions: true, ..default() }, false);
     assert_eq!(table.early_leaving.len(), table.early.entries());
-    let mut light = vec![Vec3::ZERO; p.len() * table.bins() as usize];
-    light[(table.slots[top] * table.bins() + bin) as usize] = Vec3::ONE;
+    let light = cube.light(&table);
     let moments = table.early_moments(&light, |_, _| true);
     // Over the lit face but the lit patch, per channel: the exitance, and its moment's
     // components away from the lit patch and along the normal.
@@ -205,15 +191,11 @@ fn a_beam_tables_light_leaves_leaning_away_from_where_it_entered() {
 #[test]
 fn a_beam_tables_seed_changes_its_walks_alone() {
     let medium = TranslucentPreset::Skin1.medium();
-    let (patches, surfaces, rays, transport, top) = lit_cube(medium, 0.1, 600);
-    let p = &patches.patches;
+    let cube = LitCube::new(medium, 0.1, 600);
+    let (p, top) = (&cube.patches.patches, cube.top);
     let settings = BeamTableSettings { walks: 512, late_walks: 256, ..default() };
-    let bin = direction_bin(Vec3::NEG_Y, p[top].normal, settings.cosines, settings.azimuths).unwrap();
-    let mut only = vec![None; p.len()];
-    only[top] = Some(bin);
-    let build = |seed: u32| {
-        BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, BeamTableSettings { seed, ..settings }, Some(&only))
-    };
+    let bin = cube.bin(settings);
+    let build = |seed: u32| cube.table(BeamTableSettings { seed, ..settings }, false);
     let (first, again, other) = (build(0), build(0), build(1));
     assert_eq!(first.early, again.early);
     assert_eq!(first.late_share, again.late_share);
@@ -227,24 +209,54 @@ fn a_beam_tables_seed_changes_its_walks_alone() {
     assert!((a_all - b_all).abs() / a_all < 0.1, "{a} against {b}");
 }
 
-/// A 2-unit cube of `medium` at `world_units_per_mm`, in `budget` patches, its transport
-/// (default settings), and the top face's patch nearest its centre (where a beam is shone).
-fn lit_cube(
-    medium: TranslucentMedium,
-    world_units_per_mm: f32,
-    budget: usize,
-) -> (crate::translucency::Patches, [PatchSurface; 1], SceneRays, EnergyTransport, usize) {
-    let cube = mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY);
-    let objects = [cube];
-    let views = views_of(&objects);
-    let patches = resample_into_patches(&views, budget);
-    let rays = SceneRays::new(&views);
-    let surfaces = [PatchSurface::Translucent { medium, world_units_per_mm, oriented_dipole: false }];
-    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
-    let p = &patches.patches;
-    let top = (0..p.len())
-        .filter(|&i| p[i].normal.y > 0.99)
-        .min_by(|&a, &b| p[a].centre.xz().length().total_cmp(&p[b].centre.xz().length()))
-        .expect("a top patch");
-    (patches, surfaces, rays, transport, top)
+/// A 2-unit cube of a medium, its transport (default settings), and the top face's patch
+/// nearest its centre, where a beam shines straight down.
+struct LitCube {
+    patches: crate::translucency::Patches,
+    surfaces: [PatchSurface; 1],
+    rays: SceneRays,
+    transport: EnergyTransport,
+    /// The lit patch.
+    top: usize,
+}
+
+impl LitCube {
+    /// `medium` at `world_units_per_mm`, in `budget` patches.
+    fn new(medium: TranslucentMedium, world_units_per_mm: f32, budget: usize) -> Self {
+        let cube = mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY);
+        let objects = [cube];
+        let views = views_of(&objects);
+        let patches = resample_into_patches(&views, budget);
+        let rays = SceneRays::new(&views);
+        let surfaces = [PatchSurface::Translucent { medium, world_units_per_mm, oriented_dipole: false }];
+        let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
+        let p = &patches.patches;
+        let top = (0..p.len())
+            .filter(|&i| p[i].normal.y > 0.99)
+            .min_by(|&a, &b| p[a].centre.xz().length().total_cmp(&p[b].centre.xz().length()))
+            .expect("a top patch");
+        Self { patches, surfaces, rays, transport, top }
+    }
+
+    /// The lit patch's table direction for the beam.
+    fn bin(&self, settings: BeamTableSettings) -> u32 {
+        let normal = self.patches.patches[self.top].normal;
+        direction_bin(Vec3::NEG_Y, normal, settings.cosines, settings.azimuths).expect("the beam meets the top")
+    }
+
+    /// The table of `settings` with the lit patch's beam direction alone walked (all of them
+    /// with `every_direction`).
+    fn table(&self, settings: BeamTableSettings, every_direction: bool) -> BeamTable {
+        let mut only = vec![None; self.patches.patches.len()];
+        only[self.top] = Some(self.bin(settings));
+        let only = (!every_direction).then_some(only.as_slice());
+        BeamTable::build(&self.patches, &self.surfaces, &self.rays, &self.transport.scattering, settings, only)
+    }
+
+    /// One unit of irradiance in the beam's direction of `table` (its light vector).
+    fn light(&self, table: &BeamTable) -> Vec<Vec3> {
+        let mut light = vec![Vec3::ZERO; self.patches.patches.len() * table.bins() as usize];
+        light[(table.slots[self.top] * table.bins() + self.bin(table.settings)) as usize] = Vec3::ONE;
+        light
+    }
 }
