@@ -383,21 +383,29 @@ impl BeamTable {
                 .collect::<Vec<_>>();
             (late.map(|l| l.0), directions)
         });
-        let mut early_rows: Vec<Vec<(u32, (Vec3, [Vec4; 3]))>> = vec![Vec::new(); n];
+        let mut early_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
+        // With the exit directions, each early entry's at the same (row, column): sorted as
+        // `early`'s rows are, their values line up with its.
+        let mut leaving_rows: Vec<Vec<(u32, [Vec4; 3])>> = vec![Vec::new(); n];
         let mut late_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
         let mut late_share = vec![Vec3::ZERO; tabled.len() * bins as usize];
         for (slot, (late, directions)) in columns.into_iter().enumerate() {
             for (bin, column, moments, share) in directions {
                 late_share[slot * bins as usize + bin as usize] = share;
                 for (i, v) in column {
-                    if v != Vec3::ZERO {
+                    if v == Vec3::ZERO {
+                        continue;
+                    }
+                    let at = slot as u32 * bins + bin;
+                    early_rows[i as usize].push((at, v));
+                    if settings.exit_directions {
                         // The mean direction it leaves along, per channel (the moment over
                         // the exitance): length 1 for light all leaving one way.
                         let moment = moments.get(&i).copied().unwrap_or([Vec4::ZERO; 3]);
                         let leaving = std::array::from_fn(|c| {
                             if v[c] > 0.0 { (moment[c].truncate() / v[c]).extend(moment[c].w) } else { Vec4::ZERO }
                         });
-                        early_rows[i as usize].push((slot as u32 * bins + bin, (v, leaving)));
+                        leaving_rows[i as usize].push((at, leaving));
                     }
                 }
             }
@@ -407,16 +415,11 @@ impl BeamTable {
                 }
             }
         }
-        let early = SparseMatrix::from_rows(early_rows);
         Self {
             settings,
             slots,
-            early_leaving: if settings.exit_directions { early.values.iter().map(|v| v.1).collect() } else { Vec::new() },
-            early: SparseMatrix {
-                row_offsets: early.row_offsets,
-                columns: early.columns,
-                values: early.values.into_iter().map(|v| v.0).collect(),
-            },
+            early: SparseMatrix::from_rows(early_rows),
+            early_leaving: SparseMatrix::from_rows(leaving_rows).values,
             late_share,
             late: SparseMatrix::from_rows(late_rows),
             media,

@@ -1315,35 +1315,27 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     // 0.0782 — held below —, behind the dielectric skin 0.0821 / 0.2197, marble 0.0699 /
     // 0.0812).
     let table_cases = [
-        (table, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0578, [0.985, 0.958, 0.946]),
-        (table, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2734, [0.791, 0.507, 0.347]),
-        (table, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0481, [0.985, 0.982, 0.991]),
-        (table, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0695, [0.968, 0.960, 0.975]),
-        (table, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0799, [0.976, 0.944, 0.937]),
-        (table, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.1822, [0.857, 0.719, 1.094]),
-        (table, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0699, [0.979, 0.975, 0.966]),
-        (table, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0788, [1.012, 0.999, 0.986]),
-        (table_normal, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3435, [0.709, 0.385, 0.335]),
-        (table_normal, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0782, [0.954, 0.941, 0.949]),
-        (table_lobe, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1676, [0.927, 0.810, 1.173]),
-        (table_lobe, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0507, [0.994, 0.965, 0.952]),
-        (table_1024, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2525, [0.787, 0.497, 0.377]),
+        ((table, "beam table"), TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0578, [0.985, 0.958, 0.946]),
+        ((table, "beam table"), TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2734, [0.791, 0.507, 0.347]),
+        ((table, "beam table"), TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0481, [0.985, 0.982, 0.991]),
+        ((table, "beam table"), TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0695, [0.968, 0.960, 0.975]),
+        ((table, "beam table"), TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0799, [0.976, 0.944, 0.937]),
+        ((table, "beam table"), TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.1822, [0.857, 0.719, 1.094]),
+        ((table, "beam table"), TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0699, [0.979, 0.975, 0.966]),
+        ((table, "beam table"), TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0788, [1.012, 0.999, 0.986]),
+        ((table_normal, "beam table, the normal's law"), TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3435, [0.709, 0.385, 0.335]),
+        ((table_normal, "beam table, the normal's law"), TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0782, [0.954, 0.941, 0.949]),
+        ((table_lobe, "beam table, 1024 walks, exit lobes"), TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1676, [0.927, 0.810, 1.173]),
+        ((table_lobe, "beam table, 1024 walks, exit lobes"), TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0507, [0.994, 0.965, 0.952]),
+        ((table_1024, "beam table, 1024 walks"), TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2525, [0.787, 0.497, 0.377]),
     ];
-    for (oracles, preset, name, lighting, how, eta, rel_l1, ratio) in table_cases {
+    for ((oracles, named), preset, name, lighting, how, eta, rel_l1, ratio) in table_cases {
         let medium = bevy_mesostructure::translucency::TranslucentMedium {
             index_of_refraction: eta,
             ..preset.medium()
         };
         let reference = reference_picture(name, lighting);
-        let label = if oracles == table {
-            format!("{name} (beam table)")
-        } else if oracles == table_normal {
-            format!("{name} (beam table, the normal's law)")
-        } else if oracles == table_lobe {
-            format!("{name} (beam table, 1024 walks, exit lobes)")
-        } else {
-            format!("{name} (beam table, 1024 walks)")
-        };
+        let label = format!("{name} ({named})");
         holds_as_documented(&view, &label, lighting, medium, false, &default(), how, oracles, &reference, rel_l1, ratio);
     }
 }
