@@ -21,7 +21,7 @@
 //!     [--beam-table COSINES,AZIMUTHS] [--single-scattering-oracle]
 //!     [--beam-orders FIRST,LAST] [--late-light profile|profile-less-early|clamped]
 //!     [--late-walks 1024] [--lit-face-single-scattering-law]
-//!     [--exit-axis plugin|normal|normal-all|flow-all]
+//!     [--exit-axis plugin|normal|normal-all|flow-all|lobe] [--exit-lobes true|false]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
@@ -119,6 +119,11 @@ struct Cli {
     /// law, not the share `1 − ν` (suffixes `_exitnormalall`, `_exitflowall`)
     #[arg(long, value_enum, default_value_t = Axis::Plugin)]
     exit_axis: Axis,
+    /// With the beam table, give each patch's light from afar out by a lobe leaning the way
+    /// it travelled (`TransportSettings::exit_lobes`; method suffix `_exitlean` on the
+    /// plugin's axis, `_exitflow` when off)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    exit_lobes: bool,
     /// Walks a channel from each patch for `--scattering walks|beam-walks`
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=65536))]
     walks: u32,
@@ -464,6 +469,7 @@ fn main() {
         beam_incidence: cli.beam_incidence,
         shape_diffusion: cli.shape_diffusion,
         deep_exit_law: cli.deep_exit_law,
+        exit_lobes: cli.exit_lobes,
         diffusion_energy_kept: cli.energy_kept,
         ..default()
     };
@@ -544,7 +550,11 @@ fn main() {
     let ss_oracle = if cli.single_scattering_oracle { "_ssoracle" } else { "" };
     let table = cli.scattering == Scattering::BeamTable;
     let (exit_axis, exit_name) = match cli.exit_axis {
-        Axis::Plugin => (ExitAxis::Plugin, if table { "_exitflow" } else { "" }),
+        Axis::Plugin => (ExitAxis::Plugin, match (table, cli.exit_lobes) {
+            (true, true) => "_exitlean",
+            (true, false) => "_exitflow",
+            (false, _) => "",
+        }),
         Axis::Normal => (ExitAxis::Normal, ""),
         Axis::NormalAll => (ExitAxis::NormalAll, "_exitnormalall"),
         Axis::FlowAll => (ExitAxis::FlowAll, "_exitflowall"),

@@ -191,8 +191,96 @@ pub struct BeamTable {
     pub late: SparseMatrix<Vec3>,
     /// Per slot, its medium's single-scattering albedo (rgb) and index of refraction (w).
     pub media: Vec<Vec4>,
+    /// Per slot, how its object's light from afar leans as it leaves ([`ExitLean`], fitted
+    /// to the object's beam walks).
+    pub exit_lean: Vec<ExitLean>,
     /// Wall-clock seconds to build.
     pub seconds: f32,
+}
+
+/// How far, in patch sizes, light must have come to leave a patch by its exit lobe
+/// ([`ExitLean`]): nearer light leaves in the patch's own limb-darkened law (as lobes of
+/// their mean, the ball's skin lit from the front went 0.058 → 0.088 in relative L1;
+/// 0.5 – 4 measured, 2 the best from the front: `docs/translucent.md`).
+pub const LOBE_SOURCE_DISTANCE: f32 = 2.0;
+
+/// Whether light from patch `j` reaches patch `i` from afar ([`LOBE_SOURCE_DISTANCE`]).
+pub fn from_afar(patches: &Patches, i: usize, j: usize) -> bool {
+    let p = &patches.patches;
+    p[i].surface_point.distance(p[j].surface_point) > LOBE_SOURCE_DISTANCE * patches.size_of(i)
+}
+
+/// The unit direction light travels from patch `j`'s diffusion source, `depth` under its
+/// surface point, to patch `i`'s surface point (zero where they meet): what
+/// [`BeamTable::flow`] and [`ExitLean`] measure a patch's light by.
+fn from_source(patches: &Patches, i: usize, j: usize, depth: f32) -> Vec3 {
+    let p = &patches.patches;
+    (p[i].surface_point - (p[j].surface_point - p[j].normal * depth)).normalize_or_zero()
+}
+
+/// How an object's light from afar leans as it leaves, per channel: the mean direction it
+/// leaves along (refracted out) as `along · n + across · t`, `n` the exit patch's normal and
+/// `t` the part across it of the direction the light came from ([`from_source`]). Fitted by
+/// least squares over the object's beam walks that leave more than [`LOBE_SOURCE_DISTANCE`]
+/// patch sizes from their entry (`n` and `t` are orthogonal, so each coefficient is a ratio
+/// of sums). A patch's light from afar leaves by the lobe of that mean over its sources
+/// ([`BeamTable::flow`], [`ExitLaw::set_far_lobes`](super::transport::ExitLaw::set_far_lobes)):
+/// a model of the walks' own directions, pooled over the whole object, so free of each
+/// entry's noise (each entry's own mean needed 8× the walks to help: `docs/translucent.md`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ExitLean {
+    /// Per channel, along the normal (Lambert's law: ⅔).
+    pub along: Vec3,
+    /// Per channel, along the way the light came (0: none).
+    pub across: Vec3,
+}
+
+impl ExitLean {
+    /// The mean direction light from afar leaves a patch of unit `normal` along in channel
+    /// `c`, given the mean of the directions it came from, `from` ([`BeamTable::flow`]'s
+    /// `far_axis`).
+    pub fn mean(&self, c: usize, normal: Vec3, from: Vec3) -> Vec3 {
+        normal * self.along[c] + (from - normal * from.dot(normal)) * self.across[c]
+    }
+}
+
+/// [`ExitLean`]'s least-squares sums over walks, per channel: `Σ n·ω`, the walks, `Σ t·ω`
+/// and `Σ |t|²`.
+#[derive(Clone, Copy, Debug, Default)]
+struct LeanSums {
+    along: Vec3,
+    walks: Vec3,
+    across: Vec3,
+    spread: Vec3,
+}
+
+impl LeanSums {
+    fn add(&mut self, other: &Self) {
+        self.along += other.along;
+        self.walks += other.walks;
+        self.across += other.across;
+        self.spread += other.spread;
+    }
+
+    fn lean(&self) -> ExitLean {
+        let ratio = |a: Vec3, b: Vec3| Vec3::select(b.cmpgt(Vec3::ZERO), a / b.max(Vec3::splat(1e-30)), Vec3::ZERO);
+        ExitLean {
+            along: Vec3::select(self.walks.cmpgt(Vec3::ZERO), ratio(self.along, self.walks), Vec3::splat(2.0 / 3.0)),
+            across: ratio(self.across, self.spread),
+        }
+    }
+}
+
+/// The way the light a beam table gives a patch flows in ([`BeamTable::flow`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TableFlow {
+    /// Per channel, `Σ_j c_ij u_ij / Σ_j c_ij` over all the table's light from other
+    /// patches (what [`ExitLaw::set_flow`](super::transport::ExitLaw::set_flow) takes).
+    pub axis: [Vec3; 3],
+    /// The table's early light from afar ([`from_afar`]).
+    pub far: Vec3,
+    /// Per channel, the same mean over that light alone (what [`ExitLean::mean`] takes).
+    pub far_axis: [Vec3; 3],
 }
 
 /// The patch a walk leaves by: the nearest sample facing the exit's way (not the far side of
@@ -260,7 +348,7 @@ type Moments = HashMap<u32, [Vec4; 3]>;
 
 /// One patch's late column and, per direction walked, its early column, their moments and
 /// its late share.
-type PatchColumns = (Option<Column>, Vec<(u32, Column, Moments, Vec3)>);
+type PatchColumns = (Option<Column>, Vec<(u32, Column, Moments, Vec3)>, LeanSums);
 
 impl BeamTable {
     /// Directions a patch.
@@ -323,18 +411,19 @@ impl BeamTable {
             }
         }
         let exits = ExitPatches::new(patches);
+        let source_depths = super::transport::EnergyTransport::source_depths(patches, surfaces);
         let bins = settings.bins();
         let columns: Vec<PatchColumns> = parallel_rows(tabled.len(), |slot| {
             let j = tabled[slot];
             let Some((medium, units_per_mm)) = medium_of(j) else {
-                return (None, Vec::new());
+                return (None, Vec::new(), LeanSums::default());
             };
             let walked: Vec<u32> = match only {
                 Some(only) => only.get(j).copied().flatten().into_iter().collect(),
                 None => (0..bins).collect(),
             };
             if walked.is_empty() {
-                return (None, Vec::new());
+                return (None, Vec::new(), LeanSums::default());
             }
             let column_of = ColumnWalks {
                 patches,
@@ -350,6 +439,7 @@ impl BeamTable {
                     .collect(),
                 last_order: settings.last_order,
                 directions: settings.exit_directions,
+                source_depth: source_depths.get(j).copied().unwrap_or(Vec3::ZERO),
                 seed_offset: settings.seed as u64 * SEED_STRIDE,
             };
             let diffuse_entering =
@@ -359,17 +449,19 @@ impl BeamTable {
                 diffuse_entering,
                 settings.late_walks,
             );
+            let mut lean = LeanSums::default();
             let directions = walked
                 .into_iter()
                 .map(|bin| {
                     let travel = bin_direction(bin, p[j].normal, settings.cosines, settings.azimuths);
                     let seed = (j as u64 * bins as u64 + bin as u64).wrapping_add(column_of.seed_offset);
-                    let (column, moments, remaining) = column_of.walk(
+                    let (column, moments, remaining, walks_lean) = column_of.walk(
                         WalkLaunch::Beam(travel),
                         settings.walks,
                         seed,
                         true,
                     );
+                    lean.add(&walks_lean);
                     let share = match &late {
                         Some((_, late_remaining)) => Vec3::select(
                             late_remaining.cmpgt(Vec3::ZERO),
@@ -381,7 +473,7 @@ impl BeamTable {
                     (bin, column, moments, share)
                 })
                 .collect::<Vec<_>>();
-            (late.map(|l| l.0), directions)
+            (late.map(|l| l.0), directions, lean)
         });
         let mut early_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
         // With the exit directions, each early entry's at the same (row, column): sorted as
@@ -389,7 +481,10 @@ impl BeamTable {
         let mut leaving_rows: Vec<Vec<(u32, [Vec4; 3])>> = vec![Vec::new(); n];
         let mut late_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
         let mut late_share = vec![Vec3::ZERO; tabled.len() * bins as usize];
-        for (slot, (late, directions)) in columns.into_iter().enumerate() {
+        // Each object's lean, pooled over its patches' walks.
+        let mut object_leans: HashMap<u32, LeanSums> = HashMap::default();
+        for (slot, (late, directions, lean)) in columns.into_iter().enumerate() {
+            object_leans.entry(p[tabled[slot]].object).or_default().add(&lean);
             for (bin, column, moments, share) in directions {
                 late_share[slot * bins as usize + bin as usize] = share;
                 for (i, v) in column {
@@ -423,6 +518,10 @@ impl BeamTable {
             late_share,
             late: SparseMatrix::from_rows(late_rows),
             media,
+            exit_lean: tabled
+                .iter()
+                .map(|&j| object_leans.get(&p[j].object).map_or_else(ExitLean::default, LeanSums::lean))
+                .collect(),
             seconds: start.elapsed().as_secs_f32(),
         }
     }
@@ -473,45 +572,56 @@ impl BeamTable {
         patch_of
     }
 
-    /// Per patch and channel, the way the light the table gives it flows in (what
-    /// [`ExitLaw::flow`](super::transport::ExitLaw::flow) takes about): `Σ_j c_ij u_ij / Σ_j c_ij`
-    /// over the other patches `j`, `c_ij` what `j`'s beams (`light`, as for [`apply`](Self::apply))
-    /// give patch `i` through the early and late columns, `u_ij` the unit direction to `i`'s
-    /// surface point from `j`'s diffusion source (`source_depths[j]` under its surface point,
-    /// per channel). Its length, 0 – 1, is how much of that light flows one way; zero where
-    /// none comes from elsewhere.
-    pub fn flow(&self, patches: &Patches, light: &[Vec3], source_depths: &[Vec3]) -> Vec<[Vec3; 3]> {
-        let p = &patches.patches;
-        let n = p.len();
+    /// Per patch, the way the light the table gives it flows in ([`TableFlow`]): per channel
+    /// `Σ_j c_ij u_ij / Σ_j c_ij` over the other patches `j`, `c_ij` what `j`'s beams
+    /// (`light`, as for [`apply`](Self::apply)) give patch `i` through the early and late
+    /// columns, `u_ij` the unit direction to `i`'s surface point from `j`'s diffusion source
+    /// (`source_depths[j]` under its surface point, per channel; what
+    /// [`ExitLaw::flow`](super::transport::ExitLaw::flow) takes about); and the same over the
+    /// early light from afar alone, with its amount (what the exit lobes take). Lengths 0 – 1:
+    /// how much of that light flows one way; zero where none comes.
+    pub fn flow(&self, patches: &Patches, light: &[Vec3], source_depths: &[Vec3]) -> Vec<TableFlow> {
+        let n = patches.patches.len();
         let bins = self.bins() as usize;
         let patch_of = self.slot_patches();
         let beam = |c: usize| light.get(c).copied().unwrap_or(Vec3::ZERO);
         let late_light = self.late_light(light);
+        let mean = |sum: [Vec3; 3], total: Vec3| {
+            std::array::from_fn(|c| if total[c] > 0.0 { sum[c] / total[c] } else { Vec3::ZERO })
+        };
         (0..n)
             .map(|i| {
                 let (mut flow, mut total) = ([Vec3::ZERO; 3], Vec3::ZERO);
-                let mut add = |j: usize, given: Vec3| {
+                let (mut far_flow, mut far) = ([Vec3::ZERO; 3], Vec3::ZERO);
+                let mut add = |j: usize, given: Vec3, early: bool| {
                     if j == i || j >= n {
                         return;
                     }
                     let depth = source_depths.get(j).copied().unwrap_or(Vec3::ZERO);
+                    let afar = early && from_afar(patches, i, j);
                     for c in 0..3 {
-                        let source = p[j].surface_point - p[j].normal * depth[c];
-                        flow[c] += (p[i].surface_point - source).normalize_or_zero() * given[c];
+                        let u = from_source(patches, i, j, depth[c]) * given[c];
+                        flow[c] += u;
+                        if afar {
+                            far_flow[c] += u;
+                        }
                     }
                     total += given;
+                    if afar {
+                        far += given;
+                    }
                 };
                 if i < self.early.rows() {
                     for (column, v) in self.early.row(i) {
-                        add(patch_of[column / bins] as usize, v * beam(column));
+                        add(patch_of[column / bins] as usize, v * beam(column), true);
                     }
                 }
                 if i < self.late.rows() {
                     for (slot, v) in self.late.row(i) {
-                        add(patch_of[slot] as usize, v * late_light[slot]);
+                        add(patch_of[slot] as usize, v * late_light[slot], false);
                     }
                 }
-                std::array::from_fn(|c| if total[c] > 0.0 { flow[c] / total[c] } else { Vec3::ZERO })
+                TableFlow { axis: mean(flow, total), far, far_axis: mean(far_flow, far) }
             })
             .collect()
     }
@@ -596,6 +706,9 @@ struct ColumnWalks<'a> {
     last_order: u32,
     /// Whether to take the exits' moments.
     directions: bool,
+    /// Where light entering patch `j` acts as a source, per channel
+    /// ([`EnergyTransport::source_depths`](super::transport::EnergyTransport::source_depths)).
+    source_depth: Vec3,
     /// Added to every walk's seed ([`BeamTableSettings::seed`]).
     seed_offset: u64,
 }
@@ -606,7 +719,13 @@ impl ColumnWalks<'_> {
     /// (per channel, `Σ exitance · ω`), and the share still inside after the last order.
     /// With `law_takes_lit_face_single`, what leaves after one scattering by the lit face
     /// (an exit normal within 60° of the patch's) is left to [`single_scattering_radiance`].
-    fn walk(&self, launch: WalkLaunch, walks: u32, seed: u64, law_takes_lit_face_single: bool) -> (Column, Moments, Vec3) {
+    fn walk(
+        &self,
+        launch: WalkLaunch,
+        walks: u32,
+        seed: u64,
+        law_takes_lit_face_single: bool,
+    ) -> (Column, Moments, Vec3, LeanSums) {
         let p = &self.patches.patches;
         let pj = &p[self.j];
         let share = 1.0 / walks as f32;
@@ -617,6 +736,9 @@ impl ColumnWalks<'_> {
         let mut column = Column::default();
         let mut moments = Moments::default();
         let mut remaining = Vec3::ZERO;
+        // A beam's walks that leave from afar: what the object's `ExitLean` is fitted to.
+        let mut lean = LeanSums::default();
+        let beam = matches!(launch, WalkLaunch::Beam(_));
         walk_ends(
             &self.medium,
             self.units_per_mm,
@@ -638,6 +760,16 @@ impl ColumnWalks<'_> {
                         if self.directions {
                             moments.entry(i).or_insert([Vec4::ZERO; 3])[c] += (exitance * exit.leaving).extend(1.0);
                         }
+                        let i = i as usize;
+                        if beam && from_afar(self.patches, i, self.j) {
+                            let n = p[i].normal;
+                            let from = from_source(self.patches, i, self.j, self.source_depth[c]);
+                            let t = from - n * from.dot(n);
+                            lean.along[c] += n.dot(exit.leaving);
+                            lean.walks[c] += 1.0;
+                            lean.across[c] += t.dot(exit.leaving);
+                            lean.spread[c] += t.length_squared();
+                        }
                     }
                 }
                 // Through a gap in the mesh: lost.
@@ -645,7 +777,7 @@ impl ColumnWalks<'_> {
                 WalkEnd::Remainder => remaining[c] += share,
             },
         );
-        (column, moments, remaining)
+        (column, moments, remaining, lean)
     }
 
     /// The late light per unit of diffuse walks' remainder: the profile's column (per unit
@@ -660,7 +792,7 @@ impl ColumnWalks<'_> {
     ) -> Option<(Column, Vec3)> {
         let p = &self.patches.patches;
         let seed = (u64::MAX - self.j as u64).wrapping_sub(self.seed_offset);
-        let (early, _, remaining) = self.walk(WalkLaunch::Diffuse, late_walks, seed, false);
+        let (early, _, remaining, _) = self.walk(WalkLaunch::Diffuse, late_walks, seed, false);
         if remaining == Vec3::ZERO {
             return None;
         }

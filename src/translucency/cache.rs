@@ -12,12 +12,12 @@ use std::{
 use bevy::prelude::*;
 
 use super::{
-    beam_table::{BeamTable, BeamTableSettings},
+    beam_table::{BeamTable, BeamTableSettings, ExitLean},
     patches::{Patch, PatchSample, Patches},
     transport::{EnergyTransport, PatchSurface, SparseMatrix, TransportReport, TransportSettings},
 };
 
-const MAGIC: &[u8; 8] = b"BMSTRN05";
+const MAGIC: &[u8; 8] = b"BMSTRN06";
 
 /// FNV-1a, 64 bits: the cache's key and the plugin's change signatures.
 #[derive(Clone, Copy)]
@@ -260,6 +260,7 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
                     w.f32s(m.values.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
                 }
                 w.f32s(t.early_leaving.iter().flatten().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
+                w.f32s(t.exit_lean.iter().flat_map(|l| l.along.to_array().into_iter().chain(l.across.to_array())).collect::<Vec<_>>().into_iter())?;
                 w.f32s([t.seconds].into_iter())?;
             }
         }
@@ -414,6 +415,7 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
     let early = read_matrix(r)?;
     let late = read_matrix(r)?;
     let leaving: Vec<Vec4> = r.f32s()?.chunks_exact(4).map(Vec4::from_slice).collect();
+    let lean = r.f32s()?;
     let seconds = r.f32s()?;
     let (count, bins) = (media.len(), settings.bins() as usize);
     if slots.len() != n
@@ -422,6 +424,7 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
         || !consistent(&early, Some(n), count * bins, 3)
         || !consistent(&late, Some(n), count, 3)
         || leaving.len() != if settings.exit_directions { early.1.len() * 3 } else { 0 }
+        || lean.len() != count * 6
         || seconds.len() != 1
     {
         return Err(invalid("beam table"));
@@ -439,6 +442,10 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
         early_leaving: leaving.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
         early: matrix(early),
         late: matrix(late),
+        exit_lean: lean
+            .chunks_exact(6)
+            .map(|l| ExitLean { along: Vec3::from_slice(&l[0..3]), across: Vec3::from_slice(&l[3..6]) })
+            .collect(),
         seconds: seconds[0],
     }))
 }

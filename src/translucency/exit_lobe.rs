@@ -33,8 +33,8 @@ impl ExitLobe {
     }
 }
 
-/// Cells of the fit table per unit of the mean's components.
-const FIT_CELLS: usize = 64;
+/// Cells of the fit table per unit of the mean's components (`FIT_CELLS` in `iterate.wgsl`).
+pub const FIT_CELLS: usize = 64;
 
 /// The table of lobes by their mean direction's components along the normal and across it
 /// (`FIT_CELLS` cells each over 0 – 1): per cell, `(κ, θ, norm)` of the lobe whose mean is
@@ -105,6 +105,12 @@ impl LobeFits {
             })
             .collect();
         Self { cells }
+    }
+
+    /// The table's cells, `(κ, θ, norm)`, by the mean's component along the normal, then
+    /// across it (what `exit_lobe` in `iterate.wgsl` reads).
+    pub fn cells(&self) -> &[[f32; 3]] {
+        &self.cells
     }
 
     /// The lobe about a patch of unit `normal` whose exitance-weighted mean leaving direction

@@ -369,6 +369,7 @@ pub(crate) fn run_precompute(
             settings.transport.object_exit_share as u32 as f32,
             settings.transport.shape_diffusion as u32 as f32,
             settings.transport.deep_exit_law as u32 as f32,
+            settings.transport.exit_lobes as u32 as f32,
         ]),
         // The beam table's settings (none: all zero).
         hash_f32s(settings.transport.beam_table.map_or([0.0; 6], |t| {

@@ -33,6 +33,12 @@ struct GatherParams {
     // 1/N), three vec4s a patch; `has_flow` 0: none, the normal's law.
     flow: u32,
     has_flow: u32,
+    // Per patch its exit lobes (`ExitLaw::lobes`, five vec4s a patch: per channel axis and κ,
+    // the norms, the light from afar that leaves by them); `has_lobes` 0: none.
+    lobes: u32,
+    has_lobes: u32,
+    padding_x: u32,
+    padding_y: u32,
 }
 
 struct GatherPatch {
@@ -80,19 +86,38 @@ fn single_scattering_radiance(alpha: vec3<f32>, eta_in: f32, e: vec3<f32>, mu0: 
     return alpha * e * transmitted / (4.0 * 3.14159265358979 * eta * eta * (inside0 + inside));
 }
 
-// `ExitLaw::factor_towards` (transport.rs) in one channel: 1 + D (s − 1),
-// D = g·clamp(1 − A E⁰/B), s the deep law about the channel's `flow` where it has one (axis,
-// 1/N), else about the normal at the exit cosine mu.
-fn exit_factor(law: vec4<f32>, flow: vec4<f32>, local_albedo: f32, eta: f32, b: f32, e0: f32,
-               n: vec3<f32>, towards: vec3<f32>, mu: f32) -> f32 {
-    if law.w <= 0.0 || b <= 0.0 {
-        return 1.0;
+// `ExitLaw::factor_towards` (transport.rs) in one channel: the share `lobe_exitance / B`
+// leaves by the channel's exit lobe (`lobe`: axis and κ; `ExitLobe::factor`), the rest
+// `B' = B − lobe_exitance` by 1 + D (s − 1), D = g·clamp(1 − A E⁰/B'), s the deep law about
+// the channel's `flow` where it has one (axis, 1/N), else about the normal at the exit
+// cosine mu.
+fn exit_factor(law: vec4<f32>, flow: vec4<f32>, lobe: vec4<f32>, lobe_norm: f32, lobe_exitance: f32,
+               local_albedo: f32, eta: f32, b: f32, e0: f32, n: vec3<f32>, towards: vec3<f32>,
+               mu: f32) -> f32 {
+    var share = 0.0;
+    if lobe_norm > 0.0 && b > 0.0 {
+        share = clamp(lobe_exitance / b, 0.0, 1.0);
     }
-    let deep = law.w * clamp(1.0 - local_albedo * e0 / b, 0.0, 1.0);
+    let lobed = share * lobe_norm * exp(lobe.w * (dot(towards, lobe.xyz) - 1.0));
+    let rest = b * (1.0 - share);
+    if law.w <= 0.0 || rest <= 0.0 {
+        return lobed + (1.0 - share);
+    }
+    let deep = law.w * clamp(1.0 - local_albedo * e0 / rest, 0.0, 1.0);
+    var shape = deep_exit_shape(law, eta, mu);
     if any(flow != vec4(0.0)) {
-        return 1.0 + deep * (deep_exit_shape_about(law, eta, n, flow.xyz, towards) * flow.w - 1.0);
+        shape = deep_exit_shape_about(law, eta, n, flow.xyz, towards) * flow.w;
     }
-    return 1.0 + deep * (deep_exit_shape(law, eta, mu) - 1.0);
+    return lobed + (1.0 - share) * (1.0 + deep * (shape - 1.0));
+}
+
+// Patch `i`'s exit lobes: `k` 0 – 2 a channel's axis and κ, 3 the norms, 4 the light from
+// afar (zero without them).
+fn patch_lobes(i: u32, k: u32) -> vec4<f32> {
+    if params.has_lobes == 0u {
+        return vec4(0.0);
+    }
+    return vectors[params.lobes + 5u * i + k];
 }
 
 // Patch `i`'s flow in `channel` (zero without one).
@@ -169,13 +194,15 @@ fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
                         let b_i = vectors[params.exitance + i].rgb;
                         let e0 = vectors[params.direct + i].rgb;
                         let eta = record.local_albedo.w;
+                        let norms = patch_lobes(i, 3u);
+                        let afar = patch_lobes(i, 4u);
                         let law = vec3(
-                            exit_factor(record.law_r, patch_flow(i, 0u), record.local_albedo.r, eta,
-                                        b_i.r, e0.r, n, towards, mu),
-                            exit_factor(record.law_g, patch_flow(i, 1u), record.local_albedo.g, eta,
-                                        b_i.g, e0.g, n, towards, mu),
-                            exit_factor(record.law_b, patch_flow(i, 2u), record.local_albedo.b, eta,
-                                        b_i.b, e0.b, n, towards, mu),
+                            exit_factor(record.law_r, patch_flow(i, 0u), patch_lobes(i, 0u), norms.r,
+                                        afar.r, record.local_albedo.r, eta, b_i.r, e0.r, n, towards, mu),
+                            exit_factor(record.law_g, patch_flow(i, 1u), patch_lobes(i, 1u), norms.g,
+                                        afar.g, record.local_albedo.g, eta, b_i.g, e0.g, n, towards, mu),
+                            exit_factor(record.law_b, patch_flow(i, 2u), patch_lobes(i, 2u), norms.b,
+                                        afar.b, record.local_albedo.b, eta, b_i.b, e0.b, n, towards, mu),
                         );
                         sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) * law / 3.14159265358979;
                         // Single scattering by the lit face (`BeamSingleScattering::radiance`):

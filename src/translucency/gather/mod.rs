@@ -209,6 +209,11 @@ struct GatherParams {
     beam_direction: u32,
     flow: u32,
     has_flow: u32,
+    lobes: u32,
+    has_lobes: u32,
+    // A uniform's size is a multiple of 16 bytes.
+    padding_x: u32,
+    padding_y: u32,
 }
 
 /// The gather radius in patch sizes: about two rings of neighbours.
@@ -381,6 +386,10 @@ fn gather_buffers(
         beam_direction: beams.direction,
         flow: transport.flow_offset().unwrap_or(0),
         has_flow: u32::from(transport.flow_offset().is_some()),
+        lobes: transport.lobes_offset().unwrap_or(0),
+        has_lobes: u32::from(transport.lobes_offset().is_some()),
+        padding_x: 0,
+        padding_y: 0,
     };
     let patch_buffer = device.create_buffer_with_data(&BufferInitDescriptor {
         label: Some("translucency_gather_patches"),

@@ -55,14 +55,20 @@ struct Layout {
     beam_irradiance: u32,
     beam_direction: u32,
     // The way the table's light flows into each patch (`BeamTable::flow`, `ExitLaw::set_flow`),
-    // where `flow` is 1: each slot's patch (words in `matrices`), each patch's frame (24
+    // where `flow` is 1: each slot's patch (words in `matrices`), each patch's frame (32
     // words in `matrices`: surface point, normal and η, the diffusion source's depth per
-    // channel, the deep law per channel (α, ν, 1/N, g)), and the flow out (three vec4s a
-    // patch in `vectors`: axis, 1/N).
+    // channel and how far light from afar comes, the deep law per channel (α, ν, 1/N, g),
+    // the lean along and across per channel), and the flow out (three vec4s a patch in
+    // `vectors`: axis, 1/N).
     flow: u32,
     slot_patches: u32,
     frames: u32,
     table_flow: u32,
+    // The exit lobes: their fits (`LobeFits`, 3 words a cell: κ, θ, norm) in `matrices`, and
+    // each patch's (five vec4s: per channel axis and κ, the norms, the light from afar) in
+    // `vectors`.
+    lobe_fits: u32,
+    table_lobes: u32,
 }
 
 struct State {
@@ -200,34 +206,52 @@ fn table_rows(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 fn frame_vec4(i: u32, k: u32) -> vec4<f32> {
-    let at = packing.frames + 24u * i + 4u * k;
+    let at = packing.frames + 32u * i + 4u * k;
     return vec4(bitcast<f32>(matrices[at]), bitcast<f32>(matrices[at + 1u]),
                 bitcast<f32>(matrices[at + 2u]), bitcast<f32>(matrices[at + 3u]));
 }
 
 // What patch `j`'s beams give patch `i` (`given`, RGB), flowing from `j`'s diffusion source
 // to `i`: into each channel's sum of directions (`BeamTable::flow`).
+// The early light from afar (`from_afar`) is summed apart as well: what the exit lobes take.
 struct FlowSums {
     r: vec3<f32>,
     g: vec3<f32>,
     b: vec3<f32>,
     total: vec3<f32>,
+    far_r: vec3<f32>,
+    far_g: vec3<f32>,
+    far_b: vec3<f32>,
+    far: vec3<f32>,
 }
 
-fn add_flow(sums: ptr<function, FlowSums>, x: vec3<f32>, i: u32, j: u32, given: vec3<f32>) {
+// `from_source` (beam_table.rs): the unit direction from a diffusion source to `x`.
+fn from_source(x: vec3<f32>, source: vec3<f32>) -> vec3<f32> {
+    let d = x - source;
+    return select(vec3(0.0), normalize(d), dot(d, d) > 0.0);
+}
+
+fn add_flow(sums: ptr<function, FlowSums>, x: vec3<f32>, afar: f32, i: u32, j: u32, given: vec3<f32>,
+            early: bool) {
     if j == i || j >= packing.patches {
         return;
     }
     let point = frame_vec4(j, 0u).xyz;
     let normal = frame_vec4(j, 1u).xyz;
     let depth = frame_vec4(j, 2u).xyz;
-    let to_r = x - (point - normal * depth.x);
-    let to_g = x - (point - normal * depth.y);
-    let to_b = x - (point - normal * depth.z);
-    (*sums).r += select(vec3(0.0), normalize(to_r), dot(to_r, to_r) > 0.0) * given.x;
-    (*sums).g += select(vec3(0.0), normalize(to_g), dot(to_g, to_g) > 0.0) * given.y;
-    (*sums).b += select(vec3(0.0), normalize(to_b), dot(to_b, to_b) > 0.0) * given.z;
+    let u_r = from_source(x, point - normal * depth.x) * given.x;
+    let u_g = from_source(x, point - normal * depth.y) * given.y;
+    let u_b = from_source(x, point - normal * depth.z) * given.z;
+    (*sums).r += u_r;
+    (*sums).g += u_g;
+    (*sums).b += u_b;
     (*sums).total += given;
+    if early && distance(x, point) > afar {
+        (*sums).far_r += u_r;
+        (*sums).far_g += u_g;
+        (*sums).far_b += u_b;
+        (*sums).far += given;
+    }
 }
 
 // `ExitLaw::set_flow` in one channel: the axis and 1/N of the deep law about it (zero where
@@ -248,21 +272,90 @@ fn flow_out(sum: vec3<f32>, total: f32, law: vec4<f32>, normal: vec3<f32>, eta: 
 // Patch `i`'s flow from the table's early and late rows (`BeamTable::flow`).
 fn table_flow_of(i: u32) {
     let x = frame_vec4(i, 0u).xyz;
-    var sums = FlowSums(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    let afar = frame_vec4(i, 2u).w;
+    let zero = vec3(0.0);
+    var sums = FlowSums(zero, zero, zero, zero, zero, zero, zero, zero);
     for (var k = matrices[packing.early_offsets + i]; k < matrices[packing.early_offsets + i + 1u]; k += 1u) {
         let column = matrices[packing.early_columns + k];
         let given = rgb(packing.early_values + 3u * k).rgb * vectors[packing.beam_light + column].rgb;
-        add_flow(&sums, x, i, matrices[packing.slot_patches + column / packing.bins], given);
+        add_flow(&sums, x, afar, i, matrices[packing.slot_patches + column / packing.bins], given, true);
     }
     for (var k = matrices[packing.late_offsets + i]; k < matrices[packing.late_offsets + i + 1u]; k += 1u) {
         let slot = matrices[packing.late_columns + k];
         let given = rgb(packing.late_values + 3u * k).rgb * vectors[packing.beam_late + slot].rgb;
-        add_flow(&sums, x, i, matrices[packing.slot_patches + slot], given);
+        add_flow(&sums, x, afar, i, matrices[packing.slot_patches + slot], given, false);
     }
     let normal = frame_vec4(i, 1u);
     vectors[packing.table_flow + 3u * i] = flow_out(sums.r, sums.total.x, frame_vec4(i, 3u), normal.xyz, normal.w);
     vectors[packing.table_flow + 3u * i + 1u] = flow_out(sums.g, sums.total.y, frame_vec4(i, 4u), normal.xyz, normal.w);
     vectors[packing.table_flow + 3u * i + 2u] = flow_out(sums.b, sums.total.z, frame_vec4(i, 5u), normal.xyz, normal.w);
+    table_lobes_of(i, normal.xyz, sums);
+}
+
+// `ExitLaw::set_far_lobes`: each channel's light from afar by the lobe fitted to the mean
+// its lean gives for the directions it came from (`ExitLean::mean`); none without a lean.
+fn table_lobes_of(i: u32, normal: vec3<f32>, sums: FlowSums) {
+    let along = frame_vec4(i, 6u).xyz;
+    let across = frame_vec4(i, 7u).xyz;
+    let at = packing.table_lobes + 5u * i;
+    if all(along == vec3(0.0)) && all(across == vec3(0.0)) {
+        for (var k = 0u; k < 5u; k += 1u) {
+            vectors[at + k] = vec4(0.0);
+        }
+        return;
+    }
+    let far_r = select(vec3(0.0), sums.far_r / sums.far.x, sums.far.x > 0.0);
+    let far_g = select(vec3(0.0), sums.far_g / sums.far.y, sums.far.y > 0.0);
+    let far_b = select(vec3(0.0), sums.far_b / sums.far.z, sums.far.z > 0.0);
+    let r = exit_lobe(normal, lean_mean(normal, far_r, along.x, across.x), sums.far.x);
+    let g = exit_lobe(normal, lean_mean(normal, far_g, along.y, across.y), sums.far.y);
+    let b = exit_lobe(normal, lean_mean(normal, far_b, along.z, across.z), sums.far.z);
+    vectors[at] = r.axis_sharpness;
+    vectors[at + 1u] = g.axis_sharpness;
+    vectors[at + 2u] = b.axis_sharpness;
+    vectors[at + 3u] = vec4(r.norm, g.norm, b.norm, 0.0);
+    vectors[at + 4u] = vec4(sums.far, 0.0);
+}
+
+// `ExitLean::mean` in one channel.
+fn lean_mean(normal: vec3<f32>, came: vec3<f32>, along: f32, across: f32) -> vec3<f32> {
+    return normal * along + (came - normal * dot(came, normal)) * across;
+}
+
+struct Lobe {
+    axis_sharpness: vec4<f32>,
+    norm: f32,
+}
+
+// The fit table's side (`FIT_CELLS` in exit_lobe.rs).
+const FIT_CELLS: u32 = 64u;
+
+// `LobeFits::lobe` (exit_lobe.rs): the lobe whose exitance-weighted mean leaving direction is
+// `mean`, from the table of fits; none (norm 0) without light from afar, Lambert's for a
+// zero or non-finite mean.
+fn exit_lobe(normal: vec3<f32>, mean: vec3<f32>, far: f32) -> Lobe {
+    if !(far > 0.0) {
+        return Lobe(vec4(0.0), 0.0);
+    }
+    // A non-finite mean fails both comparisons.
+    if !(dot(mean, mean) > 0.0 && dot(mean, mean) < 1e30) {
+        return Lobe(vec4(normal, 0.0), 1.0);
+    }
+    let along = dot(mean, normal);
+    let tangent_part = mean - along * normal;
+    let across = length(tangent_part);
+    // glam's `any_orthonormal_vector` where the mean has no tangential part.
+    let sign = select(-1.0, 1.0, normal.z >= 0.0);
+    let a = -1.0 / (sign + normal.z);
+    let any_tangent = vec3(normal.x * normal.y * a, sign + normal.y * normal.y * a, -normal.y);
+    let tangent = select(any_tangent, tangent_part / across, across > 1e-6);
+    let row = min(u32(clamp(along, 0.0, 1.0) * f32(FIT_CELLS)), FIT_CELLS - 1u);
+    let column = min(u32(clamp(across, 0.0, 1.0) * f32(FIT_CELLS)), FIT_CELLS - 1u);
+    let cell = packing.lobe_fits + 3u * (row * FIT_CELLS + column);
+    let kappa = bitcast<f32>(matrices[cell]);
+    let theta = bitcast<f32>(matrices[cell + 1u]);
+    let norm = bitcast<f32>(matrices[cell + 2u]);
+    return Lobe(vec4(cos(theta) * normal + sin(theta) * tangent, kappa), norm);
 }
 
 var<workgroup> lanes: array<vec4<f32>, 64>;

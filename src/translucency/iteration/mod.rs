@@ -79,6 +79,10 @@ struct Layout {
     slot_patches: u32,
     frames: u32,
     table_flow: u32,
+    // The exit lobes' fits (`LobeFits`: 3 words a cell) in `matrices`, and each patch's lobes
+    // in `vectors` (5 vec4s a patch: per channel axis and κ, the norms, the light from afar).
+    lobe_fits: u32,
+    table_lobes: u32,
 }
 
 /// What the iteration needs of a patch to give the deep field's exit law its axis each frame
@@ -96,6 +100,12 @@ pub struct FlowFrame {
     pub source_depth: Vec3,
     /// Its deep law per channel, `(α, ν, 1/N, g)` ([`ExitLaw::channels`](super::transport::ExitLaw::channels)).
     pub law: [Vec4; 3],
+    /// How its light from afar leans as it leaves ([`ExitLaw::lean`](super::transport::ExitLaw::lean);
+    /// zero: no exit lobes).
+    pub lean: super::beam_table::ExitLean,
+    /// How far light must come from to leave by the lobes
+    /// ([`from_afar`](super::beam_table::from_afar)), world units.
+    pub afar: f32,
 }
 
 impl FlowFrame {
@@ -118,19 +128,23 @@ impl FlowFrame {
                     eta: law.eta,
                     source_depth: source_depths.get(i).copied().unwrap_or(Vec3::ZERO),
                     law: law.channels,
+                    lean: law.lean,
+                    afar: super::beam_table::LOBE_SOURCE_DISTANCE * patches.size_of(i),
                 }
             })
             .collect()
     }
 
-    fn words(&self) -> [u32; 24] {
+    fn words(&self) -> [u32; 32] {
         let v = [
             self.point.extend(0.0),
             self.normal.extend(self.eta),
-            self.source_depth.extend(0.0),
+            self.source_depth.extend(self.afar),
             self.law[0],
             self.law[1],
             self.law[2],
+            self.lean.along.extend(0.0),
+            self.lean.across.extend(0.0),
         ];
         std::array::from_fn(|k| v[k / 4][k % 4].to_bits())
     }
@@ -361,6 +375,10 @@ impl GpuTransport {
             layout.flow = 1;
             layout.slot_patches = push(&mut words, t.slot_patches());
             layout.frames = push(&mut words, frames.iter().flat_map(FlowFrame::words));
+            layout.lobe_fits = push(
+                &mut words,
+                super::exit_lobe::LobeFits::get().cells().iter().flatten().map(|v| v.to_bits()),
+            );
         }
         words.push(0);
 
@@ -378,7 +396,9 @@ impl GpuTransport {
         layout.beam_late = layout.beam_light + layout.slots * layout.bins;
         layout.table_flow = layout.beam_late + layout.slots;
         let flows = if layout.flow == 1 { 3 * n } else { 0 };
-        let vector_count = (layout.table_flow + flows).max(1) as u64;
+        layout.table_lobes = layout.table_flow + flows;
+        let lobes = if layout.flow == 1 { 5 * n } else { 0 };
+        let vector_count = (layout.table_lobes + lobes).max(1) as u64;
 
         let matrices = device.create_buffer_with_data(&BufferInitDescriptor {
             label: Some("translucency_matrices"),
@@ -592,6 +612,15 @@ impl GpuTransport {
     /// `None` without a beam table or frames.
     pub fn flow_offset(&self) -> Option<u32> {
         (self.layout.flow == 1).then_some(self.layout.table_flow)
+    }
+
+    /// Where each patch's exit lobes start in the vectors buffer (in `vec4<f32>`s, five a
+    /// patch: per channel the lobe's axis and κ, the three norms, and the light from afar
+    /// that leaves by them, as [`ExitLaw::lobes`](super::transport::ExitLaw::lobes) and
+    /// [`lobe_exitance`](super::transport::ExitLaw::lobe_exitance)); `None` as for
+    /// [`flow_offset`](Self::flow_offset).
+    pub fn lobes_offset(&self) -> Option<u32> {
+        (self.layout.flow == 1).then_some(self.layout.table_lobes)
     }
 
     /// The buffer holding every vector (what a test reads back).

@@ -2,7 +2,8 @@
 
 use super::*;
 use crate::translucency::beam_table::{
-    BeamTable, BeamTableSettings, bin_direction, direction_bin, single_scattering_radiance,
+    BeamTable, BeamTableSettings, TableFlow, bin_direction, direction_bin, from_afar,
+    single_scattering_radiance,
 };
 
 /// A beam snaps to the nearest of the table's directions: a unit direction into the surface
@@ -130,15 +131,27 @@ fn a_beam_tables_light_flows_away_from_where_it_entered() {
     let expected = Vec3::splat(0.1) / (medium.reduced_scattering + medium.absorption);
     assert!((depths[top] - expected).abs().max_element() < 1e-6, "{} against {expected}", depths[top]);
     let flows = table.flow(patches, &light, &depths);
-    assert_eq!(flows[top], [Vec3::ZERO; 3]);
-    let mut round = 0;
+    assert_eq!(flows[top], TableFlow::default());
+    let (mut round, mut afar) = (0, 0);
     for (i, flow) in flows.iter().enumerate().filter(|&(i, _)| i != top && p[i].normal.y > 0.99) {
         let away = (p[i].surface_point - p[top].surface_point).normalize();
-        for axis in flow.iter().filter(|a| **a != Vec3::ZERO) {
+        for axis in flow.axis.iter().filter(|a| **a != Vec3::ZERO) {
             assert!(axis.length() <= 1.0 + 1e-5 && axis.y > 0.0 && axis.dot(away) > 0.0, "patch {i}: {axis}");
             round += 1;
         }
+        // The early light from afar, and only that, has a far axis: the same way.
+        let far_apart = from_afar(patches, i, top);
+        for c in 0..3 {
+            let far_axis = flow.far_axis[c];
+            assert_eq!(flow.far[c] > 0.0, far_apart && far_axis != Vec3::ZERO, "patch {i} channel {c}");
+            if flow.far[c] > 0.0 {
+                assert!(far_axis.length() <= 1.0 + 1e-5 && far_axis.dot(away) > 0.0, "patch {i}: {far_axis}");
+                afar += 1;
+            }
+        }
     }
+    eprintln!("{afar} patch channels of the top face receive its light from afar");
+    assert!(afar >= 24, "{afar}");
     eprintln!("{round} patch channels of the top face receive the lit patch's light");
     assert!(round >= 150, "{round}");
 }
@@ -182,6 +195,31 @@ fn a_beam_tables_light_leaves_leaning_away_from_where_it_entered() {
         let lobe = fits.lobe(Vec3::Y, Vec3::new(lean[c], up[c], 0.0));
         let grazing = |x: f32| Vec3::new(x, 0.3, 0.0).normalize();
         assert!(lobe.factor(grazing(1.0)) > 1.2 * lobe.factor(grazing(-1.0)), "channel {c}: {lobe:?}");
+    }
+    // The object's lean (`ExitLean`, fitted to the same walks from afar) gives back the mean
+    // they leave along over the lit face from the way each patch's light came (`flow`'s far
+    // axis): the lean's pooled model against the walks' own directions.
+    let fitted = table.exit_lean[table.slots[top] as usize];
+    eprintln!("the cube's lean: along {:.3}, across {:.3}", fitted.along, fitted.across);
+    let depths = EnergyTransport::source_depths(&cube.patches, &cube.surfaces);
+    let flows = table.flow(&cube.patches, &light, &depths);
+    let measured = table.early_moments(&light, |i, j| from_afar(&cube.patches, i, j));
+    let (mut walked, mut modelled, mut far) = ([Vec3::ZERO; 3], [Vec3::ZERO; 3], Vec3::ZERO);
+    for (i, (early, moment)) in measured.iter().enumerate().filter(|&(i, _)| i != top && p[i].normal.y > 0.99) {
+        let (away, flow) = ((p[i].surface_point - p[top].surface_point).normalize(), &flows[i]);
+        assert!((flow.far - *early).abs().max_element() <= 1e-6 * early.max_element().max(1e-6), "patch {i}");
+        for c in 0..3 {
+            let model = fitted.mean(c, p[i].normal, flow.far_axis[c]) * flow.far[c];
+            walked[c] += Vec3::new(moment[c].truncate().dot(away), moment[c].y, 0.0);
+            modelled[c] += Vec3::new(model.dot(away), model.y, 0.0);
+        }
+        far += *early;
+    }
+    for c in 0..3 {
+        assert!((0.55..0.8).contains(&fitted.along[c]) && fitted.across[c] > 0.1, "channel {c}: {fitted:?}");
+        let (walked, modelled) = (walked[c] / far[c], modelled[c] / far[c]);
+        eprintln!("channel {c}, from afar over the lit face: the walks' mean (away, outward) {walked:.3}, the lean's {modelled:.3}");
+        assert!((walked - modelled).abs().max_element() < 0.03, "channel {c}: {walked} against {modelled}");
     }
 }
 
