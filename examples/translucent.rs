@@ -55,6 +55,10 @@ struct Cli {
     /// patch on one core to precompute: the default room ~1 min on 2 cores)
     #[arg(long)]
     beam_table: bool,
+    /// With the beam table, light from afar leaves by lobes leaning the way it travelled
+    /// (`TransportSettings::exit_lobes`)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    exit_lobes: bool,
     /// Headless: swing the spot during the warm-up frames, as in a window, so that every frame
     /// injects and iterates anew (for timing; the shots still fix it in front and behind)
     #[arg(long)]
@@ -120,6 +124,7 @@ fn main() {
                 shape_diffusion: cli.shape_diffusion,
                 deep_exit_law: cli.deep_exit_law,
                 beam_table: cli.beam_table.then(default),
+                exit_lobes: cli.exit_lobes,
                 ..default()
             },
             max_iterations: cli.max_iterations,
