@@ -269,12 +269,14 @@ pub struct TransportSettings {
     /// With a beam table, give the light a translucent patch receives from more than
     /// [`LOBE_SOURCE_DISTANCE`](super::beam_table::LOBE_SOURCE_DISTANCE) patch sizes away out
     /// by a lobe leaning the way it travelled ([`ExitLean`], fitted to the table's own walks)
-    /// instead of the deep law: light that crossed an object keeps going towards the side
-    /// the light came from. On by default (per frame; the table's build is the same): lit
-    /// from behind, a 1 cm skin ball goes from 0.273 to 0.177 in relative L1 against a
-    /// light-traced reference, the Stanford bunny's skin from 0.258 to 0.228, and from the
-    /// front the bunny's skin from 0.080 to 0.078, the ball's from 0.058 to 0.065
-    /// (`docs/translucent.md`).
+    /// instead of the deep law: light that crossed an object leaves leaning the way it was
+    /// going. On by default (per frame; the table's build is the same): lit from behind, a
+    /// 1 cm skin ball goes from 0.273 to 0.178 in relative L1 against a light-traced
+    /// reference, the Stanford bunny's skin from 0.258 to 0.230, and from the front the
+    /// bunny's skin from 0.080 to 0.078, the ball's from 0.058 to 0.065
+    /// (`docs/translucent.md`). Without a beam table it does nothing: the profile's light
+    /// from afar is mostly late light, which the lean does not describe (a back-lit marble
+    /// ball went from 0.078 to 0.53).
     pub exit_lobes: bool,
 }
 
@@ -284,8 +286,8 @@ impl Default for TransportSettings {
     /// memory, +3 % in the test room's); form factors down to 1e-5 (a
     /// patch of 1/1000 of a room's wall area seen face-on from 5 wall widths away); clusters
     /// 4 patches wide linked as one beyond 3 radii; each object's own random walks and each
-    /// beam's incidence (both measured closer to a light-traced reference; see
-    /// `docs/translucent.md` for what each costs and changes).
+    /// beam's incidence, and with a beam table its exit lobes (all measured closer to
+    /// light-traced references; see `docs/translucent.md` for what each costs and changes).
     fn default() -> Self {
         Self {
             kernel: DiffusionKernel::ScaledDipole,
