@@ -504,7 +504,7 @@ fn main() {
             (
                 ScatteringSource::BeamTable(table),
                 format!(
-                    "_beamtable{cosines}x{azimuths}_walks{}_late{}_orders{}{}",
+                    "_beamtable{cosines}x{azimuths}_bilinear_walks{}_late{}_orders{}{}",
                     table.walks,
                     table.late_walks,
                     table.last_order,

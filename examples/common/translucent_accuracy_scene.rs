@@ -12,7 +12,8 @@ use std::{collections::BTreeMap, time::Instant};
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     beam_table::{
-        BeamTable, ExitPatches, BeamTableSettings, bin_direction, direction_bin, single_scattering_radiance,
+        BeamTable, ExitPatches, BeamTableSettings, bin_direction, direction_bin, direction_weights,
+        single_scattering_radiance,
     },
     EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface,
     SceneRays, SparseMatrix, TranslucentMedium, TransportSettings, direct_light,
@@ -573,13 +574,19 @@ pub fn plugin_picture(
         (ScatteringSource::BeamTable(table_settings), Some(travel)) => {
             // The walks hold the beam's incidence: no incidence weight on the object.
             transport.incidence.iter_mut().for_each(|w| *w = None);
-            let only: Vec<Option<u32>> = patches
+            let only: Vec<Vec<u32>> = patches
                 .patches
                 .iter()
-                .map(|q| direction_bin(travel, q.normal, table_settings.cosines, table_settings.azimuths))
+                .map(|q| {
+                    let weights = direction_weights(travel, q.normal, table_settings.cosines, table_settings.azimuths);
+                    let mut bins: Vec<u32> = weights.into_iter().flatten().filter(|&(_, w)| w > 0.0).map(|(b, _)| b).collect();
+                    bins.sort_unstable();
+                    bins.dedup();
+                    bins
+                })
                 .collect();
             let table = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, table_settings, Some(&only));
-            eprintln!("  beam table: {} patch-directions walked in {:.2} s", only.iter().flatten().count(), table.seconds);
+            eprintln!("  beam table: {} patch-directions walked in {:.2} s", only.iter().map(Vec::len).sum::<usize>(), table.seconds);
             // From here on the plugin's own CPU oracle: the direct light into the table, the
             // solve, the gather with single scattering's law.
             transport.beam_table = Some(table);

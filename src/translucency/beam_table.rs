@@ -103,7 +103,7 @@ const SEED_STRIDE: u64 = 1_000_003;
 /// The frame a patch's table directions are measured in: a tangent and bitangent fixed by
 /// its normal alone (Duff et al. 2017, "Building an orthonormal basis, revisited", the sign
 /// taken as `z ≥ 0`; `tangent_frame` in `inject.wgsl` is its twin).
-fn tangent_frame(normal: Vec3) -> (Vec3, Vec3) {
+pub(crate) fn tangent_frame(normal: Vec3) -> (Vec3, Vec3) {
     let sign = if normal.z >= 0.0 { 1.0 } else { -1.0 };
     let a = -1.0 / (sign + normal.z);
     let b = normal.x * normal.y * a;
@@ -128,6 +128,33 @@ pub fn direction_bin(travel: Vec3, normal: Vec3, cosines: u32, azimuths: u32) ->
     let m = (along.dot(b).atan2(along.dot(t)) / step).round().rem_euclid(azimuths as f32) as u32;
     let k = ((mu * cosines as f32) as u32).min(cosines - 1);
     Some(k * azimuths + m.min(azimuths - 1))
+}
+
+/// The table directions about a beam travelling along the unit `travel` onto a patch of unit
+/// `normal`, with their weights: bilinear in the incidence cosine between the bins' centres
+/// `(k + ½)/cosines` (held at the first and last) and in the azimuth between its two
+/// neighbours (round the circle). Four `(bin, weight)` pairs, weights summing to 1 (a pair
+/// may repeat a bin); `None` as for [`direction_bin`].
+pub fn direction_weights(travel: Vec3, normal: Vec3, cosines: u32, azimuths: u32) -> Option<[(u32, f32); 4]> {
+    let mu = -travel.dot(normal);
+    if !(mu > 0.0) || cosines == 0 || azimuths == 0 {
+        return None;
+    }
+    let (t, b) = tangent_frame(normal);
+    let along = travel + mu * normal;
+    let step = std::f32::consts::TAU / azimuths as f32;
+    let turn = (along.dot(b).atan2(along.dot(t)) / step).rem_euclid(azimuths as f32);
+    let m0 = (turn.floor() as u32).min(azimuths - 1);
+    let (m1, g) = ((m0 + 1) % azimuths, (turn - m0 as f32).clamp(0.0, 1.0));
+    let place = (mu.min(1.0) * cosines as f32 - 0.5).clamp(0.0, (cosines - 1) as f32);
+    let k0 = (place.floor() as u32).min(cosines - 1);
+    let (k1, f) = ((k0 + 1).min(cosines - 1), place - k0 as f32);
+    Some([
+        (k0 * azimuths + m0, (1.0 - f) * (1.0 - g)),
+        (k0 * azimuths + m1, (1.0 - f) * g),
+        (k1 * azimuths + m0, f * (1.0 - g)),
+        (k1 * azimuths + m1, f * g),
+    ])
 }
 
 /// The travel direction of table direction `bin` onto a patch of unit `normal` (see
@@ -359,7 +386,7 @@ impl BeamTable {
 
     /// The table of `patches`' translucent ones (`surfaces[o]` object `o`'s), `profile` the
     /// transport's `K` (its columns give the late light). With `only`, patch `j` walks only
-    /// the bin `only[j]` (the others stay empty: what one directional light needs, for the
+    /// the bins `only[j]` (the others stay empty: what one directional light needs, for the
     /// accuracy tool). Every core.
     pub fn build(
         patches: &Patches,
@@ -367,7 +394,7 @@ impl BeamTable {
         rays: &SceneRays,
         profile: &SparseMatrix<Vec3>,
         settings: BeamTableSettings,
-        only: Option<&[Option<u32>]>,
+        only: Option<&[Vec<u32>]>,
     ) -> Self {
         let start = std::time::Instant::now();
         let p = &patches.patches;
@@ -420,7 +447,7 @@ impl BeamTable {
                 return (None, Vec::new(), LeanSums::default());
             };
             let walked: Vec<u32> = match only {
-                Some(only) => only.get(j).copied().flatten().into_iter().collect(),
+                Some(only) => only.get(j).cloned().unwrap_or_default(),
                 None => (0..bins).collect(),
             };
             if walked.is_empty() {
@@ -528,14 +555,18 @@ impl BeamTable {
     }
 
     /// Where a beam travelling along `travel` onto patch `j` goes in the table's light
-    /// vector (`slot · bins + bin`), and the share of it that gets in (`entering`); `None`
-    /// for a patch without a table or a beam along or behind its surface.
-    pub fn light_index(&self, patches: &Patches, j: usize, travel: Vec3) -> Option<(usize, f32)> {
+    /// vector (`slot · bins + bin`, the four directions about it by their weights:
+    /// [`direction_weights`]), and the share of it that gets in (`entering`); `None` for a
+    /// patch without a table or a beam along or behind its surface.
+    pub fn light_index(&self, patches: &Patches, j: usize, travel: Vec3) -> Option<([(usize, f32); 4], f32)> {
         let slot = *self.slots.get(j).filter(|&&s| s != u32::MAX)?;
         let normal = patches.patches[j].normal;
-        let bin = direction_bin(travel, normal, self.settings.cosines, self.settings.azimuths)?;
+        let weights = direction_weights(travel, normal, self.settings.cosines, self.settings.azimuths)?;
         let eta = self.media[slot as usize].w;
-        Some(((slot * self.bins() + bin) as usize, entering(eta, -travel.dot(normal))))
+        Some((
+            weights.map(|(bin, w)| ((slot * self.bins() + bin) as usize, w)),
+            entering(eta, -travel.dot(normal)),
+        ))
     }
 
     /// The exitance the table gives every patch for `light`, the irradiance that got in per

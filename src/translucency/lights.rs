@@ -154,10 +154,10 @@ pub fn direct_light(
                 .filter(|_| e != Vec3::ZERO)
                 .and_then(|t| t.light_index(patches, i, -to_light))
             {
-                // The table's column holds the beam's incidence and its scattering.
+                // The table's columns hold the beam's incidence and its scattering.
                 let got_in = e * entering;
                 irradiance += got_in;
-                beams.push((at, got_in));
+                beams.extend(at.into_iter().filter(|&(_, w)| w > 0.0).map(|(at, w)| (at, got_in * w)));
                 normal_irradiance += e / cos;
                 direction += -to_light * ((e / cos).element_sum());
                 continue;

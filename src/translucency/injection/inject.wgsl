@@ -257,21 +257,39 @@ fn incidence_entry(object: u32, cos_i: f32) -> vec4<f32> {
     return mix(scene[at], scene[at + 1u], f - f32(i));
 }
 
-// `direction_bin` (beam_table.rs): the table direction nearest a beam travelling along
-// `travel` onto a surface of normal `n` (incidence cosine `mu` > 0), in the frame of
-// `tangent_frame` (Duff et al. 2017, the sign taken as z ≥ 0).
-fn direction_bin(travel: vec3<f32>, n: vec3<f32>, mu: f32) -> u32 {
+// `direction_weights` (beam_table.rs): the four table directions about a beam travelling
+// along `travel` onto a surface of normal `n` (incidence cosine `mu` > 0) and their weights,
+// bilinear in the incidence cosine between the bins' centres (held at the first and last)
+// and in the azimuth round the circle, in the frame of `tangent_frame` (Duff et al. 2017,
+// the sign taken as z ≥ 0).
+struct DirectionWeights {
+    bins: vec4<u32>,
+    weights: vec4<f32>,
+}
+
+fn direction_weights(travel: vec3<f32>, n: vec3<f32>, mu: f32) -> DirectionWeights {
     let sign = select(-1.0, 1.0, n.z >= 0.0);
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
     let t = vec3(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
     let s = vec3(b, sign + n.y * n.y * a, -n.y);
     let along = travel + mu * n;
-    let step = 6.283185307179586 / f32(injection.azimuths);
-    let turns = round(atan2(dot(along, s), dot(along, t)) / step);
-    let m = u32(turns - floor(turns / f32(injection.azimuths)) * f32(injection.azimuths));
-    let k = min(u32(mu * f32(injection.cosines)), injection.cosines - 1u);
-    return k * injection.azimuths + min(m, injection.azimuths - 1u);
+    let count = f32(injection.azimuths);
+    let raw = atan2(dot(along, s), dot(along, t)) / (6.283185307179586 / count);
+    let turn = raw - floor(raw / count) * count;
+    let m0 = min(u32(floor(turn)), injection.azimuths - 1u);
+    let m1 = (m0 + 1u) % injection.azimuths;
+    let g = clamp(turn - f32(m0), 0.0, 1.0);
+    let place = clamp(min(mu, 1.0) * f32(injection.cosines) - 0.5, 0.0, f32(injection.cosines - 1u));
+    let k0 = min(u32(floor(place)), injection.cosines - 1u);
+    let k1 = min(k0 + 1u, injection.cosines - 1u);
+    let f = place - f32(k0);
+    let row0 = k0 * injection.azimuths;
+    let row1 = k1 * injection.azimuths;
+    return DirectionWeights(
+        vec4(row0 + m0, row0 + m1, row1 + m0, row1 + m1),
+        vec4((1.0 - f) * (1.0 - g), (1.0 - f) * g, f * (1.0 - g), f * g),
+    );
 }
 
 @compute @workgroup_size(64)
@@ -347,8 +365,13 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
         if tabled_patch && cos_i > 0.0 && any(e != vec3(0.0)) {
             // The table's column holds the beam's incidence and its scattering.
             let got_in = e * (1.0 - fresnel_reflectance(min(cos_i, 1.0), max(table.y, 1.0)));
-            let at = injection.beam_light + first + direction_bin(-to_light, n, cos_i);
-            vectors[at] += vec4(got_in, 0.0);
+            let about = direction_weights(-to_light, n, cos_i);
+            for (var q = 0u; q < 4u; q++) {
+                if about.weights[q] > 0.0 {
+                    let at = injection.beam_light + first + about.bins[q];
+                    vectors[at] += vec4(got_in * about.weights[q], 0.0);
+                }
+            }
             irradiance += got_in;
             tabled += got_in;
             normal_irradiance += e / cos_i;

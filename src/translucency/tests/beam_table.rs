@@ -2,7 +2,7 @@
 
 use super::*;
 use crate::translucency::beam_table::{
-    BeamTable, BeamTableSettings, TableFlow, bin_direction, direction_bin, from_afar,
+    BeamTable, BeamTableSettings, TableFlow, bin_direction, direction_bin, direction_weights, from_afar,
     single_scattering_radiance,
 };
 
@@ -38,6 +38,55 @@ fn a_beam_snaps_to_the_nearest_direction_of_the_table() {
         }
         assert_eq!(direction_bin(normal.any_orthonormal_vector(), normal, cosines, azimuths), None);
         assert_eq!(direction_bin(normal, normal, cosines, azimuths), None);
+    }
+}
+
+/// A beam spreads over the four table directions about it (`direction_weights`, what the
+/// light's injection takes): weights of at least 0 that sum to 1, all of them on a table
+/// direction's own bin, and their mean incidence cosine and azimuth the beam's own (bilinear
+/// weights give back a linear coordinate: within 1e-4 inside the bins' centres; a beam past
+/// the first or last centre is held there).
+#[test]
+fn a_beam_spreads_over_the_four_table_directions_about_it() {
+    let normal = Vec3::new(0.3, 0.9, -0.2).normalize();
+    for (cosines, azimuths) in [(4u32, 8u32), (6, 12), (1, 1)] {
+        for bin in 0..cosines * azimuths {
+            let d = bin_direction(bin, normal, cosines, azimuths);
+            let weights = direction_weights(d, normal, cosines, azimuths).expect("a table direction");
+            let own: f32 = weights.iter().filter(|(b, _)| *b == bin).map(|(_, w)| w).sum();
+            assert!((own - 1.0).abs() < 1e-4, "{cosines}×{azimuths} bin {bin}: {weights:?}");
+        }
+        let step = std::f32::consts::TAU / azimuths as f32;
+        let mut inside = 0;
+        for k in 0..300 {
+            let t = k as f32 * 0.37;
+            let beam = Vec3::new(t.sin(), -1.2 - (t * 1.7).cos(), (t * 0.6).cos()).normalize();
+            let mu = -beam.dot(normal);
+            let Some(weights) = direction_weights(beam, normal, cosines, azimuths) else {
+                assert!(mu <= 0.0, "a beam at cosine {mu} has no directions");
+                continue;
+            };
+            assert!(weights.iter().all(|&(b, w)| w >= 0.0 && b < cosines * azimuths), "{weights:?}");
+            assert!((weights.iter().map(|w| w.1).sum::<f32>() - 1.0).abs() < 1e-5, "{weights:?}");
+            let held = mu.clamp(0.5 / cosines as f32, 1.0 - 0.5 / cosines as f32);
+            let mean_mu: f32 = weights.iter().map(|&(b, w)| w * (b / azimuths) as f32 + w * 0.5).sum::<f32>() / cosines as f32;
+            assert!((mean_mu - held).abs() < 1e-4, "cosine {mu}: {mean_mu}");
+            // The azimuth, unwrapped about the first of the four.
+            let azimuth_of = |d: Vec3| {
+                let (t, b) = crate::translucency::beam_table::tangent_frame(normal);
+                let along = d + -d.dot(normal) * normal;
+                along.dot(b).atan2(along.dot(t))
+            };
+            let first = weights[0].0 % azimuths;
+            let turns: f32 = weights
+                .iter()
+                .map(|&(b, w)| w * (first as f32 + ((b % azimuths + azimuths - first) % azimuths) as f32))
+                .sum();
+            let off = (turns * step - azimuth_of(beam)).rem_euclid(std::f32::consts::TAU);
+            assert!(azimuths == 1 || off.min(std::f32::consts::TAU - off) < 1e-3, "azimuth off by {off}");
+            inside += 1;
+        }
+        assert!(inside > 100, "{inside}");
     }
 }
 
@@ -285,8 +334,8 @@ impl LitCube {
     /// The table of `settings` with the lit patch's beam direction alone walked (all of them
     /// with `every_direction`).
     fn table(&self, settings: BeamTableSettings, every_direction: bool) -> BeamTable {
-        let mut only = vec![None; self.patches.patches.len()];
-        only[self.top] = Some(self.bin(settings));
+        let mut only = vec![Vec::new(); self.patches.patches.len()];
+        only[self.top] = vec![self.bin(settings)];
         let only = (!every_direction).then_some(only.as_slice());
         BeamTable::build(&self.patches, &self.surfaces, &self.rays, &self.transport.scattering, settings, only)
     }

@@ -264,16 +264,17 @@ pub struct TransportSettings {
     /// takes ~0.1 s a translucent patch on one core to build (the `translucent` example's
     /// room at a 20 000 budget: 58 s on 2 cores, 19 MB); against path-traced references every
     /// front-lit case comes within 0.08 in relative L1 with it (the Stanford bunny's skin
-    /// 0.160 → 0.078, marble 0.089 → 0.074; `docs/translucent.md`).
+    /// 0.160 → 0.072, marble 0.089 → 0.075, over three table seeds at most 0.078;
+    /// `docs/translucent.md`).
     pub beam_table: Option<super::beam_table::BeamTableSettings>,
     /// With a beam table, give the light a translucent patch receives from more than
     /// [`LOBE_SOURCE_DISTANCE`](super::beam_table::LOBE_SOURCE_DISTANCE) patch sizes away out
     /// by a lobe leaning the way it travelled ([`ExitLean`], fitted to the table's own walks)
     /// instead of the deep law: light that crossed an object leaves leaning the way it was
     /// going. On by default (per frame; the table's build is the same): lit from behind, a
-    /// 1 cm skin ball goes from 0.273 to 0.178 in relative L1 against a light-traced
-    /// reference, the Stanford bunny's skin from 0.258 to 0.230, and from the front the
-    /// bunny's skin from 0.080 to 0.078, the ball's from 0.058 to 0.065
+    /// 1 cm skin ball goes from 0.264 to 0.147 in relative L1 against a light-traced
+    /// reference, the Stanford bunny's skin from 0.264 to 0.236, and from the front the
+    /// bunny's skin from 0.074 to 0.072, the ball's from 0.051 to 0.057
     /// (`docs/translucent.md`). Without a beam table it does nothing: the profile's light
     /// from afar is mostly late light, which the lean does not describe (a back-lit marble
     /// ball went from 0.078 to 0.53).
