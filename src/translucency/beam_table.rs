@@ -61,10 +61,13 @@ pub struct BeamTableSettings {
 }
 
 impl Default for BeamTableSettings {
-    /// 4 × 8 directions (measured as close as 6 × 12 on the bunny and the ball:
-    /// `docs/translucent.md`), 256 walks (128 cost the ball's skin 0.060 → 0.069 in relative
-    /// L1), 1024 late walks (256: 0.060 → 0.080), the 17th scattering on (from the 9th the
-    /// back-lit bunny's skin went 0.286 → 0.316).
+    /// 4 × 8 directions (measured as close as 6 × 12 on the bunny and the ball; with each
+    /// beam spread over four of them, 3 × 6 took the bunny's skin past 0.08 in relative L1
+    /// with one seed of three: `docs/translucent.md`), 256 walks (128, 1.8× less precompute,
+    /// keep every front-lit case within 0.08 but take the back-lit ball's skin from 0.147 to
+    /// 0.166 over three seeds), 1024 late walks (256: 0.060 → 0.080 from the front, at the
+    /// nearest direction), the 17th scattering on (from the 9th the back-lit bunny's skin
+    /// went 0.286 → 0.316).
     fn default() -> Self {
         Self {
             cosines: 4,
