@@ -7,7 +7,7 @@
 //!
 //! Each table direction's column comes from three parts:
 //! - **the walks' low orders**: `walks` beam walks a channel from the patch's samples
-//!   ([`random_walk::walk_ends`]), refracted in, each exit after 1 … `last_order`
+//!   ([`walk_ends`]), refracted in, each exit after 1 … `last_order`
 //!   scatterings counted on the patch it leaves by (the nearest sample facing the exit's
 //!   way);
 //! - **single scattering by the lit face is left out**: it leaves each lit pixel in its own
@@ -251,7 +251,8 @@ fn from_source(patches: &Patches, i: usize, j: usize, depth: f32) -> Vec3 {
 
 /// How an object's light from afar leans as it leaves, per channel: the mean direction it
 /// leaves along (refracted out) as `along · n + across · t`, `n` the exit patch's normal and
-/// `t` the part across it of the direction the light came from ([`from_source`]). Fitted by
+/// `t` the part across it of the direction the light came from (from the entry's diffusion
+/// source to the exit patch's surface point). Fitted by
 /// least squares over the object's beam walks that leave more than [`LOBE_SOURCE_DISTANCE`]
 /// patch sizes from their entry (`n` and `t` are orthogonal, so each coefficient is a ratio
 /// of sums). A patch's light from afar leaves by the lobe of that mean over its sources
