@@ -121,6 +121,16 @@ pub(crate) fn tangent_frame(normal: Vec3) -> (Vec3, Vec3) {
 /// bin, its azimuth to the nearest of `azimuths`; `bin = k · azimuths + m`. `None` for a beam
 /// along or behind the surface.
 pub fn direction_bin(travel: Vec3, normal: Vec3, cosines: u32, azimuths: u32) -> Option<u32> {
+    let (mu, turns) = incidence_and_turns(travel, normal, cosines, azimuths)?;
+    let m = turns.round().rem_euclid(azimuths as f32) as u32;
+    let k = ((mu * cosines as f32) as u32).min(cosines - 1);
+    Some(k * azimuths + m.min(azimuths - 1))
+}
+
+/// A beam's incidence cosine `μ = −travel·n` onto a patch of unit `normal` and its azimuth
+/// in the patch's frame ([`tangent_frame`]) in steps of the table's azimuths (not wrapped);
+/// `None` for a beam along or behind the surface or an empty table.
+fn incidence_and_turns(travel: Vec3, normal: Vec3, cosines: u32, azimuths: u32) -> Option<(f32, f32)> {
     let mu = -travel.dot(normal);
     if !(mu > 0.0) || cosines == 0 || azimuths == 0 {
         return None;
@@ -128,9 +138,7 @@ pub fn direction_bin(travel: Vec3, normal: Vec3, cosines: u32, azimuths: u32) ->
     let (t, b) = tangent_frame(normal);
     let along = travel + mu * normal;
     let step = std::f32::consts::TAU / azimuths as f32;
-    let m = (along.dot(b).atan2(along.dot(t)) / step).round().rem_euclid(azimuths as f32) as u32;
-    let k = ((mu * cosines as f32) as u32).min(cosines - 1);
-    Some(k * azimuths + m.min(azimuths - 1))
+    Some((mu, along.dot(b).atan2(along.dot(t)) / step))
 }
 
 /// The table directions about a beam travelling along the unit `travel` onto a patch of unit
@@ -139,14 +147,8 @@ pub fn direction_bin(travel: Vec3, normal: Vec3, cosines: u32, azimuths: u32) ->
 /// neighbours (round the circle). Four `(bin, weight)` pairs, weights summing to 1 (a pair
 /// may repeat a bin); `None` as for [`direction_bin`].
 pub fn direction_weights(travel: Vec3, normal: Vec3, cosines: u32, azimuths: u32) -> Option<[(u32, f32); 4]> {
-    let mu = -travel.dot(normal);
-    if !(mu > 0.0) || cosines == 0 || azimuths == 0 {
-        return None;
-    }
-    let (t, b) = tangent_frame(normal);
-    let along = travel + mu * normal;
-    let step = std::f32::consts::TAU / azimuths as f32;
-    let turn = (along.dot(b).atan2(along.dot(t)) / step).rem_euclid(azimuths as f32);
+    let (mu, turns) = incidence_and_turns(travel, normal, cosines, azimuths)?;
+    let turn = turns.rem_euclid(azimuths as f32);
     let m0 = (turn.floor() as u32).min(azimuths - 1);
     let (m1, g) = ((m0 + 1) % azimuths, (turn - m0 as f32).clamp(0.0, 1.0));
     let place = (mu.min(1.0) * cosines as f32 - 0.5).clamp(0.0, (cosines - 1) as f32);

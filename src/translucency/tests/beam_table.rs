@@ -6,6 +6,15 @@ use crate::translucency::beam_table::{
     single_scattering_radiance,
 };
 
+/// `count` unit beam directions spread over the sphere (deterministic), most of them
+/// downwards.
+fn beams(count: usize) -> impl Iterator<Item = Vec3> {
+    (0..count).map(|k| {
+        let t = k as f32 * 0.37;
+        Vec3::new(t.sin(), -1.2 - (t * 1.7).cos(), (t * 0.6).cos()).normalize()
+    })
+}
+
 /// A beam snaps to the nearest of the table's directions: a unit direction into the surface
 /// at one of the table's incidence cosines, within half a bin of the beam's cosine and
 /// azimuth; each table direction snaps to itself; a beam along or behind the surface has no
@@ -19,9 +28,7 @@ fn a_beam_snaps_to_the_nearest_direction_of_the_table() {
             assert!((d.length() - 1.0).abs() < 1e-5);
             assert_eq!(direction_bin(d, normal, cosines, azimuths), Some(bin), "{cosines}×{azimuths}");
         }
-        for k in 0..200 {
-            let t = k as f32 * 0.37;
-            let beam = Vec3::new(t.sin(), -1.2 - (t * 1.7).cos(), (t * 0.6).cos()).normalize();
+        for beam in beams(200) {
             let mu = -beam.dot(normal);
             let Some(bin) = direction_bin(beam, normal, cosines, azimuths) else {
                 assert!(mu <= 0.0, "a beam at cosine {mu} has no bin");
@@ -58,9 +65,7 @@ fn a_beam_spreads_over_the_four_table_directions_about_it() {
         }
         let step = std::f32::consts::TAU / azimuths as f32;
         let mut inside = 0;
-        for k in 0..300 {
-            let t = k as f32 * 0.37;
-            let beam = Vec3::new(t.sin(), -1.2 - (t * 1.7).cos(), (t * 0.6).cos()).normalize();
+        for beam in beams(300) {
             let mu = -beam.dot(normal);
             let Some(weights) = direction_weights(beam, normal, cosines, azimuths) else {
                 assert!(mu <= 0.0, "a beam at cosine {mu} has no directions");
