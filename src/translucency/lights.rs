@@ -24,8 +24,9 @@ pub struct DirectLight {
     /// [`BeamTable`](super::beam_table::BeamTable) carries (may be empty: none): `K` takes
     /// the rest.
     pub tabled: Vec<Vec3>,
-    /// That irradiance by table direction (`slot · bins + bin`, `BeamTable::light_index`;
-    /// empty without a table).
+    /// That irradiance by table direction (`slot · bins + bin`, each beam over the four
+    /// directions about it by their weights: `BeamTable::light_index`; empty without a
+    /// table).
     pub beam_light: Vec<Vec3>,
     /// Per patch with a table, its beams' irradiance at normal incidence (shadowed), summed:
     /// what single scattering by the lit face leaves by (`single_scattering_radiance`, in the
