@@ -105,7 +105,7 @@ const SEED_STRIDE: u64 = 1_000_003;
 
 /// The frame a patch's table directions are measured in: a tangent and bitangent fixed by
 /// its normal alone (Duff et al. 2017, "Building an orthonormal basis, revisited", the sign
-/// taken as `z ≥ 0`; `tangent_frame` in `inject.wgsl` is its twin).
+/// taken as `z ≥ 0`; `tangent_frame` in `boundary.wgsl` is its twin).
 pub(crate) fn tangent_frame(normal: Vec3) -> (Vec3, Vec3) {
     let sign = if normal.z >= 0.0 { 1.0 } else { -1.0 };
     let a = -1.0 / (sign + normal.z);

@@ -1,9 +1,19 @@
 #define_import_path bevy_mesostructure::translucency::boundary
 
-// What the translucency's shaders share about a medium's boundary and the light leaving
-// through it: imported by the gather (a Bevy shader), appended to the raw wgpu shaders of the
+// What the translucency's shaders share about a medium's boundary, its frame and the light
+// leaving through it: imported by the gather (a Bevy shader), appended to the raw wgpu shaders of the
 // injection and the iteration (`with_boundary` in translucency/mod.rs, this file's first line
 // taken out).
+
+// `tangent_frame` (beam_table.rs): a tangent and bitangent of the unit normal `n` fixed by
+// `n` alone (Duff et al. 2017, the sign taken as z ≥ 0; the bitangent is glam's
+// `any_orthonormal_vector`): the frame a patch's table directions are measured in.
+fn tangent_frame(n: vec3<f32>) -> mat2x3<f32> {
+    let sign = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    return mat2x3(vec3(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), vec3(b, sign + n.y * n.y * a, -n.y));
+}
 
 // `fresnel_reflectance` (diffusion.rs): unpolarised, light arriving at cos_i onto index eta.
 fn fresnel_reflectance(cos_i: f32, eta: f32) -> f32 {

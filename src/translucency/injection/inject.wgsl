@@ -260,19 +260,16 @@ fn incidence_entry(object: u32, cos_i: f32) -> vec4<f32> {
 // `direction_weights` (beam_table.rs): the four table directions about a beam travelling
 // along `travel` onto a surface of normal `n` (incidence cosine `mu` > 0) and their weights,
 // bilinear in the incidence cosine between the bins' centres (held at the first and last)
-// and in the azimuth round the circle, in the frame of `tangent_frame` (Duff et al. 2017,
-// the sign taken as z ≥ 0).
+// and in the azimuth round the circle, in the frame of `tangent_frame` (boundary.wgsl).
 struct DirectionWeights {
     bins: vec4<u32>,
     weights: vec4<f32>,
 }
 
 fn direction_weights(travel: vec3<f32>, n: vec3<f32>, mu: f32) -> DirectionWeights {
-    let sign = select(-1.0, 1.0, n.z >= 0.0);
-    let a = -1.0 / (sign + n.z);
-    let b = n.x * n.y * a;
-    let t = vec3(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
-    let s = vec3(b, sign + n.y * n.y * a, -n.y);
+    let frame = tangent_frame(n);
+    let t = frame[0];
+    let s = frame[1];
     let along = travel + mu * n;
     let count = f32(injection.azimuths);
     let raw = atan2(dot(along, s), dot(along, t)) / (6.283185307179586 / count);

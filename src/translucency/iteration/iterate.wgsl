@@ -344,11 +344,9 @@ fn exit_lobe(normal: vec3<f32>, mean: vec3<f32>, far: f32) -> Lobe {
     let along = dot(mean, normal);
     let tangent_part = mean - along * normal;
     let across = length(tangent_part);
-    // glam's `any_orthonormal_vector` where the mean has no tangential part.
-    let sign = select(-1.0, 1.0, normal.z >= 0.0);
-    let a = -1.0 / (sign + normal.z);
-    let any_tangent = vec3(normal.x * normal.y * a, sign + normal.y * normal.y * a, -normal.y);
-    let tangent = select(any_tangent, tangent_part / across, across > 1e-6);
+    // glam's `any_orthonormal_vector` (the frame's bitangent) where the mean has no
+    // tangential part.
+    let tangent = select(tangent_frame(normal)[1], tangent_part / across, across > 1e-6);
     let row = min(u32(clamp(along, 0.0, 1.0) * f32(FIT_CELLS)), FIT_CELLS - 1u);
     let column = min(u32(clamp(across, 0.0, 1.0) * f32(FIT_CELLS)), FIT_CELLS - 1u);
     let cell = packing.lobe_fits + 3u * (row * FIT_CELLS + column);
