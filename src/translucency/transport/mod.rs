@@ -522,6 +522,8 @@ impl EnergyTransport {
     ) -> Vec<ExitLaw> {
         let p = &patches.patches;
         let column_totals = self.scattering.weighted_column_sums(&self.areas, p.len());
+        // With the exit lobes, each tabled patch takes its object's lean.
+        let lean_table = self.beam_table.as_ref().filter(|_| settings.exit_lobes);
         // The law is the medium's: once per object, not per patch.
         let laws: Vec<Option<([Vec4; 3], f32)>> = surfaces
             .iter()
@@ -551,9 +553,10 @@ impl EnergyTransport {
             })
             .enumerate()
             .map(|(i, mut law)| {
-                let table = self.beam_table.as_ref().filter(|_| settings.exit_lobes);
-                if let Some(&slot) = table.and_then(|t| t.slots.get(i)).filter(|&&s| s != u32::MAX) {
-                    law.lean = table.and_then(|t| t.exit_lean.get(slot as usize)).copied().unwrap_or_default();
+                if let Some(table) = lean_table
+                    && let Some(&slot) = table.slots.get(i)
+                {
+                    law.lean = table.exit_lean.get(slot as usize).copied().unwrap_or_default();
                 }
                 law
             })
