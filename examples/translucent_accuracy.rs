@@ -504,7 +504,9 @@ fn main() {
             (
                 ScatteringSource::BeamTable(table),
                 format!(
-                    "_beamtable{cosines}x{azimuths}_bilinear_walks{}_late{}_orders{}{}",
+                    // `_pastterminator`: single scattering out past the terminator kept in
+                    // the table (`law_gives_single_scattering`; rows before it lack it).
+                    "_beamtable{cosines}x{azimuths}_bilinear_pastterminator_walks{}_late{}_orders{}{}",
                     table.walks,
                     table.late_walks,
                     table.last_order,

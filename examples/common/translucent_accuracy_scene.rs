@@ -13,7 +13,7 @@ use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     beam_table::{
         BeamTable, ExitPatches, BeamTableSettings, bin_direction, direction_bin, direction_weights,
-        single_scattering_radiance,
+        law_gives_single_scattering, single_scattering_radiance,
     },
     EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface,
     SceneRays, SparseMatrix, TranslucentMedium, TransportSettings, direct_light,
@@ -388,7 +388,9 @@ fn walked_scattering(
                 let exit = match end {
                     // Single scattering leaving by the lit face is the pixel's own law's.
                     WalkEnd::Exit(exit)
-                        if lit_face_single_to_law && exit.order == 1 && exit.outward.dot(pj.normal) > 0.5 =>
+                        if lit_face_single_to_law
+                            && exit.order == 1
+                            && matches!(launch, WalkLaunch::Beam(d) if law_gives_single_scattering(pj.normal, d, exit.outward)) =>
                     {
                         return;
                     }

@@ -17,7 +17,7 @@ use super::{
     transport::{EnergyTransport, PatchSurface, SparseMatrix, TransportReport, TransportSettings},
 };
 
-const MAGIC: &[u8; 8] = b"BMSTRN06";
+const MAGIC: &[u8; 8] = b"BMSTRN07";
 
 /// FNV-1a, 64 bits: the cache's key and the plugin's change signatures.
 #[derive(Clone, Copy)]

@@ -1370,25 +1370,29 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     // dielectric skin 0.0821 / 0.2197, marble 0.0699 / 0.0812), and the light from afar leaves by lobes leaning the way it travelled
     // (`TransportSettings::exit_lobes`, on by default; `false` here: the flow's law alone,
     // `translucent_accuracy --exit-lobes false`). Each beam is spread over the four table
-    // directions about it (`direction_weights`). Skin behind the dielectric from behind has
-    // blue 1.43× with this table's seed (0.72× and 1.09× with seeds 1 and 2: a few far walks).
+    // directions about it (`direction_weights`). Single scattering that a grazing beam sends
+    // out past the terminator, by a face turned from the light, stays in the table
+    // (`law_gives_single_scattering`: the gather's law gives none there). Skin from behind
+    // has blue 1.22× with this table's seed (1.49× and 1.41× with seeds 1 and 2), behind the
+    // dielectric 1.54× (0.83× and 1.16×): a few far walks in a channel the reference barely
+    // has there.
     let (lean, flow) = (true, false);
     let table_cases = [
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0572, [0.989, 0.951, 0.949]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1470, [0.959, 0.784, 0.783]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0461, [0.984, 0.980, 0.989]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0624, [0.978, 0.971, 0.984]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0548, [0.981, 0.955, 0.933]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.1174, [0.931, 0.867, 1.428]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0689, [0.981, 0.973, 0.966]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0762, [1.015, 1.001, 0.990]),
-        ((table, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0514, [0.979, 0.950, 0.950]),
-        ((table, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2643, [0.782, 0.479, 0.368]),
-        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3366, [0.702, 0.364, 0.355]),
-        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0769, [0.955, 0.943, 0.948]),
-        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1427, [0.936, 0.769, 1.071]),
-        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0449, [0.989, 0.956, 0.955]),
-        ((table_1024, "beam table, 1024 walks, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2490, [0.786, 0.498, 0.396]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0470, [1.002, 0.966, 0.962]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1315, [0.997, 0.921, 1.218]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0452, [0.987, 0.982, 0.991]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0624, [0.979, 0.973, 0.987]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0542, [0.984, 0.958, 0.935]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.1166, [0.940, 0.910, 1.536]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0688, [0.981, 0.973, 0.966]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0762, [1.015, 1.001, 0.991]),
+        ((table, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0497, [0.995, 0.966, 0.964]),
+        ((table, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2386, [0.802, 0.560, 0.601]),
+        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3160, [0.717, 0.424, 0.577]),
+        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0757, [0.956, 0.944, 0.950]),
+        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1155, [0.987, 0.993, 1.522]),
+        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0362, [1.002, 0.970, 0.969]),
+        ((table_1024, "beam table, 1024 walks, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2216, [0.806, 0.593, 0.631]),
     ];
     for ((oracles, named), exit_lobes, preset, name, lighting, how, eta, rel_l1, ratio) in table_cases {
         let medium = bevy_mesostructure::translucency::TranslucentMedium {
@@ -1516,12 +1520,13 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table_and_law, 0.0848, [0.993, 0.998, 1.033]),
         // With its exit lobes (`TransportSettings::exit_lobes`) and each beam spread over the
         // four table directions about it (`direction_weights`; the nearest direction and the
-        // flow's law alone: 0.0802, 0.2581, 0.0763).
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0720, [1.000, 1.043, 0.999]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.2360, [0.890, 0.775, 0.744]),
-        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0749, [0.987, 0.986, 0.983]),
+        // flow's law alone: 0.0802, 0.2581, 0.0763), single scattering past the terminator
+        // kept in the table (`law_gives_single_scattering`; before: 0.0720, 0.2360, 0.0749).
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0713, [1.004, 1.047, 1.004]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.2204, [0.920, 0.818, 0.796]),
+        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0749, [0.988, 0.987, 0.984]),
         // The table with the deep law about the normal, as before the flow.
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2862, [0.828, 0.754, 0.738]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2684, [0.852, 0.789, 0.787]),
     ];
     for (preset, name, lighting, how, object_exit_share, oracles, rel_l1, ratio) in cases {
         let label = format!(

@@ -3,7 +3,7 @@
 use super::*;
 use crate::translucency::beam_table::{
     BeamTable, BeamTableSettings, TableFlow, bin_direction, direction_bin, direction_weights, from_afar,
-    single_scattering_radiance,
+    law_gives_single_scattering, single_scattering_radiance,
 };
 
 /// `count` unit beam directions spread over the sphere (deterministic), most of them
@@ -126,6 +126,34 @@ fn single_scattering_leaves_with_its_closed_form_exitance() {
     }
     assert_eq!(single_scattering_radiance(alpha, 1.0, Vec3::ONE, -0.2, 0.5), Vec3::ZERO);
     assert_eq!(single_scattering_radiance(alpha, 1.0, Vec3::ONE, 0.5, 0.0), Vec3::ZERO);
+}
+
+/// Which single scattering the gather's law gives and which the table keeps
+/// (`law_gives_single_scattering`): on a ball lit at grazing incidence (cosine 0.15) near its
+/// terminator, the lit face's exits are the law's, but an exit 20° further round — past the
+/// terminator, turned from the light, where every pixel's `μ₀ < 0` and the law gives nothing
+/// — stays in the table, as do the far side of a thin part and a face across a crease more
+/// than 60° from the lit one.
+#[test]
+fn single_scattering_past_the_terminator_stays_in_the_table() {
+    let at = |degrees: f32| {
+        let a = degrees.to_radians();
+        Vec3::new(a.cos(), a.sin(), 0.0)
+    };
+    // The lit patch faces +x; the beam comes down onto it at an incidence cosine of 0.15, so
+    // the ball's terminator (its normal ⊥ to the beam) lies 8.6° below it.
+    let normal = Vec3::X;
+    let beam = Vec3::new(-0.15, -(1.0f32 - 0.15 * 0.15).sqrt(), 0.0);
+    assert!((-beam.dot(normal) - 0.15).abs() < 1e-6);
+    assert!(law_gives_single_scattering(normal, beam, at(0.0)));
+    assert!(law_gives_single_scattering(normal, beam, at(30.0)));
+    assert!(law_gives_single_scattering(normal, beam, at(-5.0)));
+    assert!(!law_gives_single_scattering(normal, beam, at(-20.0)), "past the terminator");
+    assert!(!law_gives_single_scattering(normal, beam, -normal), "a thin part's far side");
+    assert!(!law_gives_single_scattering(normal, beam, at(70.0)), "across a crease");
+    // Face-on, the whole lit face is the law's.
+    assert!(law_gives_single_scattering(normal, -normal, at(55.0)));
+    assert!(law_gives_single_scattering(normal, -normal, at(-55.0)));
 }
 
 /// A table column on a big flat face gives back, with its lit face's single scattering
