@@ -5,7 +5,7 @@
 // injection and the iteration (`with_boundary` in translucency/mod.rs, this file's first line
 // taken out).
 
-// `tangent_frame` (beam_table.rs): a tangent and bitangent of the unit normal `n` fixed by
+// `tangent_frame` (beam_table/directions.rs): a tangent and bitangent of the unit normal `n` fixed by
 // `n` alone (Duff et al. 2017, the sign taken as z ≥ 0; the bitangent is glam's
 // `any_orthonormal_vector`): the frame a patch's table directions are measured in.
 fn tangent_frame(n: vec3<f32>) -> mat2x3<f32> {

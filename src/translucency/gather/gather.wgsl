@@ -72,7 +72,7 @@ fn bucket(cell: vec3<i32>, mask: u32) -> u32 {
     return ((c.x * 73856093u) ^ (c.y * 19349663u) ^ (c.z * 83492791u)) & mask;
 }
 
-// `single_scattering_radiance` (beam_table.rs): a half-space's single scattering of a beam
+// `single_scattering_radiance` (beam_table/single_scattering.rs): a half-space's single scattering of a beam
 // of irradiance `e` at incidence cosine mu0, seen at exit cosine mu, behind a boundary of
 // index eta: α E T(μ₀) T(μ) / (4π η² (μ₀′ + μ′)).
 fn single_scattering_radiance(alpha: vec3<f32>, eta_in: f32, e: vec3<f32>, mu0: f32, mu: f32) -> vec3<f32> {

@@ -257,7 +257,7 @@ fn incidence_entry(object: u32, cos_i: f32) -> vec4<f32> {
     return mix(scene[at], scene[at + 1u], f - f32(i));
 }
 
-// `direction_weights` (beam_table.rs): the four table directions about a beam travelling
+// `direction_weights` (beam_table/directions.rs): the four table directions about a beam travelling
 // along `travel` onto a surface of normal `n` (incidence cosine `mu` > 0) and their weights,
 // bilinear in the incidence cosine between the bins' centres (held at the first and last)
 // and in the azimuth round the circle, in the frame of `tangent_frame` (boundary.wgsl).

@@ -33,7 +33,7 @@ struct Layout {
     direct_exitance: u32,
     // `MAX_TAIL_RATIO` (transport/mod.rs): the most the tail ratio is trusted.
     max_tail_ratio: f32,
-    // The beam table (`BeamTable` in beam_table.rs): slots and directions a slot; its CSR
+    // The beam table (`BeamTable` in beam_table/mod.rs): slots and directions a slot; its CSR
     // arrays (early columns over `beam_light`, late ones over `beam_late`, RGB values) and
     // each direction's late share (RGB), in `matrices`.
     slots: u32,
@@ -225,7 +225,7 @@ struct FlowSums {
     far: vec3<f32>,
 }
 
-// `from_source` (beam_table.rs): the unit direction from a diffusion source to `x`.
+// `from_source` (beam_table/flow.rs): the unit direction from a diffusion source to `x`.
 fn from_source(x: vec3<f32>, source: vec3<f32>) -> vec3<f32> {
     let d = x - source;
     return select(vec3(0.0), normalize(d), dot(d, d) > 0.0);

@@ -54,7 +54,7 @@ struct Layout {
     delta_irradiance: u32,
     direct_exitance: u32,
     max_tail_ratio: f32,
-    // The beam table (`beam_table.rs`): its slots and directions a slot, its CSR arrays
+    // The beam table (`beam_table/`): its slots and directions a slot, its CSR arrays
     // (early: RGB values over `beam_light`; late: RGB over `beam_late`) and late shares.
     slots: u32,
     bins: u32,

@@ -78,7 +78,7 @@ fn a_beam_spreads_over_the_four_table_directions_about_it() {
             assert!((mean_mu - held).abs() < 1e-4, "cosine {mu}: {mean_mu}");
             // The azimuth, unwrapped about the first of the four.
             let azimuth_of = |d: Vec3| {
-                let (t, b) = crate::translucency::beam_table::tangent_frame(normal);
+                let (t, b) = crate::translucency::beam_table::directions::tangent_frame(normal);
                 let along = d + -d.dot(normal) * normal;
                 along.dot(b).atan2(along.dot(t))
             };

@@ -1,0 +1,387 @@
+//! Building a table: each translucent patch's walks for each table direction, their exits
+//! counted on the patches they leave by, and the late light from the profile's column.
+
+use bevy::{platform::collections::HashMap, prelude::*};
+
+use super::{
+    BeamTable, BeamTableSettings, SEED_STRIDE,
+    directions::bin_direction,
+    flow::{ExitLean, LeanSums, from_afar, from_source},
+    single_scattering::law_gives_single_scattering,
+};
+use crate::translucency::{
+    diffusion::diffuse_fresnel_reflectance,
+    patches::Patches,
+    random_walk::{EntryPoint, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
+    transport::{PatchSurface, SceneRays, SparseMatrix, parallel_rows},
+};
+
+/// The patch a walk leaves by: the nearest sample facing the exit's way (not the far side of
+/// a thin part), else the nearest of any, among a grid of its object's samples (cells of the
+/// object's own patch size: a room's wall patches would make a grid of the largest size
+/// hold a whole small object in a cell).
+pub struct ExitPatches {
+    grids: Vec<(f32, HashMap<IVec3, Vec<(Vec3, Vec3, u32)>>)>,
+}
+
+impl ExitPatches {
+    /// The grids of `patches`' samples, one per object.
+    pub fn new(patches: &Patches) -> Self {
+        let objects = patches.object_patch_sizes.len();
+        let mut grids: Vec<(f32, HashMap<IVec3, Vec<(Vec3, Vec3, u32)>>)> = (0..objects)
+            .map(|o| (patches.object_patch_sizes[o].max(1e-9), HashMap::default()))
+            .collect();
+        for (i, q) in patches.patches.iter().enumerate() {
+            let Some((cell, grid)) = grids.get_mut(q.object as usize) else {
+                continue;
+            };
+            for s in patches.samples_of(i) {
+                grid.entry((s.position / *cell).floor().as_ivec3())
+                    .or_default()
+                    .push((s.position, s.normal, i as u32));
+            }
+        }
+        Self { grids }
+    }
+
+    /// The patch of `object` a walk leaving at `x` through a boundary of unit `outward`
+    /// normal leaves by; `None` where none of its samples is within a patch size.
+    pub fn of(&self, object: u32, x: Vec3, outward: Vec3) -> Option<u32> {
+        let (cell, grid) = self.grids.get(object as usize)?;
+        let key = (x / *cell).floor().as_ivec3();
+        // The nearest sample facing the exit's way (not the far side of a thin part), else
+        // the nearest of any: (distance², patch).
+        let (mut facing, mut any): (Option<(f32, u32)>, Option<(f32, u32)>) = (None, None);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let cell = grid.get(&(key + IVec3::new(dx, dy, dz)));
+                    for &(position, normal, patch) in cell.into_iter().flatten() {
+                        let d = position.distance_squared(x);
+                        if any.is_none_or(|b| d < b.0) {
+                            any = Some((d, patch));
+                        }
+                        if normal.dot(outward) > 0.0 && facing.is_none_or(|b| d < b.0) {
+                            facing = Some((d, patch));
+                        }
+                    }
+                }
+            }
+        }
+        facing.or(any).map(|b| b.1)
+    }
+}
+
+/// Exitance per unit of light entering patch `j`, by the patch it leaves through.
+type Column = HashMap<u32, Vec3>;
+
+/// A [`Column`]'s first moments in the directions its light leaves along: per channel
+/// `Σ exitance · ω` and (`w`) how many walks left, by the patch it leaves through.
+type Moments = HashMap<u32, [Vec4; 3]>;
+
+/// One patch's late column and, per direction walked, its early column, their moments and
+/// its late share.
+type PatchColumns = (Option<Column>, Vec<(u32, Column, Moments, Vec3)>, LeanSums);
+
+impl BeamTable {
+    /// The table of `patches`' translucent ones (`surfaces[o]` object `o`'s), `profile` the
+    /// transport's `K` (its columns give the late light). With `only`, patch `j` walks only
+    /// the bins `only[j]` (the others stay empty: what one directional light needs, for the
+    /// accuracy tool). Every core.
+    pub fn build(
+        patches: &Patches,
+        surfaces: &[PatchSurface],
+        rays: &SceneRays,
+        profile: &SparseMatrix<Vec3>,
+        settings: BeamTableSettings,
+        only: Option<&[Vec<u32>]>,
+    ) -> Self {
+        let start = std::time::Instant::now();
+        let p = &patches.patches;
+        let n = p.len();
+        if let Some(reason) = settings.invalid_reason() {
+            warn!("translucency: {reason} (got {settings:?}); no beam table");
+            return Self { settings, slots: vec![u32::MAX; n], ..default() };
+        }
+        let medium_of = |j: usize| match surfaces.get(p[j].object as usize) {
+            Some(&PatchSurface::Translucent { medium, world_units_per_mm, .. })
+                if medium.invalid_reason().is_none()
+                    && world_units_per_mm.is_finite()
+                    && world_units_per_mm > 0.0 =>
+            {
+                Some((medium, world_units_per_mm))
+            }
+            _ => None,
+        };
+        let mut slots = vec![u32::MAX; n];
+        let mut tabled = Vec::new();
+        let mut media = Vec::new();
+        for (j, slot) in slots.iter_mut().enumerate() {
+            if let Some((medium, _)) = medium_of(j) {
+                *slot = tabled.len() as u32;
+                tabled.push(j);
+                let alpha = medium.single_scattering_albedo();
+                media.push(Vec4::new(
+                    alpha[0] as f32,
+                    alpha[1] as f32,
+                    alpha[2] as f32,
+                    medium.index_of_refraction,
+                ));
+            }
+        }
+        // The profile's columns (it is stored by rows).
+        let mut profile_columns: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
+        for i in 0..profile.rows().min(n) {
+            for (j, v) in profile.row(i) {
+                if j < n {
+                    profile_columns[j].push((i as u32, v));
+                }
+            }
+        }
+        let exits = ExitPatches::new(patches);
+        let source_depths = crate::translucency::transport::EnergyTransport::source_depths(patches, surfaces);
+        let bins = settings.bins();
+        let columns: Vec<PatchColumns> = parallel_rows(tabled.len(), |slot| {
+            let j = tabled[slot];
+            let Some((medium, units_per_mm)) = medium_of(j) else {
+                return (None, Vec::new(), LeanSums::default());
+            };
+            let walked: Vec<u32> = match only {
+                Some(only) => only.get(j).cloned().unwrap_or_default(),
+                None => (0..bins).collect(),
+            };
+            if walked.is_empty() {
+                return (None, Vec::new(), LeanSums::default());
+            }
+            let column_of = ColumnWalks {
+                patches,
+                rays,
+                exits: &exits,
+                medium,
+                units_per_mm,
+                j,
+                entries: patches
+                    .samples_of(j)
+                    .iter()
+                    .map(|s| EntryPoint { position: s.position, normal: s.normal, area: s.area })
+                    .collect(),
+                last_order: settings.last_order,
+                directions: settings.exit_directions,
+                source_depth: source_depths.get(j).copied().unwrap_or(Vec3::ZERO),
+                seed_offset: settings.seed as u64 * SEED_STRIDE,
+            };
+            let diffuse_entering =
+                (1.0 - diffuse_fresnel_reflectance(medium.index_of_refraction as f64)) as f32;
+            let late = column_of.late_light(
+                &profile_columns[j],
+                diffuse_entering,
+                settings.late_walks,
+            );
+            let mut lean = LeanSums::default();
+            let directions = walked
+                .into_iter()
+                .map(|bin| {
+                    let travel = bin_direction(bin, p[j].normal, settings.cosines, settings.azimuths);
+                    let seed = (j as u64 * bins as u64 + bin as u64).wrapping_add(column_of.seed_offset);
+                    let (column, moments, remaining, walks_lean) = column_of.walk(
+                        WalkLaunch::Beam(travel),
+                        settings.walks,
+                        seed,
+                        true,
+                    );
+                    lean.add(&walks_lean);
+                    let share = match &late {
+                        Some((_, late_remaining)) => Vec3::select(
+                            late_remaining.cmpgt(Vec3::ZERO),
+                            remaining / late_remaining.max(Vec3::splat(1e-9)),
+                            Vec3::ZERO,
+                        ),
+                        None => Vec3::ZERO,
+                    };
+                    (bin, column, moments, share)
+                })
+                .collect::<Vec<_>>();
+            (late.map(|l| l.0), directions, lean)
+        });
+        let mut early_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
+        // With the exit directions, each early entry's at the same (row, column): sorted as
+        // `early`'s rows are, their values line up with its.
+        let mut leaving_rows: Vec<Vec<(u32, [Vec4; 3])>> = vec![Vec::new(); n];
+        let mut late_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
+        let mut late_share = vec![Vec3::ZERO; tabled.len() * bins as usize];
+        // Each object's lean, pooled over its patches' walks.
+        let mut object_leans: HashMap<u32, LeanSums> = HashMap::default();
+        for (slot, (late, directions, lean)) in columns.into_iter().enumerate() {
+            object_leans.entry(p[tabled[slot]].object).or_default().add(&lean);
+            for (bin, column, moments, share) in directions {
+                late_share[slot * bins as usize + bin as usize] = share;
+                for (i, v) in column {
+                    if v == Vec3::ZERO {
+                        continue;
+                    }
+                    let at = slot as u32 * bins + bin;
+                    early_rows[i as usize].push((at, v));
+                    if settings.exit_directions {
+                        // The mean direction it leaves along, per channel (the moment over
+                        // the exitance): length 1 for light all leaving one way.
+                        let moment = moments.get(&i).copied().unwrap_or([Vec4::ZERO; 3]);
+                        let leaving = std::array::from_fn(|c| {
+                            if v[c] > 0.0 { (moment[c].truncate() / v[c]).extend(moment[c].w) } else { Vec4::ZERO }
+                        });
+                        leaving_rows[i as usize].push((at, leaving));
+                    }
+                }
+            }
+            for (i, v) in late.into_iter().flatten() {
+                if v != Vec3::ZERO {
+                    late_rows[i as usize].push((slot as u32, v));
+                }
+            }
+        }
+        Self {
+            settings,
+            slots,
+            early: SparseMatrix::from_rows(early_rows),
+            early_leaving: SparseMatrix::from_rows(leaving_rows).values,
+            late_share,
+            late: SparseMatrix::from_rows(late_rows),
+            media,
+            exit_lean: tabled
+                .iter()
+                .map(|&j| object_leans.get(&p[j].object).map_or_else(ExitLean::default, LeanSums::lean))
+                .collect(),
+            seconds: start.elapsed().as_secs_f32(),
+        }
+    }
+}
+
+/// One patch's walks.
+struct ColumnWalks<'a> {
+    patches: &'a Patches,
+    rays: &'a SceneRays,
+    exits: &'a ExitPatches,
+    medium: crate::translucency::medium::TranslucentMedium,
+    units_per_mm: f32,
+    j: usize,
+    /// Patch `j`'s samples, where its walks enter (once for all its directions).
+    entries: Vec<EntryPoint>,
+    last_order: u32,
+    /// Whether to take the exits' moments.
+    directions: bool,
+    /// Where light entering patch `j` acts as a source, per channel
+    /// ([`EnergyTransport::source_depths`](crate::translucency::transport::EnergyTransport::source_depths)).
+    source_depth: Vec3,
+    /// Added to every walk's seed ([`BeamTableSettings::seed`]).
+    seed_offset: u64,
+}
+
+impl ColumnWalks<'_> {
+    /// `walks` walks a channel of `launch` from patch `j`'s samples: the exitance per unit
+    /// of light that got in by exit patch, its first moment in the directions it leaves along
+    /// (per channel, `Σ exitance · ω`), and the share still inside after the last order.
+    /// With `law_takes_lit_face_single`, what leaves after one scattering by the lit face
+    /// where the law can give it ([`law_gives_single_scattering`]) is left to
+    /// [`single_scattering_radiance`].
+    fn walk(
+        &self,
+        launch: WalkLaunch,
+        walks: u32,
+        seed: u64,
+        law_takes_lit_face_single: bool,
+    ) -> (Column, Moments, Vec3, LeanSums) {
+        let p = &self.patches.patches;
+        let pj = &p[self.j];
+        let share = 1.0 / walks as f32;
+        // A beam's uncollided light goes on along the beam; diffuse light that crosses a thin
+        // part unscattered is the surface's.
+        let first = u32::from(matches!(launch, WalkLaunch::Beam(_)));
+        let orders = ScatteringOrders { first, last: self.last_order };
+        let mut column = Column::default();
+        let mut moments = Moments::default();
+        let mut remaining = Vec3::ZERO;
+        // A beam's walks that leave from afar: what the object's `ExitLean` is fitted to.
+        let mut lean = LeanSums::default();
+        let beam = matches!(launch, WalkLaunch::Beam(_));
+        let to_law = |order: u32, outward: Vec3| match launch {
+            WalkLaunch::Beam(d) => {
+                law_takes_lit_face_single && order == 1 && law_gives_single_scattering(pj.normal, d, outward)
+            }
+            WalkLaunch::Diffuse => false,
+        };
+        walk_ends(
+            &self.medium,
+            self.units_per_mm,
+            &self.entries,
+            self.rays,
+            walks as usize,
+            seed,
+            launch,
+            orders,
+            |c, end| match end {
+                WalkEnd::Exit(exit) if to_law(exit.order, exit.outward) => {}
+                WalkEnd::Exit(exit) => {
+                    if let Some(i) = self.exits.of(pj.object, exit.position, exit.outward) {
+                        let exitance = share * pj.area / p[i as usize].area;
+                        column.entry(i).or_default()[c] += exitance;
+                        if self.directions {
+                            moments.entry(i).or_insert([Vec4::ZERO; 3])[c] += (exitance * exit.leaving).extend(1.0);
+                        }
+                        let i = i as usize;
+                        if beam && from_afar(self.patches, i, self.j) {
+                            let n = p[i].normal;
+                            let from = from_source(self.patches, i, self.j, self.source_depth[c]);
+                            let t = from - n * from.dot(n);
+                            lean.along[c] += n.dot(exit.leaving);
+                            lean.walks[c] += 1.0;
+                            lean.across[c] += t.dot(exit.leaving);
+                            lean.spread[c] += t.length_squared();
+                        }
+                    }
+                }
+                // Through a gap in the mesh: lost.
+                WalkEnd::Gap => {}
+                WalkEnd::Remainder => remaining[c] += share,
+            },
+        );
+        (column, moments, remaining, lean)
+    }
+
+    /// The late light per unit of diffuse walks' remainder: the profile's column (per unit
+    /// of light that got in: over `diffuse_entering`) with its near field — where `late_walks`
+    /// diffuse walks leave within the orders — scaled down by their share of it; and that
+    /// remainder. `None` where no diffuse walk outlasts the orders.
+    fn late_light(
+        &self,
+        profile_column: &[(u32, Vec3)],
+        diffuse_entering: f32,
+        late_walks: u32,
+    ) -> Option<(Column, Vec3)> {
+        let p = &self.patches.patches;
+        let seed = (u64::MAX - self.j as u64).wrapping_sub(self.seed_offset);
+        let (early, _, remaining, _) = self.walk(WalkLaunch::Diffuse, late_walks, seed, false);
+        if remaining == Vec3::ZERO {
+            return None;
+        }
+        let flux = |v: Vec3, i: u32| v * p[i as usize].area;
+        let per_entered = 1.0 / diffuse_entering.max(1e-6);
+        let near: Vec3 = profile_column
+            .iter()
+            .filter(|(i, _)| early.contains_key(i))
+            .map(|&(i, v)| flux(v * per_entered, i))
+            .sum();
+        let early_flux: Vec3 = early.iter().map(|(&i, &v)| flux(v, i)).sum();
+        let kept = Vec3::select(
+            near.cmpgt(Vec3::ZERO),
+            (near - early_flux).max(Vec3::ZERO) / near.max(Vec3::splat(1e-30)),
+            Vec3::ZERO,
+        );
+        let column = profile_column
+            .iter()
+            .map(|&(i, v)| {
+                let v = v * per_entered;
+                (i, if early.contains_key(&i) { v * kept } else { v })
+            })
+            .collect();
+        Some((column, remaining))
+    }
+}

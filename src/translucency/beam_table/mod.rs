@@ -1,0 +1,274 @@
+//! A per-patch table of beam columns: where a translucent patch gives back the light of a beam
+//! arriving along each of a few directions in its own frame, from random walks in the
+//! object's triangles — the beam-resolved first scatterings that a diffusion profile, whose
+//! sources sit under the entry whatever the light's direction, does not carry
+//! (`docs/translucent.md`: on the Stanford bunny lit from the front, skin 0.160 → 0.078 and
+//! marble 0.089 → 0.073 in relative L1 against Mitsuba).
+//!
+//! Each table direction's column comes from three parts:
+//! - **the walks' low orders**: `walks` beam walks a channel from the patch's samples
+//!   ([`walk_ends`](super::random_walk::walk_ends)), refracted in, each exit after 1 … `last_order`
+//!   scatterings counted on the patch it leaves by (the nearest sample facing the exit's
+//!   way);
+//! - **single scattering by the lit face is left out**: it leaves each lit pixel in its own
+//!   law ([`single_scattering_radiance`]), limb-brightened where Lambert's law is flat; what
+//!   leaves after one scattering where that law cannot give it — through the far side of a
+//!   thin part, or past the terminator by a face turned from the light
+//!   ([`law_gives_single_scattering`]) — stays in the column;
+//! - **the late light**: the walks still inside after `last_order` scatterings leave as the
+//!   late part of diffuse light entering the patch does — the profile's column (`K`'s, the
+//!   object's shape and totals included) with its near field, the patches that `late_walks`
+//!   diffuse walks leave by within the same orders, scaled down by those early exits' share of
+//!   it — per unit of the diffuse walks' own remainder. Stopping the walks there bounds their
+//!   cost (marble's albedo 0.999 would take hundreds of scatterings) and puts the light that
+//!   crosses an object where the profile, not 256 walks' noise, says.
+//!
+//! Columns are per unit of light that got in: a frame weights each beam by the boundary's
+//! Fresnel transmittance at its own incidence.
+//!
+//! The pieces: [`directions`] (a beam's table directions in its patch's frame),
+//! [`single_scattering`] (the share the gather gives in its own law), [`flow`] (how the
+//! table's light flows in and leans as it leaves) and `build` (the walks that fill the
+//! columns).
+
+mod build;
+pub mod directions;
+pub mod flow;
+pub mod single_scattering;
+
+pub use build::ExitPatches;
+pub use directions::{bin_direction, direction_bin, direction_weights};
+pub use flow::{ExitLean, LOBE_SOURCE_DISTANCE, TableFlow, from_afar};
+pub use single_scattering::{entering, law_gives_single_scattering, single_scattering_radiance};
+
+use bevy::prelude::*;
+
+use super::{patches::Patches, transport::SparseMatrix};
+
+/// How a beam table is built.
+#[derive(Clone, Copy, Debug, PartialEq, Reflect)]
+pub struct BeamTableSettings {
+    /// Incidence cosines of the table's directions, `(k + ½)/cosines` (1 – 16).
+    pub cosines: u32,
+    /// Azimuths about the patch's normal, `2π m/azimuths` (1 – 32).
+    pub azimuths: u32,
+    /// Beam walks a channel and direction (≥ 1).
+    pub walks: u32,
+    /// Diffuse walks a channel and patch for the late light's near field (≥ 1).
+    pub late_walks: u32,
+    /// Scatterings a walk takes before it leaves as late light (≥ 1).
+    pub last_order: u32,
+    /// Keep the mean direction each entry's light leaves along ([`BeamTable::early_leaving`],
+    /// 12 more floats an entry): what the exit lobes are fitted to
+    /// ([`EnergyTransport::exit_laws_along_lobes`](super::transport::EnergyTransport::exit_laws_along_lobes)),
+    /// measured on the CPU path only (`translucent_accuracy --exit-axis lobe`; the GPU
+    /// gather does not take them yet, and the plugin turns this off with a warning; not
+    /// reflected, so the example's tuning panel does not offer it).
+    #[reflect(ignore)]
+    pub exit_directions: bool,
+    /// Offsets every walk's seed (0: the tables the docs' figures come from). Tables of
+    /// different seeds differ by their walks' noise alone, which moves the accuracy figures
+    /// by ~±0.005 from the front (`docs/translucent.md`): what a variant must beat.
+    pub seed: u32,
+}
+
+impl Default for BeamTableSettings {
+    /// 4 × 8 directions (measured as close as 6 × 12 on the bunny and the ball; with each
+    /// beam spread over four of them, 3 × 6 took the bunny's skin past 0.08 in relative L1
+    /// with one seed of three: `docs/translucent.md`), 256 walks (128, 1.8× less precompute,
+    /// keep every front-lit case within 0.08 but take the back-lit ball's skin from 0.147 to
+    /// 0.166 over three seeds), 1024 late walks (256: 0.060 → 0.080 from the front, at the
+    /// nearest direction), the 17th scattering on (from the 9th the back-lit bunny's skin
+    /// went 0.286 → 0.316).
+    fn default() -> Self {
+        Self {
+            cosines: 4,
+            azimuths: 8,
+            walks: 256,
+            late_walks: 1024,
+            last_order: 16,
+            exit_directions: false,
+            seed: 0,
+        }
+    }
+}
+
+impl BeamTableSettings {
+    /// Directions a patch.
+    pub fn bins(&self) -> u32 {
+        self.cosines * self.azimuths
+    }
+
+    /// Why these settings cannot build a table, if they cannot.
+    pub fn invalid_reason(&self) -> Option<&'static str> {
+        if !(1..=16).contains(&self.cosines) || !(1..=32).contains(&self.azimuths) {
+            Some("a beam table takes 1 – 16 cosines and 1 – 32 azimuths")
+        } else if self.walks == 0 || self.late_walks == 0 || self.last_order == 0 {
+            Some("a beam table needs at least one walk, late walk and scattering")
+        } else {
+            None
+        }
+    }
+}
+
+/// How far apart [`BeamTableSettings::seed`]s put the walks' seeds (a prime above any
+/// patch's directions' seeds, `patch · bins + bin`, at a budget's patches).
+const SEED_STRIDE: u64 = 1_000_003;
+
+/// The beam table of one scene's translucent patches.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BeamTable {
+    /// What it was built with.
+    pub settings: BeamTableSettings,
+    /// Per patch its slot (its directions are `slot · bins … + bins`), `u32::MAX` for
+    /// patches without a table (opaque, an invalid medium).
+    pub slots: Vec<u32>,
+    /// The walks' low orders — rows: the patches light leaves by; columns: `slot · bins +
+    /// bin`; values: exitance per unit of irradiance that got in, per channel.
+    pub early: SparseMatrix<Vec3>,
+    /// With [`BeamTableSettings::exit_directions`] (else empty): per entry of `early` (in its
+    /// order), per channel, the mean direction its light leaves along outside (`xyz`, the
+    /// exitance-weighted mean of the walks' leaving directions: length 1 for light all
+    /// leaving one way, ⅔ along the normal for Lambert's law) and how many walks it holds
+    /// (`w`, for the mean's noise).
+    pub early_leaving: Vec<[Vec4; 3]>,
+    /// Per direction (`slot · bins + bin`), the share of its walks still inside after the last
+    /// order over the share of diffuse walks', per channel: how much of `late`'s column its
+    /// light takes.
+    pub late_share: Vec<Vec3>,
+    /// The late light, one column per slot: where diffuse light entering the patch leaves
+    /// after the last order (the profile's column, its near field scaled down), per unit of
+    /// the diffuse walks' remainder. One column a patch, not one a direction: the late light
+    /// has forgotten the beam but for its amount.
+    pub late: SparseMatrix<Vec3>,
+    /// Per slot, its medium's single-scattering albedo (rgb) and index of refraction (w).
+    pub media: Vec<Vec4>,
+    /// Per slot, how its object's light from afar leans as it leaves ([`ExitLean`], fitted
+    /// to the object's beam walks).
+    pub exit_lean: Vec<ExitLean>,
+    /// Wall-clock seconds to build.
+    pub seconds: f32,
+}
+
+impl BeamTable {
+    /// Directions a patch.
+    pub fn bins(&self) -> u32 {
+        self.settings.bins()
+    }
+
+    /// Where a beam travelling along `travel` onto patch `j` goes in the table's light
+    /// vector (`slot · bins + bin`, the four directions about it by their weights:
+    /// [`direction_weights`]), and the share of it that gets in (`entering`); `None` for a
+    /// patch without a table or a beam along or behind its surface.
+    pub fn light_index(&self, patches: &Patches, j: usize, travel: Vec3) -> Option<([(usize, f32); 4], f32)> {
+        let slot = *self.slots.get(j).filter(|&&s| s != u32::MAX)?;
+        let normal = patches.patches[j].normal;
+        let weights = direction_weights(travel, normal, self.settings.cosines, self.settings.azimuths)?;
+        let eta = self.media[slot as usize].w;
+        Some((
+            weights.map(|(bin, w)| ((slot * self.bins() + bin) as usize, w)),
+            entering(eta, -travel.dot(normal)),
+        ))
+    }
+
+    /// The exitance the table gives every patch for `light`, the irradiance that got in per
+    /// `slot · bins + bin` (`light_index`): the early columns' product, and the late columns'
+    /// with each slot's directions summed by their `late_share`.
+    pub fn apply(&self, light: &[Vec3]) -> Vec<Vec3> {
+        let mut exitance = self.early.mul_vec(light);
+        for (b, late) in exitance.iter_mut().zip(self.late.mul_vec(&self.late_light(light))) {
+            *b += late;
+        }
+        exitance
+    }
+
+    /// Per slot, its late light for `light` (as [`apply`](Self::apply) takes it): its
+    /// directions' beams summed by their `late_share` (`table_late` in `iterate.wgsl`).
+    fn late_light(&self, light: &[Vec3]) -> Vec<Vec3> {
+        let bins = self.bins() as usize;
+        (0..self.media.len())
+            .map(|slot| {
+                (slot * bins..(slot + 1) * bins)
+                    .map(|c| self.late_share[c] * light.get(c).copied().unwrap_or(Vec3::ZERO))
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// Per slot, the patch it is the table of (the inverse of [`slots`](Self::slots)).
+    pub fn slot_patches(&self) -> Vec<u32> {
+        let mut patch_of = vec![u32::MAX; self.media.len()];
+        for (j, &slot) in self.slots.iter().enumerate() {
+            if let Some(at) = patch_of.get_mut(slot as usize) {
+                *at = j as u32;
+            }
+        }
+        patch_of
+    }
+
+    /// Per patch `i`, the early light the table gives it for `light` (as for
+    /// [`apply`](Self::apply)) from the patches `j` with `counted(i, j)` and, per channel, its
+    /// first moment in the directions it leaves along (`xyz`: `Σ exitance · ω`, from
+    /// [`early_leaving`](Self::early_leaving)) with `w = Σ exitance²/walks`, what the mean's
+    /// noise grows with.
+    pub fn early_moments(&self, light: &[Vec3], counted: impl Fn(usize, usize) -> bool) -> Vec<(Vec3, [Vec4; 3])> {
+        let beam = |c: usize| light.get(c).copied().unwrap_or(Vec3::ZERO);
+        let patch_of = self.slot_patches();
+        let bins = self.bins() as usize;
+        (0..self.early.rows())
+            .map(|i| {
+                let range = self.early.row_offsets[i] as usize..self.early.row_offsets[i + 1] as usize;
+                let (mut exitance, mut moment) = (Vec3::ZERO, [Vec4::ZERO; 3]);
+                for e in range {
+                    let column = self.early.columns[e] as usize;
+                    if !counted(i, patch_of[column / bins] as usize) {
+                        continue;
+                    }
+                    let given = self.early.values[e] * beam(column);
+                    exitance += given;
+                    for c in 0..3 {
+                        let l = self.early_leaving.get(e).map_or(Vec4::ZERO, |l| l[c]);
+                        moment[c] += (given[c] * l.truncate()).extend(given[c] * given[c] / l.w.max(1.0));
+                    }
+                }
+                (exitance, moment)
+            })
+            .collect()
+    }
+
+    /// Per patch, its medium's `(α, η)` where it has a table, zero elsewhere (what the
+    /// gather's single scattering takes).
+    pub fn patch_media(&self) -> Vec<Vec4> {
+        self.slots
+            .iter()
+            .map(|&s| self.media.get(s as usize).copied().unwrap_or(Vec4::ZERO))
+            .collect()
+    }
+
+    /// Direction `bin` of patch `j`'s column: the exitance per unit of irradiance that got
+    /// in, by the patch it leaves through (early and late light summed; empty without a
+    /// table).
+    pub fn column(&self, j: usize, bin: u32) -> Vec<(usize, Vec3)> {
+        let Some(&slot) = self.slots.get(j).filter(|&&s| s != u32::MAX) else {
+            return Vec::new();
+        };
+        let (direction, share) = (
+            (slot * self.bins() + bin) as usize,
+            self.late_share[(slot * self.bins() + bin) as usize],
+        );
+        let mut column: std::collections::BTreeMap<usize, Vec3> = Default::default();
+        for i in 0..self.early.rows() {
+            for (c, v) in self.early.row(i) {
+                if c == direction {
+                    *column.entry(i).or_default() += v;
+                }
+            }
+            for (c, v) in self.late.row(i) {
+                if c == slot as usize {
+                    *column.entry(i).or_default() += v * share;
+                }
+            }
+        }
+        column.into_iter().collect()
+    }
+}
