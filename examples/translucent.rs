@@ -11,7 +11,7 @@
 //! ```text
 //! cargo run --example translucent -- [--frames N] [--out DIR] [--size WxH] [--headless]
 //!     [--patches N] [--injection light-view|shadow-rays] [--shape-diffusion true|false]
-//!     [--deep-exit-law true|false] [--max-iterations N] [--swing]
+//!     [--deep-exit-law true|false] [--max-iterations N] [--warm-start true|false] [--swing]
 //! ```
 
 #[path = "common/mod.rs"]
@@ -50,6 +50,10 @@ struct Cli {
     #[arg(long, default_value_t = TranslucencySettings::default().max_iterations,
           value_parser = clap::value_parser!(u32).range(1..=256))]
     max_iterations: u32,
+    /// Start each light change's iteration from the last solution
+    /// (`TranslucencySettings::warm_start`)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    warm_start: bool,
     /// Carry the lights' beams into the translucent objects by a table of beam columns from
     /// random walks (`TransportSettings::beam_table`, default settings; ~0.1 s a translucent
     /// patch on one core to precompute: the default room ~1 min on 2 cores)
@@ -128,6 +132,7 @@ fn main() {
                 ..default()
             },
             max_iterations: cli.max_iterations,
+            warm_start: cli.warm_start,
             ..default()
         })
         .insert_resource(SpotPlace {

@@ -229,6 +229,10 @@ pub struct TranslucencyGpu {
     iteration_pending: bool,
     /// And the GPU injects them ([`LightInjection::LightViewMaps`](super::LightInjection)).
     injection_pending: bool,
+    /// An iteration of this transport was recorded: the next may start from its exitance.
+    solved: bool,
+    /// [`TranslucencySettings::warm_start`](super::TranslucencySettings::warm_start), this frame's.
+    warm_start: bool,
     transport: Option<GpuTransport>,
     injection: Option<GpuInjection>,
     gather: Option<(Buffer, Buffer, Buffer)>,
@@ -268,12 +272,14 @@ pub fn prepare_translucency(
         let transport = GpuTransport::with_flow(&device, &scene.transport, limits, row_lanes, &frames);
         gpu.gather = Some(gather_buffers(&device, scene, &transport));
         gpu.transport = Some(transport);
+        gpu.solved = false;
         gpu.injection = None;
         gpu.scene_generation = *generation;
         gpu.direct_generation = 0;
         gpu.lights_generation = 0;
     }
     let gpu = &mut *gpu;
+    gpu.warm_start = frame.settings.warm_start;
     let Some(transport) = &gpu.transport else {
         return;
     };
@@ -433,7 +439,9 @@ pub fn translucency_injection_pass(
 }
 
 /// Core3d system before the opaque pass: iterates the transport when the lights changed (the
-/// first view of the frame does it), timed as `translucency/iteration`.
+/// first view of the frame does it; from the last solution where
+/// [`TranslucencySettings::warm_start`](super::TranslucencySettings::warm_start) and there is
+/// one), timed as `translucency/iteration`.
 pub fn translucency_iteration_pass(
     _view: ViewQuery<&TranslucencyCamera>,
     mut gpu: ResMut<TranslucencyGpu>,
@@ -448,9 +456,10 @@ pub fn translucency_iteration_pass(
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let span = diagnostics.time_span(ctx.command_encoder(), "translucency/iteration");
-    transport.record(ctx.command_encoder());
+    transport.record(ctx.command_encoder(), gpu.solved && gpu.warm_start);
     span.end(ctx.command_encoder());
     gpu.iteration_pending = false;
+    gpu.solved = true;
 }
 
 /// A camera that shows the translucency: put on a `Camera3d` (with `Msaa::Off`). Brings the

@@ -6,6 +6,11 @@
 // row's sum in another order (a few lanes' partial sums, then a tree). The loop is
 // recorded max_iterations times; `decide` zeroes the indirect dispatch arguments once the
 // energy still moving is below the threshold, so the rest of the recorded loop costs nothing.
+// Warm-started from the last solution B' (`EnergyTransport::solve_from`): `seed_warm`,
+// `cluster_means` and `gather_warm` give ΔE = E⁰ − E_t + F B', `scatter_first_warm`
+// B = K ΔE + S⁰ + T x and ΔB = B − B' (counted as an iteration), and the loop goes on from
+// that ΔB with its absolute flux, to `warm_threshold`, the first bounce's flux estimated as
+// flux(B) (1 − r') with r' the last solution's tail ratio.
 
 struct Layout {
     patches: u32,
@@ -69,6 +74,8 @@ struct Layout {
     // `vectors`.
     lobe_fits: u32,
     table_lobes: u32,
+    // `threshold` times `WARM_THRESHOLD_SHARE` (transport/mod.rs): where a warm start stops.
+    warm_threshold: f32,
 }
 
 struct State {
@@ -90,6 +97,9 @@ struct State {
     // The flux of the last ΔB, and how much it shrank from the one before.
     previous_flux: f32,
     tail_ratio: f32,
+    // 1 for a warm start, and the share of flux(B) its first bounce is taken to hold.
+    warm: u32,
+    reference_share: f32,
 }
 
 @group(0) @binding(0) var<uniform> packing: Layout;
@@ -132,28 +142,36 @@ fn group_index(group: vec3<u32>, count: vec3<u32>) -> u32 {
     return group.y * count.x + group.x;
 }
 
+// The loop's state reset and the products' dispatch sizes; `tail_ratio` the ratio the tail
+// starts from.
+fn reset_state(warm: bool, tail_ratio: f32) {
+    let patches = dispatch_size(row_groups(packing.patches, ROW_LANES));
+    state.patch_groups = patches.x;
+    state.patch_groups_y = patches.y;
+    state.patch_groups_z = 1u;
+    let clusters = dispatch_size(row_groups(packing.clusters, ROW_LANES));
+    state.cluster_groups = clusters.x;
+    state.cluster_groups_y = clusters.y;
+    state.cluster_groups_z = 1u;
+    let scattering = dispatch_size(row_groups(packing.patches, SCATTERING_LANES));
+    state.scattering_groups = scattering.x;
+    state.scattering_groups_y = scattering.y;
+    state.scattering_groups_z = 1u;
+    state.iterations = 0u;
+    state.first_flux = -1.0;
+    state.energy_left = 1.0;
+    state.previous_flux = 0.0;
+    state.tail_ratio = tail_ratio;
+    state.warm = select(0u, 1u, warm);
+    state.reference_share = 1.0 - tail_ratio;
+}
+
 // E = E⁰, ΔE = E⁰, B = 0; the loop's state reset; the products' dispatch sizes.
 @compute @workgroup_size(64)
 fn seed(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if i == 0u {
-        let patches = dispatch_size(row_groups(packing.patches, ROW_LANES));
-        state.patch_groups = patches.x;
-        state.patch_groups_y = patches.y;
-        state.patch_groups_z = 1u;
-        let clusters = dispatch_size(row_groups(packing.clusters, ROW_LANES));
-        state.cluster_groups = clusters.x;
-        state.cluster_groups_y = clusters.y;
-        state.cluster_groups_z = 1u;
-        let scattering = dispatch_size(row_groups(packing.patches, SCATTERING_LANES));
-        state.scattering_groups = scattering.x;
-        state.scattering_groups_y = scattering.y;
-        state.scattering_groups_z = 1u;
-        state.iterations = 0u;
-        state.first_flux = -1.0;
-        state.energy_left = 1.0;
-        state.previous_flux = 0.0;
-        state.tail_ratio = 0.0;
+        reset_state(false, 0.0);
     }
     if i >= packing.patches {
         return;
@@ -163,6 +181,21 @@ fn seed(@builtin(global_invocation_id) id: vec3<u32>) {
     // K takes what the beam table does not carry (`DirectLight::tabled`).
     vectors[packing.delta_irradiance + i] = e - vectors[packing.tabled + i];
     vectors[packing.exitance + i] = vec4(0.0);
+}
+
+// A warm start: E = E⁰, ΔB = B' (the last solution, kept in B) for `cluster_means` and
+// `gather_warm`; the tail starts from the last solution's ratio.
+@compute @workgroup_size(64)
+fn seed_warm(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i == 0u {
+        reset_state(true, clamp(state.tail_ratio, 0.0, packing.max_tail_ratio));
+    }
+    if i >= packing.patches {
+        return;
+    }
+    vectors[packing.irradiance + i] = vectors[packing.direct + i];
+    vectors[packing.delta_exitance + i] = vectors[packing.exitance + i];
 }
 
 fn rgb(at: u32) -> vec4<f32> {
@@ -358,6 +391,8 @@ fn exit_lobe(normal: vec3<f32>, mean: vec3<f32>, far: f32) -> Lobe {
 
 var<workgroup> lanes: array<vec4<f32>, 64>;
 var<workgroup> flux: array<f32, 64>;
+// flux(B) of a warm start's first bounce.
+var<workgroup> exitance_flux: array<f32, 64>;
 
 // The sum of `part` over the `row_lanes` threads of `local`'s row, for every thread of the
 // workgroup (all of whose threads must call it: it holds barriers).
@@ -406,8 +441,10 @@ fn scattering_row_part(row: u32, lane: u32) -> vec4<f32> {
 }
 
 // ΔB = K ΔE (+ S⁰ on the first bounce); B += ΔB; each workgroup's share of
-// flux(ΔB) = Σ A_i (ΔB.r + ΔB.g + ΔB.b).
-fn scatter_rows(local: u32, group: u32, first: bool) {
+// flux(ΔB) = Σ A_i (ΔB.r + ΔB.g + ΔB.b) in `partials`. Warm (`warm`): the absolute flux,
+// Σ A_i (|ΔB.r| + |ΔB.g| + |ΔB.b|); its first bounce is the whole map, B = K ΔE + S⁰ + T x
+// and ΔB = B − B', with flux(B) in `partials` after the increments'.
+fn scatter_rows(local: u32, group: u32, first: bool, warm: bool) {
     let row = group * (WORKGROUP / SCATTERING_LANES) + local / SCATTERING_LANES;
     let lane = local % SCATTERING_LANES;
     var part = vec4(0.0);
@@ -416,24 +453,39 @@ fn scatter_rows(local: u32, group: u32, first: bool) {
     }
     var sum = row_sum(local, part, SCATTERING_LANES);
     var own = 0.0;
+    var own_exitance = 0.0;
     if row < packing.patches && lane == 0u {
         if first {
             sum += vectors[packing.direct_exitance + row] + vectors[packing.table_exitance + row];
         }
+        let area = bitcast<f32>(matrices[packing.areas + row]);
+        if first && warm {
+            own_exitance = area * (sum.x + sum.y + sum.z);
+            sum -= vectors[packing.exitance + row];
+        }
         vectors[packing.delta_exitance + row] = sum;
         vectors[packing.exitance + row] += sum;
-        own = bitcast<f32>(matrices[packing.areas + row]) * (sum.x + sum.y + sum.z);
+        if warm {
+            let size = abs(sum);
+            own = area * (size.x + size.y + size.z);
+        } else {
+            own = area * (sum.x + sum.y + sum.z);
+        }
     }
     flux[local] = own;
+    exitance_flux[local] = own_exitance;
     workgroupBarrier();
     for (var stride = WORKGROUP / 2u; stride > 0u; stride /= 2u) {
         if local < stride {
             flux[local] += flux[local + stride];
+            exitance_flux[local] += exitance_flux[local + stride];
         }
         workgroupBarrier();
     }
-    if local == 0u && group < row_groups(packing.patches, SCATTERING_LANES) {
+    let groups = row_groups(packing.patches, SCATTERING_LANES);
+    if local == 0u && group < groups {
         partials[group] = flux[0];
+        partials[groups + group] = exitance_flux[0];
     }
 }
 
@@ -441,18 +493,33 @@ fn scatter_rows(local: u32, group: u32, first: bool) {
 fn scatter_first(@builtin(local_invocation_index) local: u32,
                  @builtin(workgroup_id) group: vec3<u32>,
                  @builtin(num_workgroups) count: vec3<u32>) {
-    scatter_rows(local, group_index(group, count), true);
+    scatter_rows(local, group_index(group, count), true, false);
 }
 
 @compute @workgroup_size(64)
 fn scatter(@builtin(local_invocation_index) local: u32,
            @builtin(workgroup_id) group: vec3<u32>,
            @builtin(num_workgroups) count: vec3<u32>) {
-    scatter_rows(local, group_index(group, count), false);
+    scatter_rows(local, group_index(group, count), false, false);
+}
+
+@compute @workgroup_size(64)
+fn scatter_first_warm(@builtin(local_invocation_index) local: u32,
+                      @builtin(workgroup_id) group: vec3<u32>,
+                      @builtin(num_workgroups) count: vec3<u32>) {
+    scatter_rows(local, group_index(group, count), true, true);
+}
+
+@compute @workgroup_size(64)
+fn scatter_warm(@builtin(local_invocation_index) local: u32,
+                @builtin(workgroup_id) group: vec3<u32>,
+                @builtin(num_workgroups) count: vec3<u32>) {
+    scatter_rows(local, group_index(group, count), false, true);
 }
 
 const DECIDE_THREADS: u32 = 256u;
 var<workgroup> totals: array<f32, DECIDE_THREADS>;
+var<workgroup> exitance_totals: array<f32, DECIDE_THREADS>;
 
 // Sums the partial fluxes and decides whether the loop goes on. (One workgroup, as wide as
 // WebGPU allows: each thread's loads are a serial chain, once per iteration.)
@@ -460,14 +527,18 @@ var<workgroup> totals: array<f32, DECIDE_THREADS>;
 fn decide(@builtin(local_invocation_index) local: u32) {
     let count = row_groups(packing.patches, SCATTERING_LANES);
     var own = 0.0;
+    var own_exitance = 0.0;
     for (var g = local; g < count; g += DECIDE_THREADS) {
         own += partials[g];
+        own_exitance += partials[count + g];
     }
     totals[local] = own;
+    exitance_totals[local] = own_exitance;
     workgroupBarrier();
     for (var stride = DECIDE_THREADS / 2u; stride > 0u; stride /= 2u) {
         if local < stride {
             totals[local] += totals[local + stride];
+            exitance_totals[local] += exitance_totals[local + stride];
         }
         workgroupBarrier();
     }
@@ -476,16 +547,24 @@ fn decide(@builtin(local_invocation_index) local: u32) {
         return;
     }
     let total = totals[0];
+    let warm = state.warm == 1u;
+    let threshold = select(packing.threshold, packing.warm_threshold, warm);
     var go_on: bool;
-    if state.first_flux < 0.0 {
+    if state.first_flux < 0.0 && !warm {
         state.first_flux = total;
         state.energy_left = select(0.0, 1.0, total > 0.0);
         go_on = total > 0.0 && packing.max_iterations > 0u;
+    } else if state.first_flux < 0.0 {
+        // A warm start's first bounce: the whole map, counted as an iteration.
+        state.first_flux = exitance_totals[0] * state.reference_share;
+        state.iterations = 1u;
+        state.energy_left = select(0.0, total / state.first_flux, state.first_flux > 0.0);
+        go_on = state.energy_left > threshold && state.iterations < packing.max_iterations;
     } else {
         state.iterations += 1u;
         state.energy_left = total / state.first_flux;
         state.tail_ratio = select(0.0, total / state.previous_flux, state.previous_flux > 0.0);
-        go_on = state.energy_left > packing.threshold && state.iterations < packing.max_iterations;
+        go_on = state.energy_left > threshold && state.iterations < packing.max_iterations;
     }
     state.previous_flux = total;
     if !go_on {
@@ -538,6 +617,20 @@ fn gather(@builtin(local_invocation_index) local: u32,
                         packing.f_offsets, packing.f_columns, packing.f_values);
     if i.owner {
         vectors[packing.delta_irradiance + i.row] = i.sum;
+        vectors[packing.irradiance + i.row] += i.sum;
+    }
+}
+
+// A warm start's: ΔE = E⁰ − E_t + F [B', B'_clusters] for `scatter_first_warm`; E += F B'.
+@compute @workgroup_size(64)
+fn gather_warm(@builtin(local_invocation_index) local: u32,
+               @builtin(workgroup_id) group: vec3<u32>,
+               @builtin(num_workgroups) count: vec3<u32>) {
+    let i = scalar_rows(local, group, count, packing.patches,
+                        packing.f_offsets, packing.f_columns, packing.f_values);
+    if i.owner {
+        let scattered = vectors[packing.direct + i.row] - vectors[packing.tabled + i.row];
+        vectors[packing.delta_irradiance + i.row] = scattered + i.sum;
         vectors[packing.irradiance + i.row] += i.sum;
     }
 }

@@ -83,6 +83,8 @@ struct Layout {
     // in `vectors` (5 vec4s a patch: per channel axis and κ, the norms, the light from afar).
     lobe_fits: u32,
     table_lobes: u32,
+    // Where a warm start stops: `threshold` × `WARM_THRESHOLD_SHARE`.
+    warm_threshold: f32,
 }
 
 /// What the iteration needs of a patch to give the deep field's exit law its axis each frame
@@ -175,6 +177,8 @@ struct State {
     scattering_groups: [u32; 3],
     previous_flux: f32,
     tail_ratio: f32,
+    warm: u32,
+    reference_share: f32,
 }
 
 /// How the GPU iteration stops.
@@ -200,6 +204,11 @@ pub struct GpuTransport {
     extrapolate: ComputePipeline,
     restrict: ComputePipeline,
     gather: ComputePipeline,
+    // A warm start's (`EnergyTransport::solve_from`).
+    seed_warm: ComputePipeline,
+    gather_warm: ComputePipeline,
+    scatter_first_warm: ComputePipeline,
+    scatter_warm: ComputePipeline,
     table_late: ComputePipeline,
     table_rows: ComputePipeline,
 }
@@ -327,6 +336,7 @@ impl GpuTransport {
             threshold: limits.threshold,
             max_iterations: limits.max_iterations,
             max_tail_ratio: super::transport::MAX_TAIL_RATIO,
+            warm_threshold: limits.threshold * super::transport::WARM_THRESHOLD_SHARE,
             f_offsets: push(&mut words, f.row_offsets.iter().copied()),
             f_columns: push(&mut words, f.columns.iter().copied()),
             f_values: push(&mut words, f.values.iter().map(|v| v.to_bits())),
@@ -413,9 +423,10 @@ impl GpuTransport {
         });
         let partials = device.create_buffer(&BufferDescriptor {
             label: Some("translucency_partial_fluxes"),
-            // One per workgroup of the K product: at most one per patch whatever its lanes
-            // a row (`SCATTERING_LANES` in the shader).
-            size: (n.max(1) as u64) * 4,
+            // Two per workgroup of the K product (the increments' flux, and a warm start's
+            // flux(B) after them): at most one workgroup per patch whatever its lanes a row
+            // (`SCATTERING_LANES` in the shader).
+            size: (n.max(1) as u64) * 8,
             usage: BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
@@ -486,6 +497,10 @@ impl GpuTransport {
             extrapolate: pipeline("extrapolate", &control),
             restrict: pipeline("cluster_means", &products),
             gather: pipeline("gather", &products),
+            seed_warm: pipeline("seed_warm", &control),
+            gather_warm: pipeline("gather_warm", &products),
+            scatter_first_warm: pipeline("scatter_first_warm", &products),
+            scatter_warm: pipeline("scatter_warm", &products),
             table_late: pipeline("table_late", &products),
             table_rows: pipeline("table_rows", &products),
         }
@@ -521,8 +536,11 @@ impl GpuTransport {
         }
     }
 
-    /// Records one frame's iteration from the direct irradiance last written.
-    pub fn record(&self, encoder: &mut CommandEncoder) {
+    /// Records one frame's iteration from the direct irradiance last written: from zero, or
+    /// (`warm`) from the exitance the last recorded iteration left, as
+    /// [`EnergyTransport::solve_from`] does (`warm` only after one was recorded; before, the
+    /// exitance is not this transport's).
+    pub fn record(&self, encoder: &mut CommandEncoder, warm: bool) {
         let n = self.layout.patches;
         if n == 0 {
             return;
@@ -547,12 +565,26 @@ impl GpuTransport {
                 pass.set_pipeline(&self.table_rows);
                 pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
             }
-            pass.set_pipeline(&self.seed);
-            pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
-            pass.set_pipeline(&self.scatter_first);
+            if warm {
+                // E = E⁰ + F B', ΔE = E⁰ − E_t + F B', B = K ΔE + S⁰ + T x, ΔB = B − B'.
+                pass.set_pipeline(&self.seed_warm);
+                pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
+                if self.layout.clusters > 0 {
+                    pass.set_pipeline(&self.restrict);
+                    pass.dispatch_workgroups_indirect(&self.state, cluster_args);
+                }
+                pass.set_pipeline(&self.gather_warm);
+                pass.dispatch_workgroups_indirect(&self.state, patch_args);
+                pass.set_pipeline(&self.scatter_first_warm);
+            } else {
+                pass.set_pipeline(&self.seed);
+                pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
+                pass.set_pipeline(&self.scatter_first);
+            }
             pass.dispatch_workgroups_indirect(&self.state, scattering_args);
             pass.set_pipeline(&self.decide);
             pass.dispatch_workgroups(1, 1, 1);
+            let scatter = if warm { &self.scatter_warm } else { &self.scatter };
             for _ in 0..self.layout.max_iterations {
                 if self.layout.clusters > 0 {
                     pass.set_pipeline(&self.restrict);
@@ -560,7 +592,7 @@ impl GpuTransport {
                 }
                 pass.set_pipeline(&self.gather);
                 pass.dispatch_workgroups_indirect(&self.state, patch_args);
-                pass.set_pipeline(&self.scatter);
+                pass.set_pipeline(scatter);
                 pass.dispatch_workgroups_indirect(&self.state, scattering_args);
                 pass.set_pipeline(&self.decide);
                 pass.dispatch_workgroups(1, 1, 1);
@@ -629,7 +661,7 @@ impl GpuTransport {
     }
 
     /// The buffer holding the iteration's state (`iterations: u32` at byte 24,
-    /// `energy_left: f32` at byte 32, `tail_ratio: f32` at byte 52).
+    /// `energy_left: f32` at byte 32, `tail_ratio: f32` at byte 52, `warm: u32` at byte 56).
     pub fn state(&self) -> &Buffer {
         &self.state
     }
