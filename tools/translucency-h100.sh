@@ -3,7 +3,8 @@
 # the examples into /tmp/bin: the precompute of the issue's 20 k budget with and without the
 # beam table (this machine's cores), and the passes' GPU time per frame at 1920×1080 with the
 # light moving every frame and with it still, without and with the beam table (its exit lobes
-# on, the default). As Bevy's release builds run it: wgpu's indirect-call validation off.
+# on, the default), warm-started (the default) and, moving without the table, cold. As Bevy's
+# release builds run it: wgpu's indirect-call validation off.
 #
 # Here:   bash tools/gpu-pack.sh translucent translucent_precompute
 # There:  bash tools/gpu-run.sh bash tools/translucency-h100.sh
@@ -27,3 +28,7 @@ for table in "" "--beam-table"; do
     echo "${table:-no table} ${motion:-lights still}: $(grep -E 'precomputed|average' "$OUT/$name.log" | tr '\n' ' ')"
   done
 done
+# The warm start's A/B (TranslucencySettings::warm_start; on above): the light moving, cold.
+timeout 240 "$BIN/translucent" --headless --size "$SIZE" --patches "$PATCHES" --frames "$FRAMES" \
+  --swing --warm-start false --out "$OUT/cold_moving" > "$OUT/cold_moving.log" 2>&1
+echo "no table, light moving, cold starts: $(grep -E 'precomputed|average' "$OUT/cold_moving.log" | tr '\n' ' ')"
