@@ -64,7 +64,7 @@ struct Cli {
     /// objects (the `translucent` example's swing at 60 frames a second) and report on stderr
     /// each frame's products and distance from the converged exitance, warm-started from the
     /// last frame (`EnergyTransport::solve_from`) against a cold start, at the plugin's
-    /// defaults (1e-2, at most 16)
+    /// defaults (1e-2, at most 16); then the same for a quarter turn at once
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=1000))]
     warm_frames: u32,
 }
@@ -272,5 +272,20 @@ fn warm_starts(
         cold.0 as f32 / frames as f32,
         cold.1,
         cold.2,
+    );
+    // And a jump: the spot a quarter turn on from the last frame.
+    let irradiance = direct_irradiance(patches, &spot(frames as f32 * 0.013 + std::f32::consts::FRAC_PI_2), rays);
+    let direct = bevy_mesostructure::translucency::DirectLight { irradiance, ..default() };
+    let exact = transport.solve_with(&direct, 1e-7, 1000);
+    let (jump_cold, jump_warm) = (
+        transport.solve_with(&direct, threshold, cap),
+        transport.solve_from(&direct, threshold, cap, last.as_ref()),
+    );
+    eprintln!(
+        "budget {budget}: a quarter turn at once: warm {} products, {:.2e} from the converged B; cold {}, {:.2e}",
+        jump_warm.iterations,
+        off(&jump_warm.exitance, &exact.exitance),
+        jump_cold.iterations,
+        off(&jump_cold.exitance, &exact.exitance),
     );
 }

@@ -85,7 +85,8 @@ pub struct TranslucencySettings {
     /// from zero (`EnergyTransport::solve_from`): a light that moves a little each frame
     /// then takes 3 – 7 products instead of 10 in the room of `docs/translucent.md`, as
     /// close to the converged exitance (it stops at a tenth of `iteration_threshold`); a
-    /// sudden change takes up to 16 (changing it rebuilds nothing).
+    /// quarter turn at once took 8, and a sudden change may take up to `max_iterations`
+    /// (changing it rebuilds nothing).
     pub warm_start: bool,
     /// How the transport is built.
     pub transport: TransportSettings,
