@@ -138,6 +138,26 @@ fn spot_round_the_ball(angle: f32) -> PatchLight {
     }
 }
 
+/// `cpu`'s brightest channel, the worst channel of `gpu`'s exitance against it, and how many
+/// patches `gpu` holds.
+fn peak_and_worst(
+    device: &RenderDevice,
+    queue: &RenderQueue,
+    gpu: &GpuTransport,
+    cpu: &[Vec3],
+) -> (f32, f32, usize) {
+    let (buffer, range) = gpu.exitance();
+    let bytes = read_back(device, queue, buffer, range.start, range.end - range.start);
+    let exitance: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+    let peak = cpu.iter().map(|b| b.max_element()).fold(0.0, f32::max);
+    let worst = exitance
+        .iter()
+        .zip(cpu)
+        .map(|(g, c)| (Vec3::new(g[0], g[1], g[2]) - *c).abs().max_element())
+        .fold(0.0, f32::max);
+    (peak, worst, exitance.len())
+}
+
 #[test]
 fn the_gpu_iteration_matches_the_cpu_oracle() {
     if !gpu_or_skip() {
@@ -194,26 +214,8 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
             "{limits:?}: tail ratio {tail_ratio} on the GPU, {} on the CPU",
             cpu.tail_ratio
         );
-        let (buffer, range) = gpu.exitance();
-        let bytes = read_back(
-            &device,
-            &queue,
-            buffer,
-            range.start,
-            range.end - range.start,
-        );
-        let exitance: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
-        assert_eq!(exitance.len(), n);
-        let peak = cpu
-            .exitance
-            .iter()
-            .map(|b| b.max_element())
-            .fold(0.0, f32::max);
-        let worst = exitance
-            .iter()
-            .zip(&cpu.exitance)
-            .map(|(g, c)| (Vec3::new(g[0], g[1], g[2]) - *c).abs().max_element())
-            .fold(0.0, f32::max);
+        let (peak, worst, len) = peak_and_worst(&device, &queue, &gpu, &cpu.exitance);
+        assert_eq!(len, n);
         eprintln!(
             "{limits:?} {row_lanes:?}: {iterations} iterations, worst |GPU − CPU| {:.2e} of peak {peak:.3e}",
             worst / peak
@@ -253,15 +255,7 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
             "{row_lanes:?}: tail ratio {tail_ratio} on the GPU, {} on the CPU",
             cpu.tail_ratio
         );
-        let (buffer, range) = gpu.exitance();
-        let bytes = read_back(&device, &queue, buffer, range.start, range.end - range.start);
-        let exitance: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
-        let peak = cpu.exitance.iter().map(|b| b.max_element()).fold(0.0, f32::max);
-        let worst = exitance
-            .iter()
-            .zip(&cpu.exitance)
-            .map(|(g, c)| (Vec3::new(g[0], g[1], g[2]) - *c).abs().max_element())
-            .fold(0.0, f32::max);
+        let (peak, worst, _) = peak_and_worst(&device, &queue, &gpu, &cpu.exitance);
         eprintln!(
             "warm {row_lanes:?}: {iterations} iterations (cold {}), worst |GPU − CPU| {:.2e} of peak {peak:.3e}",
             cold.iterations,
@@ -350,6 +344,10 @@ fn the_gpu_beam_table_matches_the_cpu_oracle() {
     };
     let cpu = transport.solve_with(&direct, limits.threshold, limits.max_iterations);
     let peak = cpu.exitance.iter().map(|b| b.max_element()).fold(0.0, f32::max);
+    // The worst channel of `gpu`'s exitance against a CPU solution's.
+    let worst_against = |gpu: &GpuTransport, cpu: &[Vec3]| {
+        exitance_of(gpu).iter().zip(cpu).map(|(g, c)| (*g - *c).abs().max_element()).fold(0.0, f32::max)
+    };
 
     // (1) The CPU's direct light, iterated on the GPU, with the table's light flow.
     let settings = TransportSettings { beam_table: Some(table), ..default() };
@@ -362,11 +360,7 @@ fn the_gpu_beam_table_matches_the_cpu_oracle() {
     let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
     gpu.record(&mut encoder, false);
     queue.submit([encoder.finish()]);
-    let worst = exitance_of(&gpu)
-        .iter()
-        .zip(&cpu.exitance)
-        .map(|(g, c)| (*g - *c).abs().max_element())
-        .fold(0.0, f32::max);
+    let worst = worst_against(&gpu, &cpu.exitance);
     eprintln!("iteration with the table: worst |GPU − CPU| {:.2e} of the peak", worst / peak);
     assert_eq!(exitance_of(&gpu).len(), n);
     assert!(peak > 0.0 && worst <= 1e-5 * peak, "worst {worst} of {peak}");
@@ -381,11 +375,7 @@ fn the_gpu_beam_table_matches_the_cpu_oracle() {
         warm_gpu.record(&mut encoder, warm);
         queue.submit([encoder.finish()]);
     }
-    let worst = exitance_of(&warm_gpu)
-        .iter()
-        .zip(&warm_cpu.exitance)
-        .map(|(g, c)| (*g - *c).abs().max_element())
-        .fold(0.0, f32::max);
+    let worst = worst_against(&warm_gpu, &warm_cpu.exitance);
     eprintln!(
         "warm with the table: {} iterations (cold {}), worst |GPU − CPU| {:.2e} of the peak",
         warm_cpu.iterations,
