@@ -32,8 +32,9 @@ use std::{io::Write, path::PathBuf, time::Instant};
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     beam_table::{BeamTable, BeamTableSettings},
-    DiffusionKernel, EnergyTransport, PatchLight, PatchObject, SceneRays, TransportSettings,
-    direct_irradiance, resample_into_patches_with_caps, translucent_patch_cap,
+    DiffusionKernel, DirectLight, EnergyTransport, PatchLight, PatchObject, Patches, SceneRays,
+    TranslucencySettings, TransportSettings, TransportSolution, direct_irradiance,
+    resample_into_patches_with_caps, translucent_patch_cap,
 };
 
 /// Precompute cost of the translucency transport per patch budget, into a CSV.
@@ -234,13 +235,13 @@ iterations,solve_ms,threads,shadow_ray_injection_ms";
 /// solution and cold, both against the converged exitance (relative L1 of `B`).
 fn warm_starts(
     transport: &EnergyTransport,
-    patches: &bevy_mesostructure::translucency::Patches,
+    patches: &Patches,
     rays: &SceneRays,
     spot: &dyn Fn(f32) -> [PatchLight; 1],
     frames: u32,
     budget: u32,
 ) {
-    let defaults = bevy_mesostructure::translucency::TranslucencySettings::default();
+    let defaults = TranslucencySettings::default();
     let (threshold, cap) = (defaults.iteration_threshold, defaults.max_iterations);
     let off = |b: &[Vec3], exact: &[Vec3]| {
         let difference: Vec<Vec3> = b.iter().zip(exact).map(|(x, y)| *x - *y).collect();
@@ -250,12 +251,12 @@ fn warm_starts(
     let (mut warm, mut cold) = ((0u32, 0u32, 0.0f32), (0u32, 0u32, 0.0f32));
     for frame in 0..=frames {
         let irradiance = direct_irradiance(patches, &spot(frame as f32 * 0.013), rays);
-        let direct = bevy_mesostructure::translucency::DirectLight { irradiance, ..default() };
+        let direct = DirectLight { irradiance, ..default() };
         let exact = transport.solve_with(&direct, 1e-7, 1000);
         let from_cold = transport.solve_with(&direct, threshold, cap);
         let from_last = transport.solve_from(&direct, threshold, cap, last.as_ref());
         if frame > 0 {
-            let tally = |(sum, most, worst): (u32, u32, f32), s: &bevy_mesostructure::translucency::TransportSolution| {
+            let tally = |(sum, most, worst): (u32, u32, f32), s: &TransportSolution| {
                 (sum + s.iterations, most.max(s.iterations), worst.max(off(&s.exitance, &exact.exitance)))
             };
             warm = tally(warm, &from_last);
@@ -275,7 +276,7 @@ fn warm_starts(
     );
     // And a jump: the spot a quarter turn on from the last frame.
     let irradiance = direct_irradiance(patches, &spot(frames as f32 * 0.013 + std::f32::consts::FRAC_PI_2), rays);
-    let direct = bevy_mesostructure::translucency::DirectLight { irradiance, ..default() };
+    let direct = DirectLight { irradiance, ..default() };
     let exact = transport.solve_with(&direct, 1e-7, 1000);
     let (jump_cold, jump_warm) = (
         transport.solve_with(&direct, threshold, cap),

@@ -231,8 +231,6 @@ pub struct TranslucencyGpu {
     injection_pending: bool,
     /// An iteration of this transport was recorded: the next may start from its exitance.
     solved: bool,
-    /// [`TranslucencySettings::warm_start`](super::TranslucencySettings::warm_start), this frame's.
-    warm_start: bool,
     transport: Option<GpuTransport>,
     injection: Option<GpuInjection>,
     gather: Option<(Buffer, Buffer, Buffer)>,
@@ -279,7 +277,6 @@ pub fn prepare_translucency(
         gpu.lights_generation = 0;
     }
     let gpu = &mut *gpu;
-    gpu.warm_start = frame.settings.warm_start;
     let Some(transport) = &gpu.transport else {
         return;
     };
@@ -444,6 +441,7 @@ pub fn translucency_injection_pass(
 /// one), timed as `translucency/iteration`.
 pub fn translucency_iteration_pass(
     _view: ViewQuery<&TranslucencyCamera>,
+    frame: Res<TranslucencyFrame>,
     mut gpu: ResMut<TranslucencyGpu>,
     mut ctx: RenderContext,
 ) {
@@ -456,7 +454,7 @@ pub fn translucency_iteration_pass(
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let span = diagnostics.time_span(ctx.command_encoder(), "translucency/iteration");
-    transport.record(ctx.command_encoder(), gpu.solved && gpu.warm_start);
+    transport.record(ctx.command_encoder(), gpu.solved && frame.settings.warm_start);
     span.end(ctx.command_encoder());
     gpu.iteration_pending = false;
     gpu.solved = true;

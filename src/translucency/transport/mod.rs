@@ -389,9 +389,10 @@ pub struct TransportSolution {
 /// A warm start ([`EnergyTransport::solve_from`]) stops at this share of the threshold: its
 /// increments are differences between two lights' solutions, not the dominant mode the
 /// geometric tail assumes, so stopped at the threshold itself they left 0.1 – 0.6 % of `B`
-/// in error over a chain of frames; at a tenth, 0.007 – 0.035 % (a cold start's: 0.024 %)
-/// in 3 – 7 products instead of 10 (the room of `docs/translucent.md`, 4000 budget, the
-/// spot moving 0.75° a frame).
+/// in error over a chain of frames (a one-off trial); at a tenth, the room of
+/// `docs/translucent.md` with its spot turning 0.75° a frame takes 2.3 – 2.6 products a frame
+/// instead of 10, at worst 6.6e-4 from the converged `B` (a cold start's: 2.8e-4;
+/// `translucent_precompute --warm-frames 30`).
 pub const WARM_THRESHOLD_SHARE: f32 = 0.1;
 
 /// The most the iteration's tail ratio is trusted: 0.95 adds at most 19 last increments.
@@ -760,31 +761,26 @@ impl EnergyTransport {
             }
         }
         let mut exitance = delta.clone();
-        // Cold: the first bounce's flux, and the increments' (never negative but for a
-        // profile's negative correction). Warm: B₁'s share the first bounce holds, and the
-        // increments' absolute flux.
-        let (first, mut iterations) = match previous {
-            None => (self.flux(&exitance), 0),
-            Some(previous) => {
-                let first = self.flux(&exitance) * (1.0 - previous.tail_ratio.clamp(0.0, MAX_TAIL_RATIO));
-                for (d, b) in delta.iter_mut().zip(&previous.exitance) {
-                    *d -= *b;
+        // Cold: the first bounce's flux, the increments' flux (never negative but for a
+        // profile's negative correction), the ratio found by the loop. Warm: B₁'s share the
+        // first bounce holds, the increments' absolute flux, the last solution's ratio until
+        // the increments show their own; the application counted as an iteration.
+        let (first, size, threshold, mut tail_ratio, mut iterations): (f32, fn(&Self, &[Vec3]) -> f32, f32, f32, u32) =
+            match previous {
+                None => (self.flux(&exitance), Self::flux, threshold, 0.0, 0),
+                Some(previous) => {
+                    let ratio = previous.tail_ratio.clamp(0.0, MAX_TAIL_RATIO);
+                    for (d, b) in delta.iter_mut().zip(&previous.exitance) {
+                        *d -= *b;
+                    }
+                    let first = self.flux(&exitance) * (1.0 - ratio);
+                    (first, Self::absolute_flux, threshold * WARM_THRESHOLD_SHARE, ratio, 1)
                 }
-                (first, 1)
-            }
-        };
-        let size = |delta: &[Vec3]| match previous {
-            None => self.flux(delta),
-            Some(_) => self.absolute_flux(delta),
-        };
-        let start = if previous.is_some() { size(&delta) } else { first };
-        let threshold = if previous.is_some() { threshold * WARM_THRESHOLD_SHARE } else { threshold };
+            };
+        let start = size(self, &delta);
         // Nothing lit: nothing to iterate.
         let mut energy_left = if first > 0.0 { start / first } else { 0.0 };
-        // A warm start's increments shrink as the last solution's did until they show their
-        // own ratio.
-        let warm_ratio = previous.map_or(0.0, |p| p.tail_ratio.clamp(0.0, MAX_TAIL_RATIO));
-        let (mut previous_flux, mut tail_ratio) = (start, warm_ratio);
+        let mut previous_flux = start;
         while iterations < max_iterations && energy_left > threshold {
             let gathered = self.gather(&delta);
             for (e, g) in irradiance.iter_mut().zip(&gathered) {
@@ -795,7 +791,7 @@ impl EnergyTransport {
                 *b += *d;
             }
             iterations += 1;
-            let flux = size(&delta);
+            let flux = size(self, &delta);
             energy_left = flux / first;
             tail_ratio = if previous_flux > 0.0 { flux / previous_flux } else { 0.0 };
             previous_flux = flux;
