@@ -2,7 +2,7 @@
 //   ΔB₀ = K E⁰ + S⁰;  repeat { ΔB_c = cluster means of ΔB;  ΔE = F [ΔB, ΔB_c];  E += ΔE;
 //                         ΔB = K ΔE;  B += ΔB }  until flux(ΔB) ≤ threshold · flux(ΔB₀);
 //   then B += ΔB r/(1 − r), the geometric tail (r = flux(ΔB) / flux(the ΔB before)).
-// The same arithmetic as `EnergyTransport::solve` (src/translucency/transport/mod.rs), each
+// The same arithmetic as `EnergyTransport::solve` (src/translucency/transport/solve.rs), each
 // row's sum in another order (a few lanes' partial sums, then a tree). The loop is
 // recorded max_iterations times; `decide` zeroes the indirect dispatch arguments once the
 // energy still moving is below the threshold, so the rest of the recorded loop costs nothing.
@@ -36,7 +36,7 @@ struct Layout {
     delta_irradiance: u32,
     // The direct light's exitance besides K E⁰ (single scattering at each beam's incidence).
     direct_exitance: u32,
-    // `MAX_TAIL_RATIO` (transport/mod.rs): the most the tail ratio is trusted.
+    // `MAX_TAIL_RATIO` (transport/solve.rs): the most the tail ratio is trusted.
     max_tail_ratio: f32,
     // The beam table (`BeamTable` in beam_table/mod.rs): slots and directions a slot; its CSR
     // arrays (early columns over `beam_light`, late ones over `beam_late`, RGB values) and
@@ -74,7 +74,7 @@ struct Layout {
     // `vectors`.
     lobe_fits: u32,
     table_lobes: u32,
-    // `threshold` times `WARM_THRESHOLD_SHARE` (transport/mod.rs): where a warm start stops.
+    // `threshold` times `WARM_THRESHOLD_SHARE` (transport/solve.rs): where a warm start stops.
     warm_threshold: f32,
 }
 
@@ -636,7 +636,7 @@ fn gather_warm(@builtin(local_invocation_index) local: u32,
 }
 
 // After the loop: B += the geometric tail of the last ΔB, ΔB r/(1 − r) (`geometric_tail` in
-// transport/mod.rs), r the last shrink of the increments' flux.
+// transport/solve.rs), r the last shrink of the increments' flux.
 @compute @workgroup_size(64)
 fn extrapolate(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
