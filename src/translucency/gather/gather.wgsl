@@ -89,11 +89,11 @@ fn single_scattering_radiance(alpha: vec3<f32>, eta_in: f32, e: vec3<f32>, mu0: 
 // `ExitLaw::factor_towards` (transport.rs) in one channel: the share `lobe_exitance / B`
 // leaves by the channel's exit lobe (`lobe`: axis and κ; `ExitLobe::factor`), the rest
 // `B' = B − lobe_exitance` by 1 + D (s − 1), D = g·clamp(1 − A E⁰/B'), s the deep law about
-// the channel's `flow` where it has one (axis, 1/N), else about the normal at the exit
-// cosine mu.
+// the channel's `flow` where it has one (axis, 1/N), else about the normal
+// (`shape_about_normal`, `deep_exit_shape` at the pixel's exit cosine).
 fn exit_factor(law: vec4<f32>, flow: vec4<f32>, lobe: vec4<f32>, lobe_norm: f32, lobe_exitance: f32,
                local_albedo: f32, eta: f32, b: f32, e0: f32, n: vec3<f32>, towards: vec3<f32>,
-               mu: f32) -> f32 {
+               shape_about_normal: f32) -> f32 {
     var share = 0.0;
     if lobe_norm > 0.0 && b > 0.0 {
         share = clamp(lobe_exitance / b, 0.0, 1.0);
@@ -104,7 +104,7 @@ fn exit_factor(law: vec4<f32>, flow: vec4<f32>, lobe: vec4<f32>, lobe_norm: f32,
         return lobed + (1.0 - share);
     }
     let deep = law.w * clamp(1.0 - local_albedo * e0 / rest, 0.0, 1.0);
-    var shape = deep_exit_shape(law, eta, mu);
+    var shape = shape_about_normal;
     if any(flow != vec4(0.0)) {
         shape = deep_exit_shape_about(law, eta, n, flow.xyz, towards) * flow.w;
     }
@@ -128,30 +128,136 @@ fn patch_flow(i: u32, channel: u32) -> vec4<f32> {
     return vectors[params.flow + 3u * i + channel];
 }
 
-// The light the patches give the pixel `p` (centre `position`), times the exposure; `w` = 0
-// where no patch reaches it (or nothing was drawn there).
-fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
+// What a pixel shows of the surface: its world point, unit normal, the unit direction and
+// exit cosine towards the camera; `valid` false where nothing was drawn.
+struct Surface {
+    valid: bool,
+    x: vec3<f32>,
+    n: vec3<f32>,
+    towards: vec3<f32>,
+    mu: f32,
+}
+
+fn pixel_surface(p: vec2<i32>, position: vec2<f32>) -> Surface {
     let depth = textureLoad(depth_prepass, p, 0);
     if depth <= 0.0 {
-        return vec4(0.0);
+        return Surface(false, vec3(0.0), vec3(0.0), vec3(0.0), 0.0);
     }
     let uv = (position - view.viewport.xy) / view.viewport.zw;
     let ndc = vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
     let world = view.world_from_clip * ndc;
     let x = world.xyz / world.w;
     let n = normalize(textureLoad(normal_prepass, p, 0).xyz * 2.0 - 1.0);
-    // The exit direction and cosine towards the camera.
     let towards = normalize(view.world_position - x);
-    let mu = clamp(dot(n, towards), 0.0, 1.0);
+    return Surface(true, x, n, towards, clamp(dot(n, towards), 0.0, 1.0));
+}
 
-    var sum = vec3(0.0);
-    var weights = 0.0;
+// A pixel's sums over the patches that reach it, and the deep law's shape at its exit cosine
+// for the last medium met (`shape_key`: that medium's per-channel laws and η; the law about
+// the normal depends on the pixel and the medium only, so one evaluation serves all of that
+// medium's patches about it).
+struct Gathered {
+    sum: vec3<f32>,
+    weights: f32,
+    shape_key_r: vec4<f32>,
+    shape_key_g: vec4<f32>,
+    shape_key_b: vec4<f32>,
+    shape_key_eta: f32,
+    shape: vec3<f32>,
+}
+
+fn no_light() -> Gathered {
+    return Gathered(vec3(0.0), 0.0, vec4(-1.0), vec4(-1.0), vec4(-1.0), -1.0, vec3(1.0));
+}
+
+// Patch `i`'s light at the pixel `s`, if it reaches it.
+fn add_patch(i: u32, s: Surface, acc: ptr<function, Gathered>) {
+    let record = patches[i];
+    let d = record.centre.xyz - s.x;
+    let d2 = dot(d, d);
+    // Each patch reaches 1.5 of its own object's patch sizes (centre.w).
+    let r2 = record.centre.w * record.centre.w;
+    if d2 >= r2 {
+        return;
+    }
+    let agree = smoothstep(0.3, 0.9, dot(s.n, record.normal.xyz));
+    let falloff = 1.0 - d2 / r2;
+#ifdef PHOTON_DENSITY
+    // The seed's photons: power Φ = M·A under a kernel of unit integral,
+    // K(d) = 3/(πR²)(1 − d²/R²)² (`GatherMethod::PhotonDensity`).
+    let w = falloff * falloff * agree * 3.0 / (3.14159265358979 * r2) * record.normal.w;
+#else
+    let w = falloff * falloff * agree;
+#endif
+    if w <= 0.0 {
+        return;
+    }
+    let b_i = vectors[params.exitance + i].rgb;
+    let e0 = vectors[params.direct + i].rgb;
+    let eta = record.local_albedo.w;
+    if any(vec3(record.law_r.w, record.law_g.w, record.law_b.w) > vec3(0.0))
+        && !(all(record.law_r == (*acc).shape_key_r) && all(record.law_g == (*acc).shape_key_g)
+             && all(record.law_b == (*acc).shape_key_b) && eta == (*acc).shape_key_eta) {
+        (*acc).shape_key_r = record.law_r;
+        (*acc).shape_key_g = record.law_g;
+        (*acc).shape_key_b = record.law_b;
+        (*acc).shape_key_eta = eta;
+        (*acc).shape = vec3(
+            deep_exit_shape(record.law_r, eta, s.mu),
+            deep_exit_shape(record.law_g, eta, s.mu),
+            deep_exit_shape(record.law_b, eta, s.mu),
+        );
+    }
+    let shape = (*acc).shape;
+    let norms = patch_lobes(i, 3u);
+    let afar = patch_lobes(i, 4u);
+    let law = vec3(
+        exit_factor(record.law_r, patch_flow(i, 0u), patch_lobes(i, 0u), norms.r, afar.r,
+                    record.local_albedo.r, eta, b_i.r, e0.r, s.n, s.towards, shape.r),
+        exit_factor(record.law_g, patch_flow(i, 1u), patch_lobes(i, 1u), norms.g, afar.g,
+                    record.local_albedo.g, eta, b_i.g, e0.g, s.n, s.towards, shape.g),
+        exit_factor(record.law_b, patch_flow(i, 2u), patch_lobes(i, 2u), norms.b, afar.b,
+                    record.local_albedo.b, eta, b_i.b, e0.b, s.n, s.towards, shape.b),
+    );
+    (*acc).sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) * law / 3.14159265358979;
+    // Single scattering by the lit face (`BeamSingleScattering::radiance`): the patch's beams
+    // at this pixel's own incidence.
+    if any(record.single.rgb > vec3(0.0)) {
+        let travel = vectors[params.beam_direction + i].xyz;
+        if dot(travel, travel) > 0.0 {
+            let mu0 = dot(s.n, -normalize(travel));
+            let e = vectors[params.beam_irradiance + i].rgb * max(mu0, 0.0);
+            (*acc).sum += w * single_scattering_radiance(record.single.rgb, record.single.w, e, mu0, s.mu);
+        }
+    }
+    (*acc).weights += w;
+}
+
+// The light gathered, times the exposure; `w` = 0 where no patch reaches the pixel.
+fn finish(acc: Gathered) -> vec4<f32> {
+    if acc.weights <= 0.0 {
+        return vec4(0.0);
+    }
+#ifdef PHOTON_DENSITY
+    return vec4(acc.sum * view.exposure, 1.0);
+#else
+    return vec4(acc.sum / acc.weights * view.exposure, 1.0);
+#endif
+}
+
+// The light the patches give the pixel `s` by its own walk of the grids: the 27 cells about
+// it in each.
+fn gathered(s: Surface) -> vec4<f32> {
+    if !s.valid {
+        return vec4(0.0);
+    }
+    var acc = no_light();
     for (var level = 0u; level < params.levels; level += 1u) {
         let cell_size = bitcast<f32>(grid[4u * level]);
         let mask = grid[4u * level + 1u];
         let table = grid[4u * level + 2u];
         let members = grid[4u * level + 3u];
-        let centre_cell = vec3<i32>(floor(x / cell_size));
+        let centre_cell = vec3<i32>(floor(s.x / cell_size));
         for (var dz = -1; dz <= 1; dz += 1) {
             for (var dy = -1; dy <= 1; dy += 1) {
                 for (var dx = -1; dx <= 1; dx += 1) {
@@ -170,63 +276,13 @@ fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
                         if any(own_cell != cell) {
                             continue;
                         }
-                        let i = grid[member];
-                        let record = patches[i];
-                        let d = record.centre.xyz - x;
-                        let d2 = dot(d, d);
-                        // Each patch reaches 1.5 of its own object's patch sizes (centre.w).
-                        let r2 = record.centre.w * record.centre.w;
-                        if d2 >= r2 {
-                            continue;
-                        }
-                        let agree = smoothstep(0.3, 0.9, dot(n, record.normal.xyz));
-                        let falloff = 1.0 - d2 / r2;
-#ifdef PHOTON_DENSITY
-                        // The seed's photons: power Φ = M·A under a kernel of unit integral,
-                        // K(d) = 3/(πR²)(1 − d²/R²)² (`GatherMethod::PhotonDensity`).
-                        let w = falloff * falloff * agree * 3.0 / (3.14159265358979 * r2) * record.normal.w;
-#else
-                        let w = falloff * falloff * agree;
-#endif
-                        if w <= 0.0 {
-                            continue;
-                        }
-                        let b_i = vectors[params.exitance + i].rgb;
-                        let e0 = vectors[params.direct + i].rgb;
-                        let eta = record.local_albedo.w;
-                        let norms = patch_lobes(i, 3u);
-                        let afar = patch_lobes(i, 4u);
-                        let law = vec3(
-                            exit_factor(record.law_r, patch_flow(i, 0u), patch_lobes(i, 0u), norms.r,
-                                        afar.r, record.local_albedo.r, eta, b_i.r, e0.r, n, towards, mu),
-                            exit_factor(record.law_g, patch_flow(i, 1u), patch_lobes(i, 1u), norms.g,
-                                        afar.g, record.local_albedo.g, eta, b_i.g, e0.g, n, towards, mu),
-                            exit_factor(record.law_b, patch_flow(i, 2u), patch_lobes(i, 2u), norms.b,
-                                        afar.b, record.local_albedo.b, eta, b_i.b, e0.b, n, towards, mu),
-                        );
-                        sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) * law / 3.14159265358979;
-                        // Single scattering by the lit face (`BeamSingleScattering::radiance`):
-                        // the patch's beams at this pixel's own incidence.
-                        let travel = vectors[params.beam_direction + i].xyz;
-                        if any(record.single.rgb > vec3(0.0)) && dot(travel, travel) > 0.0 {
-                            let mu0 = dot(n, -normalize(travel));
-                            let e = vectors[params.beam_irradiance + i].rgb * max(mu0, 0.0);
-                            sum += w * single_scattering_radiance(record.single.rgb, record.single.w, e, mu0, mu);
-                        }
-                        weights += w;
+                        add_patch(grid[member], s, &acc);
                     }
                 }
             }
         }
     }
-    if weights <= 0.0 {
-        return vec4(0.0);
-    }
-#ifdef PHOTON_DENSITY
-    return vec4(sum * view.exposure, 1.0);
-#else
-    return vec4(sum / weights * view.exposure, 1.0);
-#endif
+    return finish(acc);
 }
 
 #ifdef COMPUTE_GATHER
@@ -235,20 +291,141 @@ fn gathered(p: vec2<i32>, position: vec2<f32>) -> vec4<f32> {
 @group(0) @binding(7) var lit: texture_2d<f32>;
 @group(0) @binding(8) var lit_out: texture_storage_2d<rgba16float, write>;
 
+// A workgroup's 8×8 pixels walk the grids once together (tiled culling, as Forward+ does for
+// lights): the cells about the box of their world points give the patches that reach the
+// box, and each pixel then takes its own from that list — instead of each pixel hashing its
+// own 27 cells a grid and walking their buckets, out of step with its neighbours. A tile
+// whose box spans more than `TILE_CELLS` cells of a grid (a depth edge) or reaches more than
+// `TILE_PATCHES` patches walks the grids pixel by pixel as the fragment form does.
+const TILE_PATCHES: u32 = 256u;
+const TILE_CELLS: u32 = 128u;
+
+// The tile's box as order-preserving bits of its corners' coordinates (min x y z, max x y z).
+var<workgroup> tile_box: array<atomic<u32>, 6>;
+var<workgroup> tile_count: atomic<u32>;
+var<workgroup> tile_overflow: atomic<u32>;
+var<workgroup> tile_patches: array<u32, TILE_PATCHES>;
+
+// f32 → u32 keeping the order (negatives flipped whole, positives' sign bit set).
+fn ordered_bits(f: f32) -> u32 {
+    let b = bitcast<u32>(f);
+    return select(b | 0x80000000u, ~b, (b & 0x80000000u) != 0u);
+}
+
+fn from_ordered_bits(u: u32) -> f32 {
+    return bitcast<f32>(select(~u, u & 0x7fffffffu, (u & 0x80000000u) != 0u));
+}
+
+// The patches of all grids that may reach the box [lo, hi] into `tile_patches`, the cells
+// shared among the workgroup's threads (`thread` of 64).
+fn collect_tile_patches(thread: u32, lo: vec3<f32>, hi: vec3<f32>) {
+    for (var level = 0u; level < params.levels; level += 1u) {
+        let cell_size = bitcast<f32>(grid[4u * level]);
+        let mask = grid[4u * level + 1u];
+        let table = grid[4u * level + 2u];
+        let members = grid[4u * level + 3u];
+        // A grid's cells are as wide as its widest reach: a patch reaching the box has its
+        // centre in the box grown by one cell (and a little, for rounding).
+        let first = vec3<i32>(floor(lo / cell_size - 1.001));
+        let last = vec3<i32>(floor(hi / cell_size + 1.001));
+        let extent = vec3<u32>(last - first + 1);
+        // (Each extent first: their product could wrap.)
+        if any(extent > vec3(TILE_CELLS)) || extent.x * extent.y * extent.z > TILE_CELLS {
+            atomicStore(&tile_overflow, 1u);
+            return;
+        }
+        let cells = extent.x * extent.y * extent.z;
+        for (var c = thread; c < cells; c += 64u) {
+            let cell = first + vec3<i32>(vec3(c % extent.x, (c / extent.x) % extent.y, c / (extent.x * extent.y)));
+            let b = bucket(cell, mask);
+            let start = grid[table + b];
+            let end = grid[table + b + 1u];
+            for (var k = start; k < end; k += 1u) {
+                let member = members + 4u * k;
+                let own_cell = bitcast<vec3<i32>>(vec3(grid[member + 1u], grid[member + 2u], grid[member + 3u]));
+                if any(own_cell != cell) {
+                    continue;
+                }
+                let i = grid[member];
+                let centre = patches[i].centre;
+                // The patch's distance from the box, against its reach (a little grown: the
+                // pixels' own test decides).
+                let out = max(max(lo - centre.xyz, centre.xyz - hi), vec3(0.0));
+                if dot(out, out) >= centre.w * centre.w * 1.0001 {
+                    continue;
+                }
+                let slot = atomicAdd(&tile_count, 1u);
+                if slot < TILE_PATCHES {
+                    tile_patches[slot] = i;
+                }
+            }
+        }
+    }
+}
+
 @compute @workgroup_size(8, 8, 1)
-fn gather_compute(@builtin(global_invocation_id) id: vec3<u32>) {
-    if any(id.xy >= textureDimensions(lit)) {
+fn gather_compute(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) thread: u32,
+) {
+    if thread == 0u {
+        for (var k = 0u; k < 3u; k += 1u) {
+            atomicStore(&tile_box[k], 0xffffffffu);
+            atomicStore(&tile_box[3u + k], 0u);
+        }
+        atomicStore(&tile_count, 0u);
+        atomicStore(&tile_overflow, 0u);
+    }
+    workgroupBarrier();
+    let inside = all(id.xy < textureDimensions(lit));
+    let p = vec2<i32>(id.xy);
+    var s = Surface(false, vec3(0.0), vec3(0.0), vec3(0.0), 0.0);
+    if inside {
+        s = pixel_surface(p, vec2<f32>(id.xy) + 0.5);
+    }
+    if s.valid {
+        atomicMin(&tile_box[0], ordered_bits(s.x.x));
+        atomicMin(&tile_box[1], ordered_bits(s.x.y));
+        atomicMin(&tile_box[2], ordered_bits(s.x.z));
+        atomicMax(&tile_box[3], ordered_bits(s.x.x));
+        atomicMax(&tile_box[4], ordered_bits(s.x.y));
+        atomicMax(&tile_box[5], ordered_bits(s.x.z));
+    }
+    workgroupBarrier();
+    let lo_bits = vec3(atomicLoad(&tile_box[0]), atomicLoad(&tile_box[1]), atomicLoad(&tile_box[2]));
+    let hi_bits = vec3(atomicLoad(&tile_box[3]), atomicLoad(&tile_box[4]), atomicLoad(&tile_box[5]));
+    // Some pixel of the tile shows a surface.
+    if all(lo_bits <= hi_bits) {
+        collect_tile_patches(
+            thread,
+            vec3(from_ordered_bits(lo_bits.x), from_ordered_bits(lo_bits.y), from_ordered_bits(lo_bits.z)),
+            vec3(from_ordered_bits(hi_bits.x), from_ordered_bits(hi_bits.y), from_ordered_bits(hi_bits.z)),
+        );
+    }
+    workgroupBarrier();
+    if !inside {
         return;
     }
-    let p = vec2<i32>(id.xy);
+    var added = vec4(0.0);
+    let count = atomicLoad(&tile_count);
+    if s.valid {
+        if atomicLoad(&tile_overflow) != 0u || count > TILE_PATCHES {
+            added = gathered(s);
+        } else {
+            var acc = no_light();
+            for (var k = 0u; k < count; k += 1u) {
+                add_patch(tile_patches[k], s, &acc);
+            }
+            added = finish(acc);
+        }
+    }
     let colour = textureLoad(lit, p, 0);
-    let added = gathered(p, vec2<f32>(id.xy) + 0.5);
     textureStore(lit_out, p, vec4(colour.rgb + added.rgb, colour.a));
 }
 #else
 @fragment
 fn gather(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    let added = gathered(vec2<i32>(floor(in.position.xy)), in.position.xy);
+    let added = gathered(pixel_surface(vec2<i32>(floor(in.position.xy)), in.position.xy));
     if added.w == 0.0 {
         discard;
     }
