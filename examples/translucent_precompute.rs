@@ -35,6 +35,7 @@ use bevy_mesostructure::translucency::{
     DiffusionKernel, DirectLight, EnergyTransport, PatchLight, PatchObject, Patches, SceneRays,
     TranslucencySettings, TransportSettings, TransportSolution, direct_irradiance,
     resample_into_patches_with_caps, translucent_patch_cap,
+    transport::{settle_frames, warm_iterations},
 };
 
 /// Precompute cost of the translucency transport per patch budget, into a CSV.
@@ -64,8 +65,9 @@ struct Cli {
     /// Also turn the spot this many frames by 0.75° each about the vertical through the
     /// objects (the `translucent` example's swing at 60 frames a second) and report on stderr
     /// each frame's products and distance from the converged exitance, warm-started from the
-    /// last frame (`EnergyTransport::solve_from`) against a cold start, at the plugin's
-    /// defaults (1e-2, at most 16); then the same for a quarter turn at once
+    /// last frame (`EnergyTransport::solve_from`, at most `WARM_MAX_ITERATIONS` products, as
+    /// the plugin) against a cold start, at the plugin's defaults (1e-2, at most 16); then the
+    /// same for a quarter turn at once, and after the plugin's settling frames
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=1000))]
     warm_frames: u32,
 }
@@ -254,7 +256,7 @@ fn warm_starts(
         let direct = DirectLight { irradiance, ..default() };
         let exact = transport.solve_with(&direct, 1e-7, 1000);
         let from_cold = transport.solve_with(&direct, threshold, cap);
-        let from_last = transport.solve_from(&direct, threshold, cap, last.as_ref());
+        let from_last = transport.solve_from(&direct, threshold, warm_iterations(cap), last.as_ref());
         if frame > 0 {
             let tally = |(sum, most, worst): (u32, u32, f32), s: &TransportSolution| {
                 (sum + s.iterations, most.max(s.iterations), worst.max(off(&s.exitance, &exact.exitance)))
@@ -280,12 +282,22 @@ fn warm_starts(
     let exact = transport.solve_with(&direct, 1e-7, 1000);
     let (jump_cold, jump_warm) = (
         transport.solve_with(&direct, threshold, cap),
-        transport.solve_from(&direct, threshold, cap, last.as_ref()),
+        transport.solve_from(&direct, threshold, warm_iterations(cap), last.as_ref()),
     );
+    // Then the light stays: the plugin's settling frames, each warm from the last.
+    let mut settled = jump_warm.clone();
+    let mut settle_products = 0;
+    for _ in 0..settle_frames(cap) {
+        settled = transport.solve_from(&direct, threshold, warm_iterations(cap), Some(&settled));
+        settle_products += settled.iterations;
+    }
     eprintln!(
-        "budget {budget}: a quarter turn at once: warm {} products, {:.2e} from the converged B; cold {}, {:.2e}",
+        "budget {budget}: a quarter turn at once: warm {} products, {:.2e} from the converged B, \
+         and after {} settling frames ({settle_products} products) {:.2e}; cold {}, {:.2e}",
         jump_warm.iterations,
         off(&jump_warm.exitance, &exact.exitance),
+        settle_frames(cap),
+        off(&settled.exitance, &exact.exitance),
         jump_cold.iterations,
         off(&jump_cold.exitance, &exact.exitance),
     );

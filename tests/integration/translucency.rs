@@ -236,7 +236,12 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
     for row_lanes in [RowLanes::Gpu, RowLanes::Cpu] {
         let limits = IterationLimits { threshold: 1e-2, max_iterations: 16 };
         let cold = transport.solve_with(&direct, limits.threshold, limits.max_iterations);
-        let cpu = transport.solve_from(&moved, limits.threshold, limits.max_iterations, Some(&cold));
+        let cpu = transport.solve_from(
+            &moved,
+            limits.threshold,
+            bevy_mesostructure::translucency::transport::warm_iterations(limits.max_iterations),
+            Some(&cold),
+        );
         let gpu = GpuTransport::new(&device, &transport, limits, row_lanes);
         for (light, warm) in [(&direct, false), (&moved, true)] {
             gpu.write_direct(&queue, light);
@@ -273,6 +278,7 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
 /// off, the light's exitance dies away (1e-3 of it left at most).
 #[test]
 fn a_warm_start_follows_a_moving_spot_in_fewer_products() {
+    use bevy_mesostructure::translucency::transport::{settle_frames, warm_iterations};
     let (patches, _, transport, rays) = marble_ball_on_a_floor(TransportSettings::default());
     let relative_l1 = |a: &[Vec3], b: &[Vec3]| {
         let difference: Vec<Vec3> = a.iter().zip(b).map(|(x, y)| *x - *y).collect();
@@ -284,7 +290,7 @@ fn a_warm_start_follows_a_moving_spot_in_fewer_products() {
         let direct = direct_light(&patches, Some(&transport), &[spot_round_the_ball(frame as f32 * 0.013)], &rays);
         let exact = transport.solve_with(&direct, 1e-7, 500);
         let cold = transport.solve_with(&direct, 1e-2, 16);
-        let warm = transport.solve_from(&direct, 1e-2, 16, last.as_ref());
+        let warm = transport.solve_from(&direct, 1e-2, warm_iterations(16), last.as_ref());
         if frame > 0 {
             let (w, c) = (relative_l1(&warm.exitance, &exact.exitance), relative_l1(&cold.exitance, &exact.exitance));
             eprintln!("frame {frame}: warm {} products, {w:.2e} off; cold {}, {c:.2e}", warm.iterations, cold.iterations);
@@ -306,9 +312,16 @@ fn a_warm_start_follows_a_moving_spot_in_fewer_products() {
         ..default()
     };
     let last = last.unwrap();
-    let dark = transport.solve_from(&off, 1e-2, 16, Some(&last));
+    // As the plugin does: a warm start of at most `WARM_MAX_ITERATIONS` products, then its
+    // settling frames, each warm from the one before.
+    let mut dark = transport.solve_from(&off, 1e-2, warm_iterations(16), Some(&last));
+    let mut products = dark.iterations;
+    for _ in 0..settle_frames(16) {
+        dark = transport.solve_from(&off, 1e-2, warm_iterations(16), Some(&dark));
+        products += dark.iterations;
+    }
     let left = transport.absolute_flux(&dark.exitance) / transport.flux(&last.exitance);
-    eprintln!("switched off: {} products, {left:.2e} of the light left", dark.iterations);
+    eprintln!("switched off: {products} products over {} frames, {left:.2e} of the light left", 1 + settle_frames(16));
     assert!(left <= 1e-3, "{left}");
 }
 
@@ -367,7 +380,12 @@ fn the_gpu_beam_table_matches_the_cpu_oracle() {
     // And warm-started after the spot moved 0.75° (`solve_from`: the table's light is not
     // `K`'s in the warm start's first bounce either).
     let moved = direct_light(&patches, Some(&transport), &[spot_round_the_ball(0.013)], &rays);
-    let warm_cpu = transport.solve_from(&moved, limits.threshold, limits.max_iterations, Some(&cpu));
+    let warm_cpu = transport.solve_from(
+        &moved,
+        limits.threshold,
+        bevy_mesostructure::translucency::transport::warm_iterations(limits.max_iterations),
+        Some(&cpu),
+    );
     let warm_gpu = GpuTransport::with_flow(&device, &transport, limits, RowLanes::Cpu, &frames);
     for (light, warm) in [(&direct, false), (&moved, true)] {
         warm_gpu.write_direct(&queue, light);

@@ -231,6 +231,10 @@ pub struct TranslucencyGpu {
     injection_pending: bool,
     /// An iteration of this transport was recorded: the next may start from its exitance.
     solved: bool,
+    /// Warm solves still to record with the lights still: a warm start stops at
+    /// [`WARM_MAX_ITERATIONS`](super::transport::WARM_MAX_ITERATIONS) products, and these go
+    /// on from where it stopped ([`settle_frames`](super::transport::settle_frames)).
+    settle_frames: u32,
     transport: Option<GpuTransport>,
     injection: Option<GpuInjection>,
     gather: Option<(Buffer, Buffer, Buffer)>,
@@ -271,6 +275,7 @@ pub fn prepare_translucency(
         gpu.gather = Some(gather_buffers(&device, scene, &transport));
         gpu.transport = Some(transport);
         gpu.solved = false;
+        gpu.settle_frames = 0;
         gpu.injection = None;
         gpu.scene_generation = *generation;
         gpu.direct_generation = 0;
@@ -438,14 +443,24 @@ pub fn translucency_injection_pass(
 /// Core3d system before the opaque pass: iterates the transport when the lights changed (the
 /// first view of the frame does it; from the last solution where
 /// [`TranslucencySettings::warm_start`](super::TranslucencySettings::warm_start) and there is
-/// one), timed as `translucency/iteration`.
+/// one), and warm in the few frames after they stopped (`settle_frames`), timed as
+/// `translucency/iteration`.
 pub fn translucency_iteration_pass(
     _view: ViewQuery<&TranslucencyCamera>,
     frame: Res<TranslucencyFrame>,
     mut gpu: ResMut<TranslucencyGpu>,
     mut ctx: RenderContext,
 ) {
-    if !gpu.iteration_pending {
+    let warm = gpu.solved && frame.settings.warm_start;
+    if gpu.iteration_pending {
+        gpu.settle_frames = if warm {
+            super::transport::settle_frames(frame.settings.max_iterations.clamp(1, 256))
+        } else {
+            0
+        };
+    } else if warm && gpu.settle_frames > 0 {
+        gpu.settle_frames -= 1;
+    } else {
         return;
     }
     let Some(transport) = &gpu.transport else {
@@ -454,7 +469,7 @@ pub fn translucency_iteration_pass(
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let span = diagnostics.time_span(ctx.command_encoder(), "translucency/iteration");
-    transport.record(ctx.command_encoder(), gpu.solved && frame.settings.warm_start);
+    transport.record(ctx.command_encoder(), warm);
     span.end(ctx.command_encoder());
     gpu.iteration_pending = false;
     gpu.solved = true;

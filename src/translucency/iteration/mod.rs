@@ -25,7 +25,7 @@ use bevy::{
 };
 use bytemuck::{Pod, Zeroable};
 
-use super::transport::EnergyTransport;
+use super::transport::{EnergyTransport, warm_iterations};
 
 const WORKGROUP: u32 = 64;
 
@@ -539,7 +539,8 @@ impl GpuTransport {
     /// Records one frame's iteration from the direct irradiance last written: from zero, or
     /// (`warm`) from the exitance the last recorded iteration left, as
     /// [`EnergyTransport::solve_from`] does (`warm` only after one was recorded; before, the
-    /// exitance is not this transport's).
+    /// exitance is not this transport's), with at most
+    /// [`warm_iterations`]`(max_iterations)` products.
     pub fn record(&self, encoder: &mut CommandEncoder, warm: bool) {
         let n = self.layout.patches;
         if n == 0 {
@@ -585,7 +586,13 @@ impl GpuTransport {
             pass.set_pipeline(&self.decide);
             pass.dispatch_workgroups(1, 1, 1);
             let scatter = if warm { &self.scatter_warm } else { &self.scatter };
-            for _ in 0..self.layout.max_iterations {
+            // A warm start's application was its first product.
+            let loops = if warm {
+                warm_iterations(self.layout.max_iterations).saturating_sub(1)
+            } else {
+                self.layout.max_iterations
+            };
+            for _ in 0..loops {
                 if self.layout.clusters > 0 {
                     pass.set_pipeline(&self.restrict);
                     pass.dispatch_workgroups_indirect(&self.state, cluster_args);

@@ -28,7 +28,10 @@ mod form_factors;
 mod scattering;
 mod solve;
 
-pub use solve::{MAX_TAIL_RATIO, TransportSolution, WARM_THRESHOLD_SHARE, geometric_tail};
+pub use solve::{
+    MAX_TAIL_RATIO, TransportSolution, WARM_MAX_ITERATIONS, WARM_THRESHOLD_SHARE, geometric_tail,
+    settle_frames, warm_iterations,
+};
 
 use std::time::Instant;
 

@@ -33,6 +33,27 @@ pub struct TransportSolution {
 /// `translucent_precompute --warm-frames 30`).
 pub const WARM_THRESHOLD_SHARE: f32 = 0.1;
 
+/// The most products a warm start takes in one frame, its first application counted
+/// ([`warm_iterations`]): the GPU records no more (`GpuTransport::record`), and the plugin
+/// goes on warm from where it stopped in the frames after the lights stop
+/// ([`settle_frames`]). A spot turning 0.75° a frame took at most 5 in the room of
+/// `docs/translucent.md`, 2.3 – 2.6 on average (`translucent_precompute --warm-frames`);
+/// the loop's recorded iterations cost even when empty (22 µs each on an H100: 0.58 ms a
+/// frame at 16 against 0.36 at 6, `tools/translucency-h100.sh`).
+pub const WARM_MAX_ITERATIONS: u32 = 6;
+
+/// The most products a warm start takes for a cap of `max_iterations`.
+pub fn warm_iterations(max_iterations: u32) -> u32 {
+    max_iterations.min(WARM_MAX_ITERATIONS)
+}
+
+/// How many warm solves of [`warm_iterations`] products the plugin records after the lights
+/// stop (their own light unchanged), so that a solve the cap cut short gets at least
+/// `max_iterations` more products, as a cold start would.
+pub fn settle_frames(max_iterations: u32) -> u32 {
+    max_iterations.div_ceil(warm_iterations(max_iterations).max(1))
+}
+
 /// The most the iteration's tail ratio is trusted: 0.95 adds at most 19 last increments.
 /// A closed box of albedo ρ converges as ρ (the room of `docs/translucent.md` as ~0.62).
 pub const MAX_TAIL_RATIO: f32 = 0.95;
