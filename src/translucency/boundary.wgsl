@@ -71,19 +71,15 @@ fn deep_exit_shape_about(law: vec4<f32>, eta_in: f32, n: vec3<f32>, axis: vec3<f
 }
 
 // `deep_exit_norm_about` (diffusion.rs): 1/N of `deep_exit_shape_about` for an axis `along`
-// the normal and `across` it, by the same 16 × 32 midpoint rule in μ² and φ.
-fn deep_exit_norm_about(law: vec4<f32>, eta: f32, along: f32, across: f32) -> f32 {
-    let n = vec3(0.0, 0.0, 1.0);
-    let axis = vec3(across, 0.0, along);
-    var sum = 0.0;
-    for (var r = 0u; r < 16u; r += 1u) {
-        let mu = sqrt((f32(r) + 0.5) / 16.0);
-        let sine = sqrt(max(1.0 - mu * mu, 0.0));
-        for (var k = 0u; k < 32u; k += 1u) {
-            let phi = 6.28318530717959 * (f32(k) + 0.5) / 32.0;
-            sum += deep_exit_shape_about(law, eta, n, axis, vec3(sine * cos(phi), sine * sin(phi), mu));
-        }
-    }
-    let norm = sum / 512.0;
-    return select(1.0, 1.0 / norm, norm > 0.0);
+// the normal and `across` it is DEEP_EXIT_NORM_SAMPLES over the sum of these samples, the
+// same 16 × 32 midpoint rule in μ² and φ (`cosine_weighted_directions`); sample `s` is ring
+// s / 32, spoke s % 32. Summed by a workgroup (`table_flow_of` in iterate.wgsl).
+const DEEP_EXIT_NORM_SAMPLES: u32 = 512u;
+
+fn deep_exit_norm_sample(law: vec4<f32>, eta: f32, along: f32, across: f32, s: u32) -> f32 {
+    let mu = sqrt((f32(s / 32u) + 0.5) / 16.0);
+    let sine = sqrt(max(1.0 - mu * mu, 0.0));
+    let phi = 6.28318530717959 * (f32(s % 32u) + 0.5) / 32.0;
+    return deep_exit_shape_about(law, eta, vec3(0.0, 0.0, 1.0), vec3(across, 0.0, along),
+                                 vec3(sine * cos(phi), sine * sin(phi), mu));
 }

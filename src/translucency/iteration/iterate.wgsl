@@ -220,22 +220,58 @@ fn table_late(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 // The exitance the beam table gives each patch: its early columns over the beams' light and
-// its late columns over the slots' late light (`BeamTable::apply`). Once a light change,
-// before the iteration; a thread a row.
+// its late columns over the slots' late light (`BeamTable::apply`), and with `flow` the way
+// that light flows in and its exit lobes. Once a light change, before the iteration; a
+// workgroup a row (a translucent patch's rows hold ~900 entries: a thread a row walked them
+// alone, ~1.6 ms for the example's room on an H100), a row without entries by one thread.
+var<workgroup> table_row_entries: u32;
+
 @compute @workgroup_size(64)
-fn table_rows(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
+fn table_rows(
+    @builtin(workgroup_id) group: vec3<u32>,
+    @builtin(num_workgroups) count: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    let i = group_index(group, count);
+    if local == 0u {
+        var entries = 0u;
+        if i < packing.patches {
+            entries = matrices[packing.early_offsets + i + 1u] - matrices[packing.early_offsets + i]
+                + matrices[packing.late_offsets + i + 1u] - matrices[packing.late_offsets + i];
+        }
+        table_row_entries = entries;
+    }
     if i >= packing.patches {
         return;
     }
-    let early = rgb_row_part(packing.early_offsets, packing.early_columns, packing.early_values,
-                             packing.beam_light, i, 0u, 1u);
-    let late = rgb_row_part(packing.late_offsets, packing.late_columns, packing.late_values,
-                            packing.beam_late, i, 0u, 1u);
-    vectors[packing.table_exitance + i] = early + late;
-    if packing.flow == 1u {
-        table_flow_of(i);
+    let zero = vec3(0.0);
+    if workgroupUniformLoad(&table_row_entries) == 0u {
+        if local == 0u {
+            vectors[packing.table_exitance + i] = vec4(0.0);
+            if packing.flow == 1u {
+                table_flow_out(i, FlowSums(zero, zero, zero, zero, zero, zero, zero, zero), vec3(1.0));
+            }
+        }
+        return;
     }
+    let part = rgb_row_part(packing.early_offsets, packing.early_columns, packing.early_values,
+                            packing.beam_light, i, local, WORKGROUP)
+        + rgb_row_part(packing.late_offsets, packing.late_columns, packing.late_values,
+                       packing.beam_late, i, local, WORKGROUP);
+    let exitance = row_total(local, part);
+    if local == 0u {
+        vectors[packing.table_exitance + i] = exitance;
+    }
+    if packing.flow == 1u {
+        table_flow_of(i, local);
+    }
+}
+
+// `row_sum` over the whole workgroup, after which `lanes` may be written again.
+fn row_total(local: u32, part: vec4<f32>) -> vec4<f32> {
+    let total = row_sum(local, part, WORKGROUP);
+    workgroupBarrier();
+    return total;
 }
 
 fn frame_vec4(i: u32, k: u32) -> vec4<f32> {
@@ -287,41 +323,87 @@ fn add_flow(sums: ptr<function, FlowSums>, x: vec3<f32>, afar: f32, i: u32, j: u
     }
 }
 
-// `ExitLaw::set_flow` in one channel: the axis and 1/N of the deep law about it (zero where
-// the channel is Lambert's or no light comes from elsewhere).
-fn flow_out(sum: vec3<f32>, total: f32, law: vec4<f32>, normal: vec3<f32>, eta: f32) -> vec4<f32> {
+// `ExitLaw::set_flow` in one channel: the axis of the deep law about it (zero where the
+// channel is Lambert's or no light comes from elsewhere), without its 1/N.
+fn flow_out(sum: vec3<f32>, total: f32, law: vec4<f32>) -> vec4<f32> {
     if total <= 0.0 || law.w <= 0.0 {
         return vec4(0.0);
     }
-    let axis = sum / total;
-    if all(axis == vec3(0.0)) {
-        return vec4(0.0);
-    }
-    let along = dot(axis, normal);
-    let across = length(axis - normal * along);
-    return vec4(axis, deep_exit_norm_about(law, eta, along, across));
+    return vec4(sum / total, 0.0);
 }
 
-// Patch `i`'s flow from the table's early and late rows (`BeamTable::flow`).
-fn table_flow_of(i: u32) {
+// Patch `i`'s flow from the table's early and late rows (`BeamTable::flow`), by the
+// workgroup's threads (`local` of WORKGROUP; all must call it).
+fn table_flow_of(i: u32, local: u32) {
     let x = frame_vec4(i, 0u).xyz;
     let afar = frame_vec4(i, 2u).w;
     let zero = vec3(0.0);
     var sums = FlowSums(zero, zero, zero, zero, zero, zero, zero, zero);
-    for (var k = matrices[packing.early_offsets + i]; k < matrices[packing.early_offsets + i + 1u]; k += 1u) {
+    let early_end = matrices[packing.early_offsets + i + 1u];
+    for (var k = matrices[packing.early_offsets + i] + local; k < early_end; k += WORKGROUP) {
         let column = matrices[packing.early_columns + k];
         let given = rgb(packing.early_values + 3u * k).rgb * vectors[packing.beam_light + column].rgb;
         add_flow(&sums, x, afar, i, matrices[packing.slot_patches + column / packing.bins], given, true);
     }
-    for (var k = matrices[packing.late_offsets + i]; k < matrices[packing.late_offsets + i + 1u]; k += 1u) {
+    let late_end = matrices[packing.late_offsets + i + 1u];
+    for (var k = matrices[packing.late_offsets + i] + local; k < late_end; k += WORKGROUP) {
         let slot = matrices[packing.late_columns + k];
         let given = rgb(packing.late_values + 3u * k).rgb * vectors[packing.beam_late + slot].rgb;
         add_flow(&sums, x, afar, i, matrices[packing.slot_patches + slot], given, false);
     }
+    // The row's sums, in every thread.
+    let r = row_total(local, vec4(sums.r, sums.total.x));
+    let g = row_total(local, vec4(sums.g, sums.total.y));
+    let b = row_total(local, vec4(sums.b, sums.total.z));
+    let far_r = row_total(local, vec4(sums.far_r, sums.far.x));
+    let far_g = row_total(local, vec4(sums.far_g, sums.far.y));
+    let far_b = row_total(local, vec4(sums.far_b, sums.far.z));
+    sums = FlowSums(r.xyz, g.xyz, b.xyz, vec3(r.w, g.w, b.w),
+                    far_r.xyz, far_g.xyz, far_b.xyz, vec3(far_r.w, far_g.w, far_b.w));
+    // Each channel's 1/N about its axis (`deep_exit_norm_about`), the rule's samples shared
+    // among the threads.
     let normal = frame_vec4(i, 1u);
-    vectors[packing.table_flow + 3u * i] = flow_out(sums.r, sums.total.x, frame_vec4(i, 3u), normal.xyz, normal.w);
-    vectors[packing.table_flow + 3u * i + 1u] = flow_out(sums.g, sums.total.y, frame_vec4(i, 4u), normal.xyz, normal.w);
-    vectors[packing.table_flow + 3u * i + 2u] = flow_out(sums.b, sums.total.z, frame_vec4(i, 5u), normal.xyz, normal.w);
+    let axis_r = flow_out(sums.r, sums.total.x, frame_vec4(i, 3u)).xyz;
+    let axis_g = flow_out(sums.g, sums.total.y, frame_vec4(i, 4u)).xyz;
+    let axis_b = flow_out(sums.b, sums.total.z, frame_vec4(i, 5u)).xyz;
+    let along = vec3(dot(axis_r, normal.xyz), dot(axis_g, normal.xyz), dot(axis_b, normal.xyz));
+    let across = vec3(
+        length(axis_r - normal.xyz * along.x),
+        length(axis_g - normal.xyz * along.y),
+        length(axis_b - normal.xyz * along.z),
+    );
+    var samples = vec3(0.0);
+    for (var s = local; s < DEEP_EXIT_NORM_SAMPLES; s += WORKGROUP) {
+        samples += vec3(
+            deep_exit_norm_sample(frame_vec4(i, 3u), normal.w, along.x, across.x, s),
+            deep_exit_norm_sample(frame_vec4(i, 4u), normal.w, along.y, across.y, s),
+            deep_exit_norm_sample(frame_vec4(i, 5u), normal.w, along.z, across.z, s),
+        );
+    }
+    let norm = row_total(local, vec4(samples, 0.0)).xyz / f32(DEEP_EXIT_NORM_SAMPLES);
+    if local == 0u {
+        table_flow_out(i, sums, select(vec3(1.0), 1.0 / norm, norm > vec3(0.0)));
+    }
+}
+
+// Patch `i`'s flow per channel (axis and `inverse_norms`, zero where it has none) and exit
+// lobes from its row's sums.
+fn table_flow_out(i: u32, sums: FlowSums, inverse_norms: vec3<f32>) {
+    let normal = frame_vec4(i, 1u);
+    var flows = array(
+        flow_out(sums.r, sums.total.x, frame_vec4(i, 3u)),
+        flow_out(sums.g, sums.total.y, frame_vec4(i, 4u)),
+        flow_out(sums.b, sums.total.z, frame_vec4(i, 5u)),
+    );
+    for (var c = 0u; c < 3u; c += 1u) {
+        var flow = flows[c];
+        if any(flow.xyz != vec3(0.0)) {
+            flow.w = inverse_norms[c];
+        } else {
+            flow = vec4(0.0);
+        }
+        vectors[packing.table_flow + 3u * i + c] = flow;
+    }
     table_lobes_of(i, normal.xyz, sums);
 }
 

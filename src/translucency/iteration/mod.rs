@@ -563,8 +563,10 @@ impl GpuTransport {
                 // The beam table's exitance from the beams' light (`BeamTable::apply`).
                 pass.set_pipeline(&self.table_late);
                 pass.dispatch_workgroups(self.layout.slots.div_ceil(WORKGROUP), 1, 1);
+                // A workgroup a row, spilling into y past the per-dimension limit.
                 pass.set_pipeline(&self.table_rows);
-                pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
+                let x = n.min(65_535);
+                pass.dispatch_workgroups(x, n.div_ceil(x), 1);
             }
             if warm {
                 // E = E⁰ + F B', ΔE = E⁰ − E_t + F B', B = K ΔE + S⁰ + T x, ΔB = B − B'.
