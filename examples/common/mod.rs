@@ -24,7 +24,7 @@ use bevy::{
         RenderPlugin,
         diagnostic::RenderDiagnosticsPlugin,
         render_resource::{TextureFormat, TextureUsages},
-        view::screenshot::{Screenshot, save_to_disk},
+        view::screenshot::{Screenshot, ScreenshotCaptured, save_to_disk},
     },
     window::{ExitCondition, WindowResolution},
 };
@@ -185,7 +185,16 @@ pub struct Script {
     settling_since: Option<std::time::Instant>,
     settle_limit_reached: bool,
     translucency_printed: bool,
+    /// Shots written to disk so far, and frames waited for the last ones after the script's
+    /// end: the app exits once every shot is written (a screenshot arrives some frames after
+    /// it is asked for; exiting before dropped them and crashed the NVIDIA driver's teardown
+    /// at times), or after `SHOT_WAIT_LIMIT` frames.
+    saved: usize,
+    waited_for_shots: u32,
 }
+
+/// How many frames the script waits at its end for the shots still on their way.
+const SHOT_WAIT_LIMIT: u32 = 600;
 
 /// The app: Bevy with a window (and the tuning panel) or headless, the plugin, timing
 /// diagnostics, and the screenshot script.
@@ -264,6 +273,8 @@ pub fn app(args: &ExampleArgs, title: &str, shots: Vec<Shot>) -> App {
             settling_since: None,
             settle_limit_reached: false,
             translucency_printed: false,
+            saved: 0,
+            waited_for_shots: 0,
         })
         .init_resource::<Clock>()
         .add_systems(Update, advance_clock)
@@ -357,6 +368,17 @@ fn run_script(world: &mut World) {
     let index = script.next / 2;
     let stage = script.next % 2;
     if index >= script.shots.len() {
+        if script.saved < script.shots.len() && script.waited_for_shots < SHOT_WAIT_LIMIT {
+            script.waited_for_shots += 1;
+            return;
+        }
+        if script.saved < script.shots.len() {
+            eprintln!(
+                "warning: {} of {} shots written after {SHOT_WAIT_LIMIT} frames; exiting",
+                script.saved,
+                script.shots.len()
+            );
+        }
         world.write_message(AppExit::Success);
         return;
     }
@@ -373,8 +395,13 @@ fn run_script(world: &mut World) {
             Some(image) => Screenshot::image(image.clone()),
             None => Screenshot::primary_window(),
         };
-        world.spawn(screenshot).observe(save_to_disk(path.clone()));
-        println!("wrote {}", path.display());
+        world
+            .spawn(screenshot)
+            .observe(save_to_disk(path.clone()))
+            .observe(move |_: On<ScreenshotCaptured>, mut script: ResMut<Script>| {
+                script.saved += 1;
+                println!("wrote {}", path.display());
+            });
     }
 }
 
