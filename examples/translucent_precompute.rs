@@ -256,7 +256,9 @@ fn warm_starts(
         let direct = DirectLight { irradiance, ..default() };
         let exact = transport.solve_with(&direct, 1e-7, 1000);
         let from_cold = transport.solve_with(&direct, threshold, cap);
-        let from_last = transport.solve_from(&direct, threshold, warm_iterations(cap), last.as_ref());
+        // As the plugin: the first solve cold, the others warm and capped.
+        let most = if last.is_some() { warm_iterations(cap) } else { cap };
+        let from_last = transport.solve_from(&direct, threshold, most, last.as_ref());
         if frame > 0 {
             let tally = |(sum, most, worst): (u32, u32, f32), s: &TransportSolution| {
                 (sum + s.iterations, most.max(s.iterations), worst.max(off(&s.exitance, &exact.exitance)))

@@ -85,8 +85,12 @@ pub struct TranslucencySettings {
     /// from zero (`EnergyTransport::solve_from`): a spot turning 0.75° a frame then takes
     /// 2.3 – 2.6 products instead of 10 in the room of `docs/translucent.md`, within 6.6e-4
     /// of the converged exitance against a cold start's 2.8e-4 (it stops at a tenth of
-    /// `iteration_threshold`); a quarter turn at once took 8, and a sudden change may take up
-    /// to `max_iterations` (changing it rebuilds nothing).
+    /// `iteration_threshold`). A warm start takes at most
+    /// [`WARM_MAX_ITERATIONS`](super::transport::WARM_MAX_ITERATIONS) products a frame and
+    /// goes on warm for [`settle_frames`](super::transport::settle_frames) frames after the
+    /// lights stop: a quarter turn at once comes within 7.6e-4, 5.1e-4 after settling. On an
+    /// H100 (1080p, 17.9 k patches) a moving spot's iteration takes 0.32–0.36 ms warm against
+    /// 0.70–0.71 cold (changing it rebuilds nothing).
     pub warm_start: bool,
     /// How the transport is built.
     pub transport: TransportSettings,

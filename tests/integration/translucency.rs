@@ -290,7 +290,9 @@ fn a_warm_start_follows_a_moving_spot_in_fewer_products() {
         let direct = direct_light(&patches, Some(&transport), &[spot_round_the_ball(frame as f32 * 0.013)], &rays);
         let exact = transport.solve_with(&direct, 1e-7, 500);
         let cold = transport.solve_with(&direct, 1e-2, 16);
-        let warm = transport.solve_from(&direct, 1e-2, warm_iterations(16), last.as_ref());
+        // As the plugin: the first solve cold, the others warm and capped.
+        let most = if last.is_some() { warm_iterations(16) } else { 16 };
+        let warm = transport.solve_from(&direct, 1e-2, most, last.as_ref());
         if frame > 0 {
             let (w, c) = (relative_l1(&warm.exitance, &exact.exitance), relative_l1(&cold.exitance, &exact.exitance));
             eprintln!("frame {frame}: warm {} products, {w:.2e} off; cold {}, {c:.2e}", warm.iterations, cold.iterations);
@@ -322,6 +324,7 @@ fn a_warm_start_follows_a_moving_spot_in_fewer_products() {
     }
     let left = transport.absolute_flux(&dark.exitance) / transport.flux(&last.exitance);
     eprintln!("switched off: {products} products over {} frames, {left:.2e} of the light left", 1 + settle_frames(16));
+    // Measured: 19 products over 4 frames, 1.6e-7 left.
     assert!(left <= 1e-3, "{left}");
 }
 
