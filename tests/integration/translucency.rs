@@ -1692,3 +1692,89 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         holds_as_documented(&view, &label, lighting, medium, false, &settings, how, oracles, &reference, rel_l1, ratio);
     }
 }
+
+/// The gather's compute form culls the patches per 8×8 tile and lets a tile over a depth edge
+/// walk the grids pixel by pixel; both must draw what the fragment form draws. A marble ball
+/// before a white wall that takes part (`RadiosityReceiver`), seen so that the ball's outline
+/// crosses the wall: the tiles on the outline span both depths (a box of many cells of the
+/// ball's fine grid: they walk pixel by pixel), the rest take their tile's list.
+#[test]
+fn the_tiled_gather_draws_what_the_fragment_gather_does_across_depth_edges() {
+    use bevy::{
+        camera::{CameraMainTextureUsages, RenderTarget},
+        core_pipeline::tonemapping::Tonemapping,
+        light::GlobalAmbientLight,
+        render::render_resource::TextureUsages,
+    };
+    use bevy_mesostructure::translucency::{
+        RadiosityReceiver, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings,
+        Translucent,
+    };
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = bare_app_with(|app| {
+        app.add_plugins(TranslucencyPlugin);
+    });
+    app.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    app.insert_resource(TranslucencySettings {
+        patch_budget: 600,
+        ..default()
+    });
+    sun(&mut app, Vec3::new(-1.0, -0.4, -0.6).normalize(), 2_000.0);
+    let white = app
+        .world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::WHITE,
+            reflectance: 0.0,
+            perceptual_roughness: 1.0,
+            ..default()
+        });
+    let ball = mesh(&mut app, Sphere::new(0.05).mesh().uv(48, 24));
+    app.world_mut().spawn((
+        ball,
+        MeshMaterial3d(white.clone()),
+        Translucent::default(),
+        Transform::IDENTITY,
+    ));
+    let wall = mesh(&mut app, Cuboid::new(0.6, 0.6, 0.02));
+    app.world_mut().spawn((
+        wall,
+        MeshMaterial3d(white),
+        RadiosityReceiver,
+        Transform::from_xyz(0.0, 0.0, -0.12),
+    ));
+    let size = 64;
+    let image = target(&mut app, size, size);
+    let camera = app
+        .world_mut()
+        .spawn((
+            Camera3d::default(),
+            RenderTarget::Image(image.clone().into()),
+            Msaa::Off,
+            Tonemapping::None,
+            bevy::camera::Hdr,
+            TranslucencyCamera,
+            Transform::from_xyz(0.05, 0.03, 0.3).looking_at(Vec3::ZERO, Vec3::Y),
+        ))
+        .id();
+    run_until_ready(&mut app);
+    run(&mut app, 3);
+    assert_pipelines_ready_with_prefix(&app, "translucency_gather");
+    let tiled = screenshot(&mut app, &image);
+    app.world_mut()
+        .entity_mut(camera)
+        .insert(CameraMainTextureUsages::default());
+    run(&mut app, 2);
+    let fragment = screenshot(&mut app, &image);
+    let (a, b) = (tiled.data.as_ref().unwrap(), fragment.data.as_ref().unwrap());
+    let differ = a.iter().zip(b).map(|(p, q)| p.abs_diff(*q)).max().unwrap();
+    let lit = a.chunks(4).filter(|p| p[0] >= 3).count();
+    eprintln!("tiled against fragment gather across the ball's outline: largest difference {differ}/255; {lit} pixels lit");
+    assert!(lit > (size * size / 2) as usize, "the ball and the wall show their light: {lit} pixels");
+    assert!(differ <= 1, "the two forms of the gather differ by {differ}/255");
+}
