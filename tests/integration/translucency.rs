@@ -1766,6 +1766,8 @@ fn the_tiled_gather_draws_what_the_fragment_gather_does_across_depth_edges() {
     run(&mut app, 3);
     assert_pipelines_ready_with_prefix(&app, "translucency_gather");
     let tiled = screenshot(&mut app, &image);
+    let usages = app.world().get::<CameraMainTextureUsages>(camera).unwrap().0;
+    assert!(usages.contains(TextureUsages::STORAGE_BINDING), "the compute form drew the first");
     app.world_mut()
         .entity_mut(camera)
         .insert(CameraMainTextureUsages::default());
