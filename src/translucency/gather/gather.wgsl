@@ -9,7 +9,8 @@
 // direct light is Bevy's). Added to the lit view, times the view's exposure as Bevy's
 // lighting is: by additive blending (`gather`, a fullscreen fragment pass), or, where the
 // view's main images take storage writes, by a compute pass writing lit + gathered into the
-// view's other main image (`gather_compute`).
+// view's other main image (`gather_compute`), whose 8×8 tiles walk the grids once for their
+// pixels (`collect_tile_patches`).
 
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_render::view::View

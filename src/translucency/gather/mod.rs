@@ -1,6 +1,7 @@
 //! The translucency's render-world passes: the iteration (once a frame, when the lights
 //! changed; `iteration/`) and the gather that puts the patches' light into each view
-//! (`gather.wgsl`, a fullscreen pass added to the lit image).
+//! (`gather.wgsl`: a compute pass culling the patches per 8×8 tile where the view's main
+//! images take storage writes, else a fullscreen pass added to the lit image).
 
 use std::sync::Arc;
 
