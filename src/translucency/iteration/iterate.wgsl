@@ -249,7 +249,8 @@ fn table_rows(
         if local == 0u {
             vectors[packing.table_exitance + i] = vec4(0.0);
             if packing.flow == 1u {
-                table_flow_out(i, FlowSums(zero, zero, zero, zero, zero, zero, zero, zero), vec3(1.0));
+                let sums = FlowSums(zero, zero, zero, zero, zero, zero, zero, zero);
+                table_flow_out(i, sums, channel_flows(i, sums), vec3(1.0));
             }
         }
         return;
@@ -363,9 +364,10 @@ fn table_flow_of(i: u32, local: u32) {
     // Each channel's 1/N about its axis (`deep_exit_norm_about`), the rule's samples shared
     // among the threads.
     let normal = frame_vec4(i, 1u);
-    let axis_r = flow_out(sums.r, sums.total.x, frame_vec4(i, 3u)).xyz;
-    let axis_g = flow_out(sums.g, sums.total.y, frame_vec4(i, 4u)).xyz;
-    let axis_b = flow_out(sums.b, sums.total.z, frame_vec4(i, 5u)).xyz;
+    let flows = channel_flows(i, sums);
+    let axis_r = flows[0].xyz;
+    let axis_g = flows[1].xyz;
+    let axis_b = flows[2].xyz;
     let along = vec3(dot(axis_r, normal.xyz), dot(axis_g, normal.xyz), dot(axis_b, normal.xyz));
     let across = vec3(
         length(axis_r - normal.xyz * along.x),
@@ -382,29 +384,32 @@ fn table_flow_of(i: u32, local: u32) {
     }
     let norm = row_total(local, vec4(samples, 0.0)).xyz / f32(DEEP_EXIT_NORM_SAMPLES);
     if local == 0u {
-        table_flow_out(i, sums, select(vec3(1.0), 1.0 / norm, norm > vec3(0.0)));
+        table_flow_out(i, sums, flows, select(vec3(1.0), 1.0 / norm, norm > vec3(0.0)));
     }
 }
 
-// Patch `i`'s flow per channel (axis and `inverse_norms`, zero where it has none) and exit
-// lobes from its row's sums.
-fn table_flow_out(i: u32, sums: FlowSums, inverse_norms: vec3<f32>) {
-    let normal = frame_vec4(i, 1u);
-    var flows = array(
+// Each channel's `flow_out` from patch `i`'s row sums (its law per channel in its frame).
+fn channel_flows(i: u32, sums: FlowSums) -> array<vec4<f32>, 3> {
+    return array(
         flow_out(sums.r, sums.total.x, frame_vec4(i, 3u)),
         flow_out(sums.g, sums.total.y, frame_vec4(i, 4u)),
         flow_out(sums.b, sums.total.z, frame_vec4(i, 5u)),
     );
-    for (var c = 0u; c < 3u; c += 1u) {
-        var flow = flows[c];
-        if any(flow.xyz != vec3(0.0)) {
-            flow.w = inverse_norms[c];
-        } else {
-            flow = vec4(0.0);
-        }
-        vectors[packing.table_flow + 3u * i + c] = flow;
-    }
-    table_lobes_of(i, normal.xyz, sums);
+}
+
+// A channel's flow with its 1/N (all zero where it has no axis).
+fn with_norm(flow: vec4<f32>, inverse_norm: f32) -> vec4<f32> {
+    return vec4(flow.xyz, select(0.0, inverse_norm, any(flow.xyz != vec3(0.0))));
+}
+
+// Patch `i`'s flow per channel (`channel_flows` and `inverse_norms`) and exit lobes from its
+// row's sums.
+fn table_flow_out(i: u32, sums: FlowSums, flows: array<vec4<f32>, 3>, inverse_norms: vec3<f32>) {
+    let at = packing.table_flow + 3u * i;
+    vectors[at] = with_norm(flows[0], inverse_norms.x);
+    vectors[at + 1u] = with_norm(flows[1], inverse_norms.y);
+    vectors[at + 2u] = with_norm(flows[2], inverse_norms.z);
+    table_lobes_of(i, frame_vec4(i, 1u).xyz, sums);
 }
 
 // `ExitLaw::set_far_lobes`: each channel's light from afar by the lobe fitted to the mean
