@@ -452,13 +452,13 @@ pub fn translucency_iteration_pass(
     mut gpu: ResMut<TranslucencyGpu>,
     mut ctx: RenderContext,
 ) {
+    let Some(max_iterations) = gpu.transport.as_ref().map(GpuTransport::max_iterations) else {
+        return;
+    };
     let warm = gpu.solved && frame.settings.warm_start;
     if gpu.iteration_pending {
-        gpu.settle_frames = if warm {
-            super::transport::settle_frames(frame.settings.max_iterations.clamp(1, 256))
-        } else {
-            0
-        };
+        // As many as the transport's own cap (the settings' when it was uploaded).
+        gpu.settle_frames = if warm { super::transport::settle_frames(max_iterations) } else { 0 };
     } else if warm && gpu.settle_frames > 0 {
         gpu.settle_frames -= 1;
     } else {

@@ -511,6 +511,11 @@ impl GpuTransport {
         self.layout.patches
     }
 
+    /// The most products a cold start records ([`IterationLimits::max_iterations`]).
+    pub fn max_iterations(&self) -> u32 {
+        self.layout.max_iterations
+    }
+
     /// Writes this frame's direct light: irradiance `E⁰`, the exitance `S⁰` besides
     /// `K E⁰`, and the beam table's vectors (one per patch, the beams' light one per table
     /// direction; an empty vector is zero).
