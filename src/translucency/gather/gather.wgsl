@@ -73,6 +73,29 @@ fn bucket(cell: vec3<i32>, mask: u32) -> u32 {
     return ((c.x * 73856093u) ^ (c.y * 19349663u) ^ (c.z * 83492791u)) & mask;
 }
 
+// Grid `level`'s four words at the start of `grid` (`GatherParams::levels`).
+struct GridLevel {
+    cell_size: f32,
+    mask: u32,
+    // Where its bucket offsets and its members start.
+    table: u32,
+    members: u32,
+}
+
+fn grid_level(level: u32) -> GridLevel {
+    return GridLevel(bitcast<f32>(grid[4u * level]), grid[4u * level + 1u], grid[4u * level + 2u],
+                     grid[4u * level + 3u]);
+}
+
+// The patch of member `k` of grid `g` where it lies in `cell`, else none (-1): a bucket that
+// two walked cells hash to would give its patches twice (photons: twice the light), so only
+// the members of the very cell walked are taken.
+fn member_in_cell(g: GridLevel, k: u32, cell: vec3<i32>) -> i32 {
+    let member = g.members + 4u * k;
+    let own_cell = bitcast<vec3<i32>>(vec3(grid[member + 1u], grid[member + 2u], grid[member + 3u]));
+    return select(-1, i32(grid[member]), all(own_cell == cell));
+}
+
 // `single_scattering_radiance` (beam_table/single_scattering.rs): a half-space's single scattering of a beam
 // of irradiance `e` at incidence cosine mu0, seen at exit cosine mu, behind a boundary of
 // index eta: α E T(μ₀) T(μ) / (4π η² (μ₀′ + μ′)).
@@ -139,10 +162,14 @@ struct Surface {
     mu: f32,
 }
 
+fn no_surface() -> Surface {
+    return Surface(false, vec3(0.0), vec3(0.0), vec3(0.0), 0.0);
+}
+
 fn pixel_surface(p: vec2<i32>, position: vec2<f32>) -> Surface {
     let depth = textureLoad(depth_prepass, p, 0);
     if depth <= 0.0 {
-        return Surface(false, vec3(0.0), vec3(0.0), vec3(0.0), 0.0);
+        return no_surface();
     }
     let uv = (position - view.viewport.xy) / view.viewport.zw;
     let ndc = vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
@@ -254,30 +281,18 @@ fn gathered(s: Surface) -> vec4<f32> {
     }
     var acc = no_light();
     for (var level = 0u; level < params.levels; level += 1u) {
-        let cell_size = bitcast<f32>(grid[4u * level]);
-        let mask = grid[4u * level + 1u];
-        let table = grid[4u * level + 2u];
-        let members = grid[4u * level + 3u];
-        let centre_cell = vec3<i32>(floor(s.x / cell_size));
+        let g = grid_level(level);
+        let centre_cell = vec3<i32>(floor(s.x / g.cell_size));
         for (var dz = -1; dz <= 1; dz += 1) {
             for (var dy = -1; dy <= 1; dy += 1) {
                 for (var dx = -1; dx <= 1; dx += 1) {
                     let cell = centre_cell + vec3(dx, dy, dz);
-                    let b = bucket(cell, mask);
-                    let start = grid[table + b];
-                    let end = grid[table + b + 1u];
-                    for (var k = start; k < end; k += 1u) {
-                        // Only the members of this very cell: a bucket that two of the 27
-                        // cells hash to would give its patches twice (photons: twice the
-                        // light); a member of another of them is taken when that one is walked.
-                        let member = members + 4u * k;
-                        let own_cell = bitcast<vec3<i32>>(
-                            vec3(grid[member + 1u], grid[member + 2u], grid[member + 3u]),
-                        );
-                        if any(own_cell != cell) {
-                            continue;
+                    let b = bucket(cell, g.mask);
+                    for (var k = grid[g.table + b]; k < grid[g.table + b + 1u]; k += 1u) {
+                        let i = member_in_cell(g, k, cell);
+                        if i >= 0 {
+                            add_patch(u32(i), s, &acc);
                         }
-                        add_patch(grid[member], s, &acc);
                     }
                 }
             }
@@ -321,14 +336,11 @@ fn from_ordered_bits(u: u32) -> f32 {
 // shared among the workgroup's threads (`thread` of 64).
 fn collect_tile_patches(thread: u32, lo: vec3<f32>, hi: vec3<f32>) {
     for (var level = 0u; level < params.levels; level += 1u) {
-        let cell_size = bitcast<f32>(grid[4u * level]);
-        let mask = grid[4u * level + 1u];
-        let table = grid[4u * level + 2u];
-        let members = grid[4u * level + 3u];
+        let g = grid_level(level);
         // A grid's cells are as wide as its widest reach: a patch reaching the box has its
         // centre in the box grown by one cell (and a little, for rounding).
-        let first = vec3<i32>(floor(lo / cell_size - 1.001));
-        let last = vec3<i32>(floor(hi / cell_size + 1.001));
+        let first = vec3<i32>(floor(lo / g.cell_size - 1.001));
+        let last = vec3<i32>(floor(hi / g.cell_size + 1.001));
         let extent = vec3<u32>(last - first + 1);
         // (Each extent first: their product could wrap.)
         if any(extent > vec3(TILE_CELLS)) || extent.x * extent.y * extent.z > TILE_CELLS {
@@ -338,16 +350,13 @@ fn collect_tile_patches(thread: u32, lo: vec3<f32>, hi: vec3<f32>) {
         let cells = extent.x * extent.y * extent.z;
         for (var c = thread; c < cells; c += 64u) {
             let cell = first + vec3<i32>(vec3(c % extent.x, (c / extent.x) % extent.y, c / (extent.x * extent.y)));
-            let b = bucket(cell, mask);
-            let start = grid[table + b];
-            let end = grid[table + b + 1u];
-            for (var k = start; k < end; k += 1u) {
-                let member = members + 4u * k;
-                let own_cell = bitcast<vec3<i32>>(vec3(grid[member + 1u], grid[member + 2u], grid[member + 3u]));
-                if any(own_cell != cell) {
+            let b = bucket(cell, g.mask);
+            for (var k = grid[g.table + b]; k < grid[g.table + b + 1u]; k += 1u) {
+                let member = member_in_cell(g, k, cell);
+                if member < 0 {
                     continue;
                 }
-                let i = grid[member];
+                let i = u32(member);
                 let centre = patches[i].centre;
                 // The patch's distance from the box, against its reach (a little grown: the
                 // pixels' own test decides).
@@ -380,7 +389,7 @@ fn gather_compute(
     workgroupBarrier();
     let inside = all(id.xy < textureDimensions(lit));
     let p = vec2<i32>(id.xy);
-    var s = Surface(false, vec3(0.0), vec3(0.0), vec3(0.0), 0.0);
+    var s = no_surface();
     if inside {
         s = pixel_surface(p, vec2<f32>(id.xy) + 0.5);
     }
