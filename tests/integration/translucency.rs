@@ -782,15 +782,61 @@ fn srgb8(linear: f32) -> f32 {
     s * 255.0
 }
 
+/// White, rough and without specular (F0 = 0): the picture is the patches' light alone.
+fn matte_white(app: &mut App) -> Handle<StandardMaterial> {
+    app.world_mut()
+        .resource_mut::<Assets<StandardMaterial>>()
+        .add(StandardMaterial {
+            base_color: Color::WHITE,
+            reflectance: 0.0,
+            perceptual_roughness: 1.0,
+            ..default()
+        })
+}
+
+/// An HDR camera showing the translucency into `image` from `eye`, untonemapped: the plugin
+/// lets its main images take storage writes, so the gather runs in its compute form.
+fn hdr_translucency_camera(app: &mut App, image: &Handle<Image>, eye: Transform) -> Entity {
+    use bevy::{camera::RenderTarget, core_pipeline::tonemapping::Tonemapping};
+    app.world_mut()
+        .spawn((
+            Camera3d::default(),
+            RenderTarget::Image(image.clone().into()),
+            Msaa::Off,
+            Tonemapping::None,
+            bevy::camera::Hdr,
+            bevy_mesostructure::translucency::TranslucencyCamera,
+            eye,
+        ))
+        .id()
+}
+
+/// The largest difference (of 255) between `computed`, the picture `camera` took with the
+/// gather's compute form, and the one its fragment form draws once the camera's main images
+/// take no storage writes (left so).
+fn fragment_gather_difference(
+    app: &mut App,
+    camera: Entity,
+    image: &Handle<Image>,
+    computed: &Image,
+) -> u8 {
+    use bevy::{camera::CameraMainTextureUsages, render::render_resource::TextureUsages};
+    let usages = app.world().get::<CameraMainTextureUsages>(camera).unwrap().0;
+    assert!(usages.contains(TextureUsages::STORAGE_BINDING), "the plugin asks for storage");
+    app.world_mut()
+        .entity_mut(camera)
+        .insert(CameraMainTextureUsages::default());
+    run(app, 2);
+    let fragment = screenshot(app, image);
+    let (a, b) = (computed.data.as_ref().unwrap(), fragment.data.as_ref().unwrap());
+    a.iter().zip(b).map(|(p, q)| p.abs_diff(*q)).max().unwrap()
+}
+
 #[test]
 fn a_translucent_ball_shows_the_light_its_patches_carry() {
-    use bevy::{
-        camera::{Exposure, RenderTarget},
-        core_pipeline::tonemapping::Tonemapping,
-        light::GlobalAmbientLight,
-    };
+    use bevy::{camera::Exposure, light::GlobalAmbientLight};
     use bevy_mesostructure::translucency::{
-        TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin, TranslucencySettings,
+        TranslucencyFrame, TranslucencyPlugin, TranslucencySettings,
         Translucent, GatherMethod, LightInjection, DirectLight, ExitLaw,
         gather::{BeamSingleScattering, gathered_radiance},
         transport::TransportSolution,
@@ -816,16 +862,7 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     sun(&mut app, light_travel, 2_000.0);
     let radius = 0.05;
     let ball = mesh(&mut app, Sphere::new(radius).mesh().uv(64, 32));
-    // No specular (F0 = 0): the picture is the patches' light alone.
-    let material = app
-        .world_mut()
-        .resource_mut::<Assets<StandardMaterial>>()
-        .add(StandardMaterial {
-            base_color: Color::WHITE,
-            reflectance: 0.0,
-            perceptual_roughness: 1.0,
-            ..default()
-        });
+    let material = matte_white(&mut app);
     app.world_mut().spawn((
         ball,
         MeshMaterial3d(material),
@@ -835,19 +872,8 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     let size = 64;
     let image = target(&mut app, size, size);
     let eye = Transform::from_xyz(0.0, 0.0, 0.25).looking_at(Vec3::ZERO, Vec3::Y);
-    let camera = app
-        .world_mut()
-        .spawn((
-            Camera3d::default(),
-            RenderTarget::Image(image.clone().into()),
-            Msaa::Off,
-            Tonemapping::None,
-            // HDR: the gather runs in its compute form (compared with the fragment form below).
-            bevy::camera::Hdr,
-            TranslucencyCamera,
-            eye,
-        ))
-        .id();
+    // The gather's compute form (compared with the fragment form below).
+    let camera = hdr_translucency_camera(&mut app, &image, eye);
     run_until_ready(&mut app);
     run(&mut app, 3);
     assert_pipelines_ready_with_prefix(&app, "translucency_gather");
@@ -938,15 +964,7 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
 
     // The fragment form (a camera whose main images take no storage writes) draws the same.
     use bevy::{camera::CameraMainTextureUsages, render::render_resource::TextureUsages};
-    let usages = |app: &App| app.world().get::<CameraMainTextureUsages>(camera).unwrap().0;
-    assert!(usages(&app).contains(TextureUsages::STORAGE_BINDING), "the plugin asks for storage");
-    app.world_mut()
-        .entity_mut(camera)
-        .insert(CameraMainTextureUsages::default());
-    run(&mut app, 2);
-    let fragment = screenshot(&mut app, &image);
-    let (a, b) = (shot.data.as_ref().unwrap(), fragment.data.as_ref().unwrap());
-    let differ = a.iter().zip(b).map(|(p, q)| p.abs_diff(*q)).max().unwrap();
+    let differ = fragment_gather_difference(&mut app, camera, &image, &shot);
     eprintln!("compute against fragment gather: largest difference {differ}/255");
     assert!(differ <= 1, "the two forms of the gather differ by {differ}/255");
 
@@ -1300,15 +1318,7 @@ fn ambient_light_reaches_translucent_objects() {
         ..default()
     });
     let ball = mesh(&mut app, Sphere::new(0.05).mesh().uv(48, 24));
-    let material = app
-        .world_mut()
-        .resource_mut::<Assets<StandardMaterial>>()
-        .add(StandardMaterial {
-            base_color: Color::WHITE,
-            reflectance: 0.0,
-            perceptual_roughness: 1.0,
-            ..default()
-        });
+    let material = matte_white(&mut app);
     app.world_mut().spawn((
         ball,
         MeshMaterial3d(material),
@@ -1700,15 +1710,9 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
 /// ball's fine grid: they walk pixel by pixel), the rest take their tile's list.
 #[test]
 fn the_tiled_gather_draws_what_the_fragment_gather_does_across_depth_edges() {
-    use bevy::{
-        camera::{CameraMainTextureUsages, RenderTarget},
-        core_pipeline::tonemapping::Tonemapping,
-        light::GlobalAmbientLight,
-        render::render_resource::TextureUsages,
-    };
+    use bevy::light::GlobalAmbientLight;
     use bevy_mesostructure::translucency::{
-        RadiosityReceiver, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings,
-        Translucent,
+        RadiosityReceiver, TranslucencyPlugin, TranslucencySettings, Translucent,
     };
     if !gpu_or_skip() {
         return;
@@ -1725,15 +1729,7 @@ fn the_tiled_gather_draws_what_the_fragment_gather_does_across_depth_edges() {
         ..default()
     });
     sun(&mut app, Vec3::new(-1.0, -0.4, -0.6).normalize(), 2_000.0);
-    let white = app
-        .world_mut()
-        .resource_mut::<Assets<StandardMaterial>>()
-        .add(StandardMaterial {
-            base_color: Color::WHITE,
-            reflectance: 0.0,
-            perceptual_roughness: 1.0,
-            ..default()
-        });
+    let white = matte_white(&mut app);
     let ball = mesh(&mut app, Sphere::new(0.05).mesh().uv(48, 24));
     app.world_mut().spawn((
         ball,
@@ -1750,32 +1746,14 @@ fn the_tiled_gather_draws_what_the_fragment_gather_does_across_depth_edges() {
     ));
     let size = 64;
     let image = target(&mut app, size, size);
-    let camera = app
-        .world_mut()
-        .spawn((
-            Camera3d::default(),
-            RenderTarget::Image(image.clone().into()),
-            Msaa::Off,
-            Tonemapping::None,
-            bevy::camera::Hdr,
-            TranslucencyCamera,
-            Transform::from_xyz(0.05, 0.03, 0.3).looking_at(Vec3::ZERO, Vec3::Y),
-        ))
-        .id();
+    let eye = Transform::from_xyz(0.05, 0.03, 0.3).looking_at(Vec3::ZERO, Vec3::Y);
+    let camera = hdr_translucency_camera(&mut app, &image, eye);
     run_until_ready(&mut app);
     run(&mut app, 3);
     assert_pipelines_ready_with_prefix(&app, "translucency_gather");
     let tiled = screenshot(&mut app, &image);
-    let usages = app.world().get::<CameraMainTextureUsages>(camera).unwrap().0;
-    assert!(usages.contains(TextureUsages::STORAGE_BINDING), "the compute form drew the first");
-    app.world_mut()
-        .entity_mut(camera)
-        .insert(CameraMainTextureUsages::default());
-    run(&mut app, 2);
-    let fragment = screenshot(&mut app, &image);
-    let (a, b) = (tiled.data.as_ref().unwrap(), fragment.data.as_ref().unwrap());
-    let differ = a.iter().zip(b).map(|(p, q)| p.abs_diff(*q)).max().unwrap();
-    let lit = a.chunks(4).filter(|p| p[0] >= 3).count();
+    let differ = fragment_gather_difference(&mut app, camera, &image, &tiled);
+    let lit = tiled.data.as_ref().unwrap().chunks(4).filter(|p| p[0] >= 3).count();
     eprintln!("tiled against fragment gather across the ball's outline: largest difference {differ}/255; {lit} pixels lit");
     assert!(lit > (size * size / 2) as usize, "the ball and the wall show their light: {lit} pixels");
     assert!(differ <= 1, "the two forms of the gather differ by {differ}/255");
