@@ -384,7 +384,7 @@ fn walked_scattering(
         let walked = |launch: WalkLaunch, orders: ScatteringOrders, walks: u32, lit_face_single_to_law: bool| {
             let mut column: Vec<(u32, Vec3)> = Vec::new();
             let mut remaining = Vec3::ZERO;
-            walk_ends(&medium, world_units_per_mm, &entries, rays, walks as usize, j as u64, launch, orders, |c, end| {
+            walk_ends(&medium, world_units_per_mm, &entries, rays, walks as usize, j as u64, launch, orders, |weight, end| {
                 let exit = match end {
                     // Single scattering leaving by the lit face is the pixel's own law's.
                     WalkEnd::Exit(exit)
@@ -398,7 +398,7 @@ fn walked_scattering(
                     // Through a gap in the mesh: lost.
                     WalkEnd::Gap => return,
                     WalkEnd::Remainder => {
-                        remaining[c] += 1.0 / walks as f32;
+                        remaining += weight / walks as f32;
                         return;
                     }
                 };
@@ -412,7 +412,7 @@ fn walked_scattering(
                         column.len() - 1
                     }
                 };
-                column[at].1[c] += 1.0;
+                column[at].1 += weight;
             });
             (column, remaining)
         };

@@ -173,7 +173,7 @@ fn exit_share(
         seed,
         WalkLaunch::Diffuse,
         ScatteringOrders { first: 0, last: MAX_EVENTS },
-        (|x, d, _| first_hit(x, d), false),
+        first_hit,
         |channel, entry, end| match end {
             WalkEnd::Exit(exit) => {
                 left[channel] += 1;
@@ -246,16 +246,26 @@ pub enum WalkEnd {
     Remainder,
 }
 
-/// Walks `walks` paths a colour channel into `rays`' triangles from `entries` (drawn by
-/// area; each walk carries a `1 / walks` share of the light that entered) and calls
-/// `on_end(channel, end)` for each that leaves after at least `orders.first` scatterings or
-/// is still inside after `orders.last`. A beam's walks from entries facing away from it are
-/// not walked (their share is lost). `false` where the medium, the scale or the entries are
-/// invalid (nothing walked). The same physics as the path-traced references
+/// Walks `walks` paths into `rays`' triangles from `entries` (drawn by area), shared by the
+/// three colour channels, and calls `on_end(weight, end)` for each that leaves after at least
+/// `orders.first` scatterings or is still inside after `orders.last`: `weight / walks` is its
+/// share of the light that entered, per channel. A beam's walks from entries facing away
+/// from it are not walked (their share is lost). `false` where the medium, the scale or the
+/// entries are invalid (nothing walked). The same physics as the path-traced references
 /// (`tools/translucent_reference.py`): `translucent_accuracy --scattering walks` builds `K`
-/// from it to measure what the diffusion profile costs, and the beam table its columns. The
-/// mesh is queried only as far as each free flight reaches (several times faster for walks
-/// of a few mean free paths), so a walk that left through a gap in the mesh is not told
+/// from it to measure what the diffusion profile costs, and the beam table its columns.
+///
+/// **Hero channels** (Wilkie et al. 2014, "Hero wavelength spectral sampling"): each walk
+/// draws its free flights by one channel's `σt` — the channels in turn — and every channel
+/// takes it by the balance heuristic over the three, `weight_c = (α_c / α_max)ⁿ · p_c / p̄`,
+/// `p_k = σt_kⁿ e^{−σt_k L}` the density of its `n` flights of total length `L` under channel
+/// `k` and `p̄` their mean (so `p_c / p̄ ≤ 3`); absorption is Russian roulette at the highest
+/// albedo `α_max`. One BVH query a flight then serves all three channels: a third of the
+/// queries of a walk per channel (the beam table's build: ~2× faster at the same noise,
+/// `docs/translucent.md`).
+///
+/// The mesh is queried only as far as each free flight reaches (several times faster for
+/// walks of a few mean free paths), so a walk that left through a gap in the mesh is not told
 /// apart: it scatters on outside until it is absorbed or ends as a [`WalkEnd::Remainder`] —
 /// use short `orders.last` on meshes that may be open.
 #[allow(clippy::too_many_arguments)]
@@ -268,23 +278,146 @@ pub fn walk_ends(
     seed: u64,
     launch: WalkLaunch,
     orders: ScatteringOrders,
-    mut on_end: impl FnMut(usize, WalkEnd),
+    mut on_end: impl FnMut(Vec3, WalkEnd),
 ) -> bool {
-    walk(
-        medium,
-        world_units_per_mm,
-        entries,
-        walks,
-        seed,
-        launch,
-        orders,
-        (|x, d, t_max| rays.first_hit_within(x, d, t_max), true),
-        |channel, _, end| on_end(channel, end),
-    )
-    .is_some()
+    let Some(entry_table) = EntryTable::new(medium, world_units_per_mm, entries) else {
+        return false;
+    };
+    let scale = world_units_per_mm as f64;
+    let sigma_t: [f64; 3] = std::array::from_fn(|c| {
+        (medium.reduced_scattering[c] as f64 + medium.absorption[c] as f64) / scale
+    });
+    let albedo: [f64; 3] = std::array::from_fn(|c| medium.reduced_scattering[c] as f64 / scale / sigma_t[c]);
+    let survival = albedo[0].max(albedo[1]).max(albedo[2]);
+    let ln_sigma_t = sigma_t.map(f64::ln);
+    // Walks w = c, c + 3, … draw by channel c: each channel's share of them, for p̄.
+    let heroes: [f64; 3] = std::array::from_fn(|c| walks.saturating_sub(c).div_ceil(3) as f64 / walks.max(1) as f64);
+    // The walk's worth per channel after `n` collisions over a path `length` long.
+    let weight = |n: u32, length: f64| {
+        let log_p = std::array::from_fn::<f64, 3, _>(|k| n as f64 * ln_sigma_t[k] - sigma_t[k] * length);
+        let top = log_p[0].max(log_p[1]).max(log_p[2]);
+        let mean: f64 = (0..3).map(|k| heroes[k] * (log_p[k] - top).exp()).sum();
+        Vec3::from_array(std::array::from_fn(|c| {
+            ((albedo[c] / survival).powi(n as i32) * (log_p[c] - top).exp() / mean) as f32
+        }))
+    };
+    // Steps off the surface: a thousandth of the shortest mean free path.
+    let epsilon = (1e-3 / sigma_t[0].max(sigma_t[1]).max(sigma_t[2])) as f32;
+    let eta = entry_table.eta;
+    let mut random = SplitMix(seed);
+    for w in 0..walks {
+        let hero = w % 3;
+        let e = entry_table.pick(random.next());
+        let Some(mut d) = launch_direction(launch, e.normal, eta, &mut random) else {
+            continue;
+        };
+        let mut x = e.position - e.normal * epsilon;
+        let (mut order, mut length) = (0u32, 0.0f64);
+        for _ in 0..MAX_EVENTS {
+            let free_path = (-(1.0 - random.next()).ln() / sigma_t[hero]) as f32;
+            match rays.first_hit_within(x, d, free_path) {
+                Some((t, normal)) if t <= free_path => {
+                    length += t as f64;
+                    let hit = x + d * t;
+                    match cross_boundary(d, normal, eta, &mut random) {
+                        Crossing::Reflected { travel, outward } => {
+                            d = travel;
+                            x = hit - outward * epsilon;
+                        }
+                        Crossing::Left { outward, leaving } => {
+                            if order >= orders.first {
+                                let exit = WalkExit { position: hit, outward, order, leaving };
+                                on_end(weight(order, length), WalkEnd::Exit(exit));
+                            }
+                            break;
+                        }
+                    }
+                }
+                // The boundary is beyond the free flight: a collision.
+                _ => {
+                    x += d * free_path;
+                    length += free_path as f64;
+                    if random.next() >= survival {
+                        break;
+                    }
+                    order += 1;
+                    if order > orders.last {
+                        on_end(weight(order, length), WalkEnd::Remainder);
+                        break;
+                    }
+                    d = uniform_direction(random.next(), random.next());
+                }
+            }
+        }
+    }
+    true
 }
 
-/// The walks themselves: `on_exit(channel, entry, exit)` for each walk that leaves.
+/// Entry points drawn by area, and the medium's index (at least 1).
+struct EntryTable<'a> {
+    entries: &'a [EntryPoint],
+    /// Running sums of the entries' areas.
+    cumulative: Vec<f64>,
+    eta: f32,
+}
+
+impl<'a> EntryTable<'a> {
+    /// `None` where the medium, the scale or the entries are invalid.
+    fn new(medium: &TranslucentMedium, world_units_per_mm: f32, entries: &'a [EntryPoint]) -> Option<Self> {
+        if medium.invalid_reason().is_some()
+            || !(world_units_per_mm.is_finite() && world_units_per_mm > 0.0)
+            || entries.is_empty()
+        {
+            return None;
+        }
+        let mut cumulative = Vec::with_capacity(entries.len());
+        let mut total = 0.0f64;
+        for e in entries {
+            total += e.area.max(0.0) as f64;
+            cumulative.push(total);
+        }
+        (total > 0.0).then(|| Self { entries, cumulative, eta: medium.index_of_refraction.max(1.0) })
+    }
+
+    /// The entry at the uniform number `u` in [0, 1).
+    fn pick(&self, u: f64) -> &'a EntryPoint {
+        let pick = u * self.cumulative.last().copied().unwrap_or(0.0);
+        &self.entries[self.cumulative.partition_point(|&c| c < pick).min(self.entries.len() - 1)]
+    }
+}
+
+/// The direction a walk entering through a face of outward unit `normal` starts along;
+/// `None` where a beam does not enter through that face.
+fn launch_direction(launch: WalkLaunch, normal: Vec3, eta: f32, random: &mut SplitMix) -> Option<Vec3> {
+    match launch {
+        WalkLaunch::Diffuse => Some(cosine_about(-normal, random.next(), random.next())),
+        // A beam along or behind this face does not enter through it.
+        WalkLaunch::Beam(direction) => refracted(direction, normal, eta),
+    }
+}
+
+/// What a walk travelling along `d` does at a boundary of unit `normal` (either side).
+enum Crossing {
+    /// Turned back in by Fresnel reflection (or total internal reflection).
+    Reflected { travel: Vec3, outward: Vec3 },
+    /// Out, along `leaving`.
+    Left { outward: Vec3, leaving: Vec3 },
+}
+
+/// At the boundary, from inside: Fresnel reflection back in (total internal reflection
+/// beyond the critical angle), else out.
+fn cross_boundary(d: Vec3, normal: Vec3, eta: f32, random: &mut SplitMix) -> Crossing {
+    let outward = if normal.dot(d) > 0.0 { normal } else { -normal };
+    let cos_i = d.dot(outward) as f64;
+    if eta > 1.0 && random.next() < fresnel_reflectance(cos_i, 1.0 / eta as f64) {
+        return Crossing::Reflected { travel: d - 2.0 * d.dot(outward) * outward, outward };
+    }
+    Crossing::Left { outward, leaving: refracted_out(d, outward, eta) }
+}
+
+/// The walks of [`exit_share`], a channel at a time, to the end (absorbed by Russian roulette
+/// at the channel's albedo, or out): `on_end(channel, entry, end)` for each that leaves;
+/// `first_hit(x, d)` the whole ray's nearest boundary, `None` out through a gap.
 #[allow(clippy::too_many_arguments)]
 fn walk(
     medium: &TranslucentMedium,
@@ -294,26 +427,11 @@ fn walk(
     seed: u64,
     launch: WalkLaunch,
     orders: ScatteringOrders,
-    (first_hit, bounded): (impl Fn(Vec3, Vec3, f32) -> Option<(f32, Vec3)>, bool),
+    first_hit: impl Fn(Vec3, Vec3) -> Option<(f32, Vec3)>,
     mut on_end: impl FnMut(usize, &EntryPoint, WalkEnd),
 ) -> Option<()> {
-    if medium.invalid_reason().is_some()
-        || !(world_units_per_mm.is_finite() && world_units_per_mm > 0.0)
-        || entries.is_empty()
-    {
-        return None;
-    }
-    // Entry points by area: a cumulative table.
-    let mut cumulative = Vec::with_capacity(entries.len());
-    let mut total = 0.0f64;
-    for e in entries {
-        total += e.area.max(0.0) as f64;
-        cumulative.push(total);
-    }
-    if total <= 0.0 {
-        return None;
-    }
-    let eta = medium.index_of_refraction.max(1.0) as f64;
+    let entry_table = EntryTable::new(medium, world_units_per_mm, entries)?;
+    let eta = entry_table.eta;
     for c in 0..3 {
         let sigma_s = medium.reduced_scattering[c] as f64 / world_units_per_mm as f64;
         let sigma_t = sigma_s + medium.absorption[c] as f64 / world_units_per_mm as f64;
@@ -322,26 +440,18 @@ fn walk(
         let epsilon = (1e-3 / sigma_t) as f32;
         let mut random = SplitMix(seed ^ (c as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
         for _ in 0..walks {
-            let pick = random.next() * total;
-            let e = &entries[cumulative.partition_point(|&c| c < pick).min(entries.len() - 1)];
-            let inward = -e.normal;
-            let mut x = e.position + inward * epsilon;
-            let mut d = match launch {
-                WalkLaunch::Diffuse => cosine_about(inward, random.next(), random.next()),
-                WalkLaunch::Beam(direction) => match refracted(direction, e.normal, eta as f32) {
-                    Some(d) => d,
-                    // A beam along or behind this face does not enter through it.
-                    None => continue,
-                },
+            let e = entry_table.pick(random.next());
+            let Some(mut d) = launch_direction(launch, e.normal, eta, &mut random) else {
+                continue;
             };
+            let mut x = e.position - e.normal * epsilon;
             let mut order = 0u32;
             for _ in 0..MAX_EVENTS {
                 let free_path = (-(1.0 - random.next()).ln() / sigma_t) as f32;
-                let boundary = first_hit(x, d, free_path);
-                let (to_boundary, normal) = match boundary {
+                let (to_boundary, normal) = match first_hit(x, d) {
                     Some((t, normal)) if t <= free_path => (t, normal),
                     // Out through a gap in the mesh: it has left.
-                    None if !bounded => {
+                    None => {
                         if order >= orders.first {
                             on_end(c, e, WalkEnd::Gap);
                         }
@@ -362,21 +472,19 @@ fn walk(
                         continue;
                     }
                 };
-                // At the boundary, from inside: Fresnel reflection back in (total internal
-                // reflection beyond the critical angle), else out.
-                let outward = if normal.dot(d) > 0.0 { normal } else { -normal };
-                let cos_i = d.dot(outward) as f64;
                 let hit = x + d * to_boundary;
-                if eta > 1.0 && random.next() < fresnel_reflectance(cos_i, 1.0 / eta) {
-                    d -= 2.0 * d.dot(outward) * outward;
-                    x = hit - outward * epsilon;
-                    continue;
+                match cross_boundary(d, normal, eta, &mut random) {
+                    Crossing::Reflected { travel, outward } => {
+                        d = travel;
+                        x = hit - outward * epsilon;
+                    }
+                    Crossing::Left { outward, leaving } => {
+                        if order >= orders.first {
+                            on_end(c, e, WalkEnd::Exit(WalkExit { position: hit, outward, order, leaving }));
+                        }
+                        break;
+                    }
                 }
-                if order >= orders.first {
-                    let leaving = refracted_out(d, outward, eta as f32);
-                    on_end(c, e, WalkEnd::Exit(WalkExit { position: hit, outward, order, leaving }));
-                }
-                break;
             }
         }
     }

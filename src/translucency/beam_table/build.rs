@@ -21,42 +21,102 @@ use crate::translucency::{
 /// object's own patch size: a room's wall patches would make a grid of the largest size
 /// hold a whole small object in a cell).
 pub struct ExitPatches {
-    grids: Vec<(f32, HashMap<IVec3, Vec<(Vec3, Vec3, u32)>>)>,
+    grids: Vec<SampleGrid>,
+}
+
+/// One object's samples by cell, dense over the cells they occupy (a walk's exit looks up 27
+/// cells: as a hash map's keys they took 15 % of a table's build).
+#[derive(Default)]
+struct SampleGrid {
+    /// Cell size (world units): the object's patch size.
+    cell: f32,
+    /// The lowest cell's integer coordinates (`floor(x / cell)`).
+    low: IVec3,
+    /// Cells along each axis.
+    size: IVec3,
+    /// Where each cell's samples start in `samples` (one more than there are cells).
+    starts: Vec<u32>,
+    /// Position, unit normal and patch of each sample, by cell, in the patches' order.
+    samples: Vec<(Vec3, Vec3, u32)>,
+}
+
+impl SampleGrid {
+    /// The grid of `samples` (position, normal, patch) in cells of `cell`.
+    fn new(cell: f32, samples: &[(Vec3, Vec3, u32)]) -> Self {
+        let key = |x: Vec3| (x / cell).floor().as_ivec3();
+        let Some(first) = samples.first() else {
+            return Self { cell, ..default() };
+        };
+        let (low, high) = samples.iter().fold((key(first.0), key(first.0)), |(low, high), s| {
+            (low.min(key(s.0)), high.max(key(s.0)))
+        });
+        let size = high - low + IVec3::ONE;
+        let index = |k: IVec3| {
+            let k = (k - low).as_uvec3();
+            (k.x + size.x as u32 * (k.y + size.y as u32 * k.z)) as usize
+        };
+        // A counting sort keeps each cell's samples in the patches' order.
+        let cells = size.x as usize * size.y as usize * size.z as usize;
+        let mut starts = vec![0u32; cells + 1];
+        for s in samples {
+            starts[index(key(s.0)) + 1] += 1;
+        }
+        for c in 0..cells {
+            starts[c + 1] += starts[c];
+        }
+        let mut next = starts.clone();
+        let mut sorted = vec![(Vec3::ZERO, Vec3::ZERO, 0); samples.len()];
+        for &s in samples {
+            let c = index(key(s.0));
+            sorted[next[c] as usize] = s;
+            next[c] += 1;
+        }
+        Self { cell, low, size, starts, samples: sorted }
+    }
+
+    /// The samples in the cell of integer coordinates `k` (none outside the grid).
+    fn cell(&self, k: IVec3) -> &[(Vec3, Vec3, u32)] {
+        // Saturating: an exit far outside (a walk out through a gap) stays outside.
+        let k = k.saturating_sub(self.low);
+        if k.cmplt(IVec3::ZERO).any() || k.cmpge(self.size).any() {
+            return &[];
+        }
+        let c = (k.x + self.size.x * (k.y + self.size.y * k.z)) as usize;
+        &self.samples[self.starts[c] as usize..self.starts[c + 1] as usize]
+    }
 }
 
 impl ExitPatches {
     /// The grids of `patches`' samples, one per object.
     pub fn new(patches: &Patches) -> Self {
         let objects = patches.object_patch_sizes.len();
-        let mut grids: Vec<(f32, HashMap<IVec3, Vec<(Vec3, Vec3, u32)>>)> = (0..objects)
-            .map(|o| (patches.object_patch_sizes[o].max(1e-9), HashMap::default()))
-            .collect();
+        let mut samples: Vec<Vec<(Vec3, Vec3, u32)>> = vec![Vec::new(); objects];
         for (i, q) in patches.patches.iter().enumerate() {
-            let Some((cell, grid)) = grids.get_mut(q.object as usize) else {
+            let Some(object) = samples.get_mut(q.object as usize) else {
                 continue;
             };
-            for s in patches.samples_of(i) {
-                grid.entry((s.position / *cell).floor().as_ivec3())
-                    .or_default()
-                    .push((s.position, s.normal, i as u32));
-            }
+            object.extend(patches.samples_of(i).iter().map(|s| (s.position, s.normal, i as u32)));
         }
+        let grids = samples
+            .iter()
+            .enumerate()
+            .map(|(o, s)| SampleGrid::new(patches.object_patch_sizes[o].max(1e-9), s))
+            .collect();
         Self { grids }
     }
 
     /// The patch of `object` a walk leaving at `x` through a boundary of unit `outward`
     /// normal leaves by; `None` where none of its samples is within a patch size.
     pub fn of(&self, object: u32, x: Vec3, outward: Vec3) -> Option<u32> {
-        let (cell, grid) = self.grids.get(object as usize)?;
-        let key = (x / *cell).floor().as_ivec3();
+        let grid = self.grids.get(object as usize)?;
+        let key = (x / grid.cell).floor().as_ivec3();
         // The nearest sample facing the exit's way (not the far side of a thin part), else
         // the nearest of any: (distance², patch).
         let (mut facing, mut any): (Option<(f32, u32)>, Option<(f32, u32)>) = (None, None);
         for dz in -1..=1 {
             for dy in -1..=1 {
                 for dx in -1..=1 {
-                    let cell = grid.get(&(key + IVec3::new(dx, dy, dz)));
-                    for &(position, normal, patch) in cell.into_iter().flatten() {
+                    for &(position, normal, patch) in grid.cell(key.saturating_add(IVec3::new(dx, dy, dz))) {
                         let d = position.distance_squared(x);
                         if any.is_none_or(|b| d < b.0) {
                             any = Some((d, patch));
@@ -317,30 +377,35 @@ impl ColumnWalks<'_> {
             seed,
             launch,
             orders,
-            |c, end| match end {
+            |weight, end| match end {
                 WalkEnd::Exit(exit) if to_law(exit.order, exit.outward) => {}
                 WalkEnd::Exit(exit) => {
                     if let Some(i) = self.exits.of(pj.object, exit.position, exit.outward) {
-                        let exitance = share * pj.area / p[i as usize].area;
-                        column.entry(i).or_default()[c] += exitance;
+                        let exitance = weight * (share * pj.area / p[i as usize].area);
+                        *column.entry(i).or_default() += exitance;
                         if self.directions {
-                            moments.entry(i).or_insert([Vec4::ZERO; 3])[c] += (exitance * exit.leaving).extend(1.0);
+                            let moment = moments.entry(i).or_insert([Vec4::ZERO; 3]);
+                            for c in 0..3 {
+                                moment[c] += (exitance[c] * exit.leaving).extend(weight[c]);
+                            }
                         }
                         let i = i as usize;
                         if beam && from_afar(self.patches, i, self.j) {
                             let n = p[i].normal;
-                            let from = from_source(self.patches, i, self.j, self.source_depth[c]);
-                            let t = from - n * from.dot(n);
-                            lean.along[c] += n.dot(exit.leaving);
-                            lean.walks[c] += 1.0;
-                            lean.across[c] += t.dot(exit.leaving);
-                            lean.spread[c] += t.length_squared();
+                            for c in 0..3 {
+                                let from = from_source(self.patches, i, self.j, self.source_depth[c]);
+                                let t = from - n * from.dot(n);
+                                lean.along[c] += weight[c] * n.dot(exit.leaving);
+                                lean.walks[c] += weight[c];
+                                lean.across[c] += weight[c] * t.dot(exit.leaving);
+                                lean.spread[c] += weight[c] * t.length_squared();
+                            }
                         }
                     }
                 }
                 // Through a gap in the mesh: lost.
                 WalkEnd::Gap => {}
-                WalkEnd::Remainder => remaining[c] += share,
+                WalkEnd::Remainder => remaining += weight * share,
             },
         );
         (column, moments, remaining, lean)

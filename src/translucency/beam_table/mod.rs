@@ -6,8 +6,8 @@
 //! marble 0.089 → 0.073 in relative L1 against Mitsuba).
 //!
 //! Each table direction's column comes from three parts:
-//! - **the walks' low orders**: `walks` beam walks a channel from the patch's samples
-//!   ([`walk_ends`](super::random_walk::walk_ends)), refracted in, each exit after 1 … `last_order`
+//! - **the walks' low orders**: `walks` beam walks from the patch's samples, each shared by
+//!   the three channels ([`walk_ends`](super::random_walk::walk_ends)), refracted in, each exit after 1 … `last_order`
 //!   scatterings counted on the patch it leaves by (the nearest sample facing the exit's
 //!   way);
 //! - **single scattering by the lit face is left out**: it leaves each lit pixel in its own
@@ -21,7 +21,7 @@
 //!   diffuse walks leave by within the same orders, scaled down by those early exits' share of
 //!   it — per unit of the diffuse walks' own remainder. Stopping the walks there bounds their
 //!   cost (marble's albedo 0.999 would take hundreds of scatterings) and puts the light that
-//!   crosses an object where the profile, not 256 walks' noise, says.
+//!   crosses an object where the profile, not a few hundred walks' noise, says.
 //!
 //! Columns are per unit of light that got in: a frame weights each beam by the boundary's
 //! Fresnel transmittance at its own incidence.
@@ -52,9 +52,10 @@ pub struct BeamTableSettings {
     pub cosines: u32,
     /// Azimuths about the patch's normal, `2π m/azimuths` (1 – 32).
     pub azimuths: u32,
-    /// Beam walks a channel and direction (≥ 1).
+    /// Beam walks a direction (≥ 1), each shared by the three channels (hero channels:
+    /// [`walk_ends`](super::random_walk::walk_ends)).
     pub walks: u32,
-    /// Diffuse walks a channel and patch for the late light's near field (≥ 1).
+    /// Diffuse walks a patch for the late light's near field (≥ 1), shared by the channels.
     pub late_walks: u32,
     /// Scatterings a walk takes before it leaves as late light (≥ 1).
     pub last_order: u32,
@@ -75,17 +76,17 @@ pub struct BeamTableSettings {
 impl Default for BeamTableSettings {
     /// 4 × 8 directions (measured as close as 6 × 12 on the bunny and the ball; with each
     /// beam spread over four of them, 3 × 6 took the bunny's skin past 0.08 in relative L1
-    /// with one seed of three: `docs/translucent.md`), 256 walks (128, 1.8× less precompute,
-    /// keep every front-lit case within 0.08 but take the back-lit ball's skin from 0.147 to
-    /// 0.166 over three seeds), 1024 late walks (256: 0.060 → 0.080 from the front, at the
-    /// nearest direction), the 17th scattering on (from the 9th the back-lit bunny's skin
-    /// went 0.286 → 0.316).
+    /// with one seed of three: `docs/translucent.md`), 384 walks shared by the channels and
+    /// 3072 late walks (against 256 and 1024 walks a channel before: the table's build 1.6×
+    /// faster, the ball's skin from the front 0.048 → 0.044 and the bunny's 0.073 → 0.077 over
+    /// three seeds, the rest within their noise; 1024 late walks: the ball's skin 0.053), the
+    /// 17th scattering on (from the 9th the back-lit bunny's skin went 0.286 → 0.316).
     fn default() -> Self {
         Self {
             cosines: 4,
             azimuths: 8,
-            walks: 256,
-            late_walks: 1024,
+            walks: 384,
+            late_walks: 3072,
             last_order: 16,
             exit_directions: false,
             seed: 0,
@@ -129,8 +130,8 @@ pub struct BeamTable {
     /// With [`BeamTableSettings::exit_directions`] (else empty): per entry of `early` (in its
     /// order), per channel, the mean direction its light leaves along outside (`xyz`, the
     /// exitance-weighted mean of the walks' leaving directions: length 1 for light all
-    /// leaving one way, ⅔ along the normal for Lambert's law) and how many walks it holds
-    /// (`w`, for the mean's noise).
+    /// leaving one way, ⅔ along the normal for Lambert's law) and what its walks weigh in
+    /// the channel (`w`, their hero-channel weights summed: for the mean's noise).
     pub early_leaving: Vec<[Vec4; 3]>,
     /// Per direction (`slot · bins + bin`), the share of its walks still inside after the last
     /// order over the share of diffuse walks', per channel: how much of `late`'s column its
