@@ -40,8 +40,12 @@ impl Hash {
     }
 }
 
+/// Bumped when the same settings come to build a different transport, so that files of the
+/// old one are not found (2: the beam table's walks shared by the colour channels).
+const REVISION: u32 = 2;
+
 /// The cache key of a scene: its objects (world-space positions, indices, surface), the
-/// patch budget, the transport settings and the crate's version.
+/// patch budget, the transport settings, the crate's version and [`REVISION`].
 pub fn scene_key(
     objects: &[(&[Vec3], &[u32], PatchSurface)],
     budget: usize,
@@ -49,6 +53,7 @@ pub fn scene_key(
 ) -> u64 {
     let mut h = Hash::new()
         .bytes(env!("CARGO_PKG_VERSION").as_bytes())
+        .bytes(&REVISION.to_le_bytes())
         .bytes(&(budget as u64).to_le_bytes())
         .bytes(format!("{:?}", settings.kernel).as_bytes())
         .f32s([
