@@ -138,7 +138,11 @@ pub fn edge_exits(
             }
         };
         let (tx, ty) = (to(x.x, d.x), to(x.y, d.y));
-        Some(if tx < ty { (tx, Vec3::X) } else { (ty, Vec3::Y) })
+        Some(if tx < ty {
+            (tx, Vec3::X)
+        } else {
+            (ty, Vec3::Y)
+        })
     })?;
     Some((exits.left - exits.other_face, exits.other_face))
 }
@@ -161,7 +165,7 @@ fn exit_share(
     entries: &[EntryPoint],
     walks: usize,
     seed: u64,
-    first_hit: impl Fn(Vec3, Vec3) -> Option<(f32, Vec3)>,
+    first_hit: impl Fn(Vec3, Vec3) -> Option<(f32, Vec3)> + Sync,
 ) -> Option<Exits> {
     let mut left = [0usize; 3];
     let mut other_face = [0usize; 3];
@@ -172,7 +176,10 @@ fn exit_share(
         walks,
         seed,
         WalkLaunch::Diffuse,
-        ScatteringOrders { first: 0, last: MAX_EVENTS },
+        ScatteringOrders {
+            first: 0,
+            last: MAX_EVENTS,
+        },
         first_hit,
         |channel, entry, end| match end {
             WalkEnd::Exit(exit) => {
@@ -287,14 +294,17 @@ pub fn walk_ends(
     let sigma_t: [f64; 3] = std::array::from_fn(|c| {
         (medium.reduced_scattering[c] as f64 + medium.absorption[c] as f64) / scale
     });
-    let albedo: [f64; 3] = std::array::from_fn(|c| medium.reduced_scattering[c] as f64 / scale / sigma_t[c]);
+    let albedo: [f64; 3] =
+        std::array::from_fn(|c| medium.reduced_scattering[c] as f64 / scale / sigma_t[c]);
     let survival = albedo[0].max(albedo[1]).max(albedo[2]);
     let ln_sigma_t = sigma_t.map(f64::ln);
     // Walks w = c, c + 3, … draw by channel c: each channel's share of them, for p̄.
-    let heroes: [f64; 3] = std::array::from_fn(|c| walks.saturating_sub(c).div_ceil(3) as f64 / walks.max(1) as f64);
+    let heroes: [f64; 3] =
+        std::array::from_fn(|c| walks.saturating_sub(c).div_ceil(3) as f64 / walks.max(1) as f64);
     // The walk's worth per channel after `n` collisions over a path `length` long.
     let weight = |n: u32, length: f64| {
-        let log_p = std::array::from_fn::<f64, 3, _>(|k| n as f64 * ln_sigma_t[k] - sigma_t[k] * length);
+        let log_p =
+            std::array::from_fn::<f64, 3, _>(|k| n as f64 * ln_sigma_t[k] - sigma_t[k] * length);
         let top = log_p[0].max(log_p[1]).max(log_p[2]);
         let mean: f64 = (0..3).map(|k| heroes[k] * (log_p[k] - top).exp()).sum();
         Vec3::from_array(std::array::from_fn(|c| {
@@ -326,7 +336,12 @@ pub fn walk_ends(
                         }
                         Crossing::Left { outward, leaving } => {
                             if order >= orders.first {
-                                let exit = WalkExit { position: hit, outward, order, leaving };
+                                let exit = WalkExit {
+                                    position: hit,
+                                    outward,
+                                    order,
+                                    leaving,
+                                };
                                 on_end(weight(order, length), WalkEnd::Exit(exit));
                             }
                             break;
@@ -363,7 +378,11 @@ struct EntryTable<'a> {
 
 impl<'a> EntryTable<'a> {
     /// `None` where the medium, the scale or the entries are invalid.
-    fn new(medium: &TranslucentMedium, world_units_per_mm: f32, entries: &'a [EntryPoint]) -> Option<Self> {
+    fn new(
+        medium: &TranslucentMedium,
+        world_units_per_mm: f32,
+        entries: &'a [EntryPoint],
+    ) -> Option<Self> {
         if medium.invalid_reason().is_some()
             || !(world_units_per_mm.is_finite() && world_units_per_mm > 0.0)
             || entries.is_empty()
@@ -376,19 +395,31 @@ impl<'a> EntryTable<'a> {
             total += e.area.max(0.0) as f64;
             cumulative.push(total);
         }
-        (total > 0.0).then(|| Self { entries, cumulative, eta: medium.index_of_refraction.max(1.0) })
+        (total > 0.0).then(|| Self {
+            entries,
+            cumulative,
+            eta: medium.index_of_refraction.max(1.0),
+        })
     }
 
     /// The entry at the uniform number `u` in [0, 1).
     fn pick(&self, u: f64) -> &'a EntryPoint {
         let pick = u * self.cumulative.last().copied().unwrap_or(0.0);
-        &self.entries[self.cumulative.partition_point(|&c| c < pick).min(self.entries.len() - 1)]
+        &self.entries[self
+            .cumulative
+            .partition_point(|&c| c < pick)
+            .min(self.entries.len() - 1)]
     }
 }
 
 /// The direction a walk entering through a face of outward unit `normal` starts along;
 /// `None` where a beam does not enter through that face.
-fn launch_direction(launch: WalkLaunch, normal: Vec3, eta: f32, random: &mut SplitMix) -> Option<Vec3> {
+fn launch_direction(
+    launch: WalkLaunch,
+    normal: Vec3,
+    eta: f32,
+    random: &mut SplitMix,
+) -> Option<Vec3> {
     match launch {
         WalkLaunch::Diffuse => Some(cosine_about(-normal, random.next(), random.next())),
         // A beam along or behind this face does not enter through it.
@@ -410,29 +441,39 @@ fn cross_boundary(d: Vec3, normal: Vec3, eta: f32, random: &mut SplitMix) -> Cro
     let outward = if normal.dot(d) > 0.0 { normal } else { -normal };
     let cos_i = d.dot(outward) as f64;
     if eta > 1.0 && random.next() < fresnel_reflectance(cos_i, 1.0 / eta as f64) {
-        return Crossing::Reflected { travel: d - 2.0 * d.dot(outward) * outward, outward };
+        return Crossing::Reflected {
+            travel: d - 2.0 * d.dot(outward) * outward,
+            outward,
+        };
     }
-    Crossing::Left { outward, leaving: refracted_out(d, outward, eta) }
+    Crossing::Left {
+        outward,
+        leaving: refracted_out(d, outward, eta),
+    }
 }
 
-/// The walks of [`exit_share`], a channel at a time, to the end (absorbed by Russian roulette
-/// at the channel's albedo, or out): `on_end(channel, entry, end)` for each that leaves;
+/// The walks of [`exit_share`], a channel at a time (the three on their own cores: marble's
+/// walks run hundreds of scatterings, each an unbounded query, and held the transport's
+/// build up on one core), to the end (absorbed by Russian roulette at the channel's albedo,
+/// or out): `on_end(channel, entry, end)` for each that leaves, channel by channel;
 /// `first_hit(x, d)` the whole ray's nearest boundary, `None` out through a gap.
 #[allow(clippy::too_many_arguments)]
-fn walk(
+fn walk<'a>(
     medium: &TranslucentMedium,
     world_units_per_mm: f32,
-    entries: &[EntryPoint],
+    entries: &'a [EntryPoint],
     walks: usize,
     seed: u64,
     launch: WalkLaunch,
     orders: ScatteringOrders,
-    first_hit: impl Fn(Vec3, Vec3) -> Option<(f32, Vec3)>,
+    first_hit: impl Fn(Vec3, Vec3) -> Option<(f32, Vec3)> + Sync,
     mut on_end: impl FnMut(usize, &EntryPoint, WalkEnd),
 ) -> Option<()> {
     let entry_table = EntryTable::new(medium, world_units_per_mm, entries)?;
     let eta = entry_table.eta;
-    for c in 0..3 {
+    let channels = super::transport::parallel_rows(3, |c| {
+        let mut ends: Vec<(&'a EntryPoint, WalkEnd)> = Vec::new();
+        let mut on_end = |_: usize, e: &'a EntryPoint, end: WalkEnd| ends.push((e, end));
         let sigma_s = medium.reduced_scattering[c] as f64 / world_units_per_mm as f64;
         let sigma_t = sigma_s + medium.absorption[c] as f64 / world_units_per_mm as f64;
         let albedo = sigma_s / sigma_t;
@@ -480,12 +521,27 @@ fn walk(
                     }
                     Crossing::Left { outward, leaving } => {
                         if order >= orders.first {
-                            on_end(c, e, WalkEnd::Exit(WalkExit { position: hit, outward, order, leaving }));
+                            on_end(
+                                c,
+                                e,
+                                WalkEnd::Exit(WalkExit {
+                                    position: hit,
+                                    outward,
+                                    order,
+                                    leaving,
+                                }),
+                            );
                         }
                         break;
                     }
                 }
             }
+        }
+        ends
+    });
+    for (c, ends) in channels.into_iter().enumerate() {
+        for (e, end) in ends {
+            on_end(c, e, end);
         }
     }
     Some(())

@@ -11,7 +11,9 @@ use crate::translucency::{
     medium,
     patches::Patches,
     random_walk,
-    shape_diffusion::{MAX_SHAPE_PATCHES, SHAPE_SOURCE_DEPTH, ShapePatch, boundary_correction},
+    shape_diffusion::{
+        DipoleChannel, MAX_SHAPE_PATCHES, SHAPE_SOURCE_DEPTH, ShapePatch, boundary_correction,
+    },
 };
 
 /// `K` and what building it found.
@@ -63,7 +65,8 @@ pub(super) fn build(
         _ => None,
     };
     let mut shape_too_large_objects = 0;
-    let shape_solutions: Vec<Option<(DiffusionProfile, [Vec<f64>; 3])>> = surfaces
+    // Each object to solve: its profile, channels and patches in millimetres.
+    let shapes: Vec<Option<(DiffusionProfile, [DipoleChannel; 3], Vec<ShapePatch>)>> = surfaces
         .iter()
         .enumerate()
         .map(|(object, s)| {
@@ -93,8 +96,25 @@ pub(super) fn build(
                     area: p[i].area as f64 * mm * mm,
                 })
                 .collect();
-            let [r, g, b] = channels.map(|c| boundary_correction(&shape, c));
-            let solved = r.zip(g).zip(b).map(|((r, g), b)| (profile, [r, g, b]));
+            Some((profile, channels, shape))
+        })
+        .collect();
+    // Every object's three channels at once: each solve's LU steps are short and one at a
+    // time, so that one solve alone keeps few cores busy.
+    let mut corrections = parallel_rows(shapes.len() * 3, |task| {
+        let (profile_channels_shape, c) = (&shapes[task / 3], task % 3);
+        profile_channels_shape
+            .as_ref()
+            .map(|(_, channels, shape)| boundary_correction(shape, channels[c]))
+    })
+    .into_iter();
+    let shape_solutions: Vec<Option<(DiffusionProfile, [Vec<f64>; 3])>> = shapes
+        .iter()
+        .enumerate()
+        .map(|(object, solve)| {
+            let [r, g, b] = [(); 3].map(|_| corrections.next().flatten().flatten());
+            let (profile, ..) = solve.as_ref()?;
+            let solved = r.zip(g).zip(b).map(|((r, g), b)| (*profile, [r, g, b]));
             if solved.is_none() {
                 warn!(
                     "translucency: object {object}'s diffusion could not be solved in its \
@@ -191,69 +211,66 @@ pub(super) fn build(
     // Per translucent object: the slab's W∞ of its profile, and the factor its columns
     // carry beyond it — 1, or (`object_exit_share`) what random walks find leaving the
     // object's own shape over what leaves a slab.
-    let object_totals: Vec<Option<(Vec3, Vec3)>> = profiles
-        .iter()
-        .enumerate()
-        .map(|(object, profile)| {
-            let (profile, units_per_mm, _) = (*profile)?;
-            let total = profile.total_reflectance();
-            let slab = Vec3::new(total[0] as f32, total[1] as f32, total[2] as f32);
-            let PatchSurface::Translucent { medium, .. } = surfaces[object] else {
-                return Some((slab, Vec3::ONE));
-            };
-            if !settings.object_exit_share {
-                return Some((slab, Vec3::ONE));
+    // The objects on their own cores (each walks its channels on three).
+    let object_totals: Vec<Option<(Vec3, Vec3)>> = parallel_rows(profiles.len(), |object| {
+        let (profile, units_per_mm, _) = profiles[object]?;
+        let total = profile.total_reflectance();
+        let slab = Vec3::new(total[0] as f32, total[1] as f32, total[2] as f32);
+        let PatchSurface::Translucent { medium, .. } = surfaces[object] else {
+            return Some((slab, Vec3::ONE));
+        };
+        if !settings.object_exit_share {
+            return Some((slab, Vec3::ONE));
+        }
+        let entries: Vec<_> = (0..n)
+            .filter(|&i| p[i].object as usize == object)
+            .flat_map(|i| patches.samples_of(i))
+            .map(|s| random_walk::EntryPoint {
+                position: s.position,
+                normal: s.normal,
+                area: s.area,
+            })
+            .collect();
+        // Chiang et al.'s `A` (the scaled dipole's and Burley's total) is an
+        // index-matched slab's: over an index-matched slab's share, the walks' share
+        // (Fresnel reflecting them back inside the boundary) carries the boundary's
+        // internal reflection as well as the shape (over the slab's own share it
+        // carried the shape alone, and a skin ball at η 1.3 under uniform light came
+        // out 1.28–1.70× too bright against a path tracer; `docs/translucent.md`).
+        // Jensen's dipole holds its boundary already (`A = (1 + F_dr)/(1 − F_dr)`).
+        let slab_medium = if medium.index_of_refraction > 1.0
+            && settings.kernel != diffusion::DiffusionKernel::Dipole
+        {
+            medium::TranslucentMedium {
+                index_of_refraction: 1.0,
+                ..medium
             }
-            let entries: Vec<_> = (0..n)
-                .filter(|&i| p[i].object as usize == object)
-                .flat_map(|i| patches.samples_of(i))
-                .map(|s| random_walk::EntryPoint {
-                    position: s.position,
-                    normal: s.normal,
-                    area: s.area,
-                })
-                .collect();
-            // Chiang et al.'s `A` (the scaled dipole's and Burley's total) is an
-            // index-matched slab's: over an index-matched slab's share, the walks' share
-            // (Fresnel reflecting them back inside the boundary) carries the boundary's
-            // internal reflection as well as the shape (over the slab's own share it
-            // carried the shape alone, and a skin ball at η 1.3 under uniform light came
-            // out 1.28–1.70× too bright against a path tracer; `docs/translucent.md`).
-            // Jensen's dipole holds its boundary already (`A = (1 + F_dr)/(1 − F_dr)`).
-            let slab_medium = if medium.index_of_refraction > 1.0
-                && settings.kernel != diffusion::DiffusionKernel::Dipole
-            {
-                medium::TranslucentMedium {
-                    index_of_refraction: 1.0,
-                    ..medium
-                }
-            } else {
-                medium
-            };
-            let (walks, seed) = (random_walk::WALKS_PER_CHANNEL, object as u64);
-            let object_share = random_walk::object_exit_share(
-                &medium,
-                units_per_mm as f32,
-                &entries,
-                rays,
-                walks,
-                seed,
-            );
-            let slab_share =
-                random_walk::slab_exit_share(&slab_medium, units_per_mm as f32, walks, seed);
-            let finite =
-                object_share
-                    .zip(slab_share)
-                    .map_or(Vec3::ONE, |(object_share, slab_share)| {
-                        Vec3::select(
-                            slab_share.cmpgt(Vec3::ZERO),
-                            object_share / slab_share.max(Vec3::splat(1e-9)),
-                            Vec3::ONE,
-                        )
-                    });
-            Some((slab, finite))
-        })
-        .collect();
+        } else {
+            medium
+        };
+        let (walks, seed) = (random_walk::WALKS_PER_CHANNEL, object as u64);
+        let object_share = random_walk::object_exit_share(
+            &medium,
+            units_per_mm as f32,
+            &entries,
+            rays,
+            walks,
+            seed,
+        );
+        let slab_share =
+            random_walk::slab_exit_share(&slab_medium, units_per_mm as f32, walks, seed);
+        let finite =
+            object_share
+                .zip(slab_share)
+                .map_or(Vec3::ONE, |(object_share, slab_share)| {
+                    Vec3::select(
+                        slab_share.cmpgt(Vec3::ZERO),
+                        object_share / slab_share.max(Vec3::splat(1e-9)),
+                        Vec3::ONE,
+                    )
+                });
+        Some((slab, finite))
+    });
 
     // Each translucent column carries the slab's total reflectance: Σ_i P_ij = W∞. The
     // cut-off drops ~1 %, and equal-area discs about neighbouring centres overlap the
