@@ -318,52 +318,25 @@ pub fn walk_ends(
     for w in 0..walks {
         let hero = w % 3;
         let e = entry_table.pick(random.next());
-        let Some(mut d) = launch_direction(launch, e.normal, eta, &mut random) else {
+        let Some(d) = launch_direction(launch, e.normal, eta, &mut random) else {
             continue;
         };
-        let mut x = e.position - e.normal * epsilon;
-        let (mut order, mut length) = (0u32, 0.0f64);
-        for _ in 0..MAX_EVENTS {
-            let free_path = (-(1.0 - random.next()).ln() / sigma_t[hero]) as f32;
-            match rays.first_hit_within(x, d, free_path) {
-                Some((t, normal)) if t <= free_path => {
-                    length += t as f64;
-                    let hit = x + d * t;
-                    match cross_boundary(d, normal, eta, &mut random) {
-                        Crossing::Reflected { travel, outward } => {
-                            d = travel;
-                            x = hit - outward * epsilon;
-                        }
-                        Crossing::Left { outward, leaving } => {
-                            if order >= orders.first {
-                                let exit = WalkExit {
-                                    position: hit,
-                                    outward,
-                                    order,
-                                    leaving,
-                                };
-                                on_end(weight(order, length), WalkEnd::Exit(exit));
-                            }
-                            break;
-                        }
-                    }
-                }
-                // The boundary is beyond the free flight: a collision.
-                _ => {
-                    x += d * free_path;
-                    length += free_path as f64;
-                    if random.next() >= survival {
-                        break;
-                    }
-                    order += 1;
-                    if order > orders.last {
-                        on_end(weight(order, length), WalkEnd::Remainder);
-                        break;
-                    }
-                    d = uniform_direction(random.next(), random.next());
-                }
-            }
-        }
+        let medium = WalkMedium {
+            sigma_t: sigma_t[hero],
+            survival,
+            epsilon,
+            eta,
+        };
+        let query = |x, d, t_max| rays.first_hit_within(x, d, t_max);
+        walk_one(
+            e,
+            d,
+            medium,
+            (query, true),
+            orders,
+            &mut random,
+            |order, length, end| on_end(weight(order, length), end),
+        );
     }
     true
 }
@@ -473,69 +446,33 @@ fn walk<'a>(
     let eta = entry_table.eta;
     let channels = super::transport::parallel_rows(3, |c| {
         let mut ends: Vec<(&'a EntryPoint, WalkEnd)> = Vec::new();
-        let mut on_end = |_: usize, e: &'a EntryPoint, end: WalkEnd| ends.push((e, end));
         let sigma_s = medium.reduced_scattering[c] as f64 / world_units_per_mm as f64;
         let sigma_t = sigma_s + medium.absorption[c] as f64 / world_units_per_mm as f64;
         let albedo = sigma_s / sigma_t;
         // Steps off the surface: a thousandth of a mean free path.
         let epsilon = (1e-3 / sigma_t) as f32;
         let mut random = SplitMix(seed ^ (c as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let medium = WalkMedium {
+            sigma_t,
+            survival: albedo,
+            epsilon,
+            eta,
+        };
         for _ in 0..walks {
             let e = entry_table.pick(random.next());
-            let Some(mut d) = launch_direction(launch, e.normal, eta, &mut random) else {
+            let Some(d) = launch_direction(launch, e.normal, eta, &mut random) else {
                 continue;
             };
-            let mut x = e.position - e.normal * epsilon;
-            let mut order = 0u32;
-            for _ in 0..MAX_EVENTS {
-                let free_path = (-(1.0 - random.next()).ln() / sigma_t) as f32;
-                let (to_boundary, normal) = match first_hit(x, d) {
-                    Some((t, normal)) if t <= free_path => (t, normal),
-                    // Out through a gap in the mesh: it has left.
-                    None => {
-                        if order >= orders.first {
-                            on_end(c, e, WalkEnd::Gap);
-                        }
-                        break;
-                    }
-                    // The boundary is beyond the free flight: a collision.
-                    _ => {
-                        x += d * free_path;
-                        if random.next() >= albedo {
-                            break;
-                        }
-                        order += 1;
-                        if order > orders.last {
-                            on_end(c, e, WalkEnd::Remainder);
-                            break;
-                        }
-                        d = uniform_direction(random.next(), random.next());
-                        continue;
-                    }
-                };
-                let hit = x + d * to_boundary;
-                match cross_boundary(d, normal, eta, &mut random) {
-                    Crossing::Reflected { travel, outward } => {
-                        d = travel;
-                        x = hit - outward * epsilon;
-                    }
-                    Crossing::Left { outward, leaving } => {
-                        if order >= orders.first {
-                            on_end(
-                                c,
-                                e,
-                                WalkEnd::Exit(WalkExit {
-                                    position: hit,
-                                    outward,
-                                    order,
-                                    leaving,
-                                }),
-                            );
-                        }
-                        break;
-                    }
-                }
-            }
+            let query = |x, d, _| first_hit(x, d);
+            walk_one(
+                e,
+                d,
+                medium,
+                (query, false),
+                orders,
+                &mut random,
+                |_, _, end| ends.push((e, end)),
+            );
         }
         ends
     });
@@ -545,6 +482,85 @@ fn walk<'a>(
         }
     }
     Some(())
+}
+
+/// What one walk's steps take of the medium.
+#[derive(Clone, Copy)]
+struct WalkMedium {
+    /// The extinction its free flights are drawn by (world units⁻¹).
+    sigma_t: f64,
+    /// The odds of going on at each collision (Russian roulette).
+    survival: f64,
+    /// How far it steps off the surface, in and after a reflection.
+    epsilon: f32,
+    /// The medium's relative index (at least 1).
+    eta: f32,
+}
+
+/// One walk from `entry` along `d` (already inside) until it leaves, is absorbed or has
+/// scattered more than `orders.last` times: `on_end(order, length, end)` for an end that
+/// [`walk_ends`] reports (`order` its scatterings, `length` its path in the medium).
+/// `query(x, d, t_max)` the nearest boundary along `d` (`bounded`: only within `t_max`, so
+/// that none is no gap but a collision).
+fn walk_one(
+    entry: &EntryPoint,
+    mut d: Vec3,
+    medium: WalkMedium,
+    (query, bounded): (impl Fn(Vec3, Vec3, f32) -> Option<(f32, Vec3)>, bool),
+    orders: ScatteringOrders,
+    random: &mut SplitMix,
+    mut on_end: impl FnMut(u32, f64, WalkEnd),
+) {
+    let mut x = entry.position - entry.normal * medium.epsilon;
+    let (mut order, mut length) = (0u32, 0.0f64);
+    for _ in 0..MAX_EVENTS {
+        let free_path = (-(1.0 - random.next()).ln() / medium.sigma_t) as f32;
+        let (to_boundary, normal) = match query(x, d, free_path) {
+            Some((t, normal)) if t <= free_path => (t, normal),
+            // Out through a gap in the mesh: it has left.
+            None if !bounded => {
+                if order >= orders.first {
+                    on_end(order, length, WalkEnd::Gap);
+                }
+                return;
+            }
+            // The boundary is beyond the free flight: a collision.
+            _ => {
+                x += d * free_path;
+                length += free_path as f64;
+                if random.next() >= medium.survival {
+                    return;
+                }
+                order += 1;
+                if order > orders.last {
+                    on_end(order, length, WalkEnd::Remainder);
+                    return;
+                }
+                d = uniform_direction(random.next(), random.next());
+                continue;
+            }
+        };
+        length += to_boundary as f64;
+        let hit = x + d * to_boundary;
+        match cross_boundary(d, normal, medium.eta, random) {
+            Crossing::Reflected { travel, outward } => {
+                d = travel;
+                x = hit - outward * medium.epsilon;
+            }
+            Crossing::Left { outward, leaving } => {
+                if order >= orders.first {
+                    let exit = WalkExit {
+                        position: hit,
+                        outward,
+                        order,
+                        leaving,
+                    };
+                    on_end(order, length, WalkEnd::Exit(exit));
+                }
+                return;
+            }
+        }
+    }
 }
 
 /// A direction cosine-distributed about the unit vector `axis`.
