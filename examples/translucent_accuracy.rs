@@ -17,10 +17,10 @@
 //!     [--kernel scaled-dipole|burley|dipole] [--gather interpolation|photons]
 //!     [--object-exit-share true|false] [--beam-incidence true|false]
 //!     [--oriented-dipole true|false] [--shape-diffusion true|false]
-//!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks|beam-table] [--walks 256]
+//!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks|beam-table] [--walks N]
 //!     [--beam-table COSINES,AZIMUTHS] [--single-scattering-oracle]
 //!     [--beam-orders FIRST,LAST] [--late-light profile|profile-less-early|clamped]
-//!     [--late-walks 1024] [--lit-face-single-scattering-law]
+//!     [--late-walks N] [--lit-face-single-scattering-law]
 //!     [--exit-axis plugin|normal|normal-all|flow-all|lobe] [--exit-lobes true|false]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
@@ -101,7 +101,7 @@ struct Cli {
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     beam_incidence: bool,
     /// Where the object's scattering `K` comes from: the plugin's diffusion profile, or as an
-    /// oracle of it random walks from every patch (`--walks` a channel; the references' own
+    /// oracle of it random walks from every patch (`--walks` a patch, shared by the channels; the references' own
     /// physics) entering diffusely as `K` assumes, or as the light's own beam (exact first
     /// flights: a bound on what a better beam model gains, not something a moving light can
     /// have; index-matched only). Method suffix `_walks<n>` / `_beamwalks<n>`
@@ -124,9 +124,11 @@ struct Cli {
     /// plugin's axis, `_exitflow` when off)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     exit_lobes: bool,
-    /// Walks a channel from each patch for `--scattering walks|beam-walks`
-    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=65536))]
-    walks: u32,
+    /// Walks from each patch (shared by the channels) for `--scattering walks|beam-walks`
+    /// (default 256), or a direction for `--scattering beam-table` (default the plugin's,
+    /// `BeamTableSettings::default().walks`)
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    walks: Option<u32>,
     /// With `--scattering beam-walks`: snap each patch's beam to the nearest of a per-patch
     /// table's directions, COSINES incidence cosines × AZIMUTHS azimuths in the patch's frame
     /// (what precomputed beam columns looked up per frame would give; method suffix
@@ -144,9 +146,11 @@ struct Cli {
     /// walks), or that without its negative entries (`clamped`). Method suffix `_late<name>`
     #[arg(long, value_enum, default_value_t = Late::Profile)]
     late_light: Late,
-    /// Diffuse walks a channel from each patch for `--late-light profile-less-early|clamped`
-    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=65536))]
-    late_walks: u32,
+    /// Diffuse walks from each patch (shared by the channels) for `--late-light
+    /// profile-less-early|clamped` (default 1024) and `--scattering beam-table` (default the
+    /// plugin's, `BeamTableSettings::default().late_walks`)
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    late_walks: Option<u32>,
     /// With `--scattering beam-table`: offset its walks' seeds (`BeamTableSettings::seed`; 0
     /// the documented tables). Runs over a few seeds show what a variant must beat: one seed
     /// moves the figures by ~±0.005 from the front. Method suffix `_seed<n>` when not 0
@@ -487,16 +491,18 @@ fn main() {
     } else {
         format!("_kept{}", cli.energy_kept)
     };
+    // The oracles' walks (256 and 1024 unless given); the table's default to the plugin's.
+    let (walks, late_walks) = (cli.walks.unwrap_or(256), cli.late_walks.unwrap_or(1024));
     let (source, walked) = match cli.scattering {
         Scattering::Profile => (ScatteringSource::Profile, String::new()),
-        Scattering::Walks => (ScatteringSource::Walks(cli.walks), format!("_walks{}", cli.walks)),
+        Scattering::Walks => (ScatteringSource::Walks(walks), format!("_walks{walks}")),
         Scattering::BeamTable => {
             let (cosines, azimuths) = cli.beam_table.unwrap_or((4, 8));
             let table = BeamTableSettings {
                 cosines,
                 azimuths,
-                walks: cli.walks,
-                late_walks: cli.late_walks,
+                walks: cli.walks.unwrap_or(BeamTableSettings::default().walks),
+                late_walks: cli.late_walks.unwrap_or(BeamTableSettings::default().late_walks),
                 last_order: cli.beam_orders.map_or(16, |(_, last)| last),
                 exit_directions: cli.exit_axis == Axis::Lobe,
                 seed: cli.table_seed,
@@ -515,10 +521,10 @@ fn main() {
             )
         }
         Scattering::BeamWalks => match cli.beam_table {
-            None => (ScatteringSource::BeamWalks(cli.walks), format!("_beamwalks{}", cli.walks)),
+            None => (ScatteringSource::BeamWalks(walks), format!("_beamwalks{walks}")),
             Some((cosines, azimuths)) => (
                 ScatteringSource::BinnedBeamWalks {
-                    walks: cli.walks,
+                    walks,
                     cosines,
                     azimuths,
                     orders: cli.beam_orders.map_or(
@@ -530,19 +536,19 @@ fn main() {
                         Late::ProfileLessEarly => LateLight::ProfileLessEarly,
                         Late::Clamped => LateLight::ProfileLessEarlyClamped,
                     },
-                    late_walks: cli.late_walks,
+                    late_walks,
                     lit_face_single_to_law: cli.lit_face_single_scattering_law,
                 },
                 format!(
                     "_beamwalks{}_table{cosines}x{azimuths}{}",
-                    cli.walks,
+                    walks,
                     cli.beam_orders.map_or(String::new(), |(f, l)| format!(
                         "_orders{f}to{l}{}_late{}",
                         if cli.lit_face_single_scattering_law { "_litfacelaw" } else { "" },
                         match cli.late_light {
                             Late::Profile => "profile".to_string(),
-                            Late::ProfileLessEarly => format!("lessearly{}", cli.late_walks),
-                            Late::Clamped => format!("clamped{}", cli.late_walks),
+                            Late::ProfileLessEarly => format!("lessearly{late_walks}"),
+                            Late::Clamped => format!("clamped{late_walks}"),
                         }
                     ))
                 ),
