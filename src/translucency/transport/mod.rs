@@ -391,14 +391,29 @@ pub fn patch_albedos(patches: &Patches, surfaces: &[PatchSurface]) -> Vec<Vec3> 
         .collect()
 }
 
-/// Runs `f(i)` for `0..n` on every core, interleaved so uneven rows balance; results in order.
+/// Runs `f(i)` for `0..n` on every core, each core taking the next row as it finishes one
+/// (rows of one patch or object differ in cost by orders of magnitude: a wall's form factors
+/// against a translucent patch's beam walks); results in order, whichever core made them.
 pub(super) fn parallel_rows<R: Send>(n: usize, f: impl Fn(usize) -> R + Sync) -> Vec<R> {
     let t = threads().min(n.max(1));
+    // Rows taken a few at a time where there are many (cheap rows, one counter), one at a
+    // time where there are few.
+    let chunk = (n / (t * 64)).max(1);
+    let next = std::sync::atomic::AtomicUsize::new(0);
     let mut parts: Vec<Vec<(usize, R)>> = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..t)
-            .map(|k| {
-                let f = &f;
-                scope.spawn(move || (k..n).step_by(t).map(|i| (i, f(i))).collect::<Vec<_>>())
+            .map(|_| {
+                let (f, next) = (&f, &next);
+                scope.spawn(move || {
+                    let mut done = Vec::new();
+                    loop {
+                        let first = next.fetch_add(chunk, std::sync::atomic::Ordering::Relaxed);
+                        if first >= n {
+                            return done;
+                        }
+                        done.extend((first..(first + chunk).min(n)).map(|i| (i, f(i))));
+                    }
+                })
             })
             .collect();
         handles
