@@ -24,6 +24,9 @@ pub struct ExitPatches {
     grids: Vec<SampleGrid>,
 }
 
+/// The most cells a [`SampleGrid`] takes (16 MB of offsets).
+const MAX_SAMPLE_CELLS: usize = 1 << 22;
+
 /// One object's samples by cell, dense over the cells they occupy (a walk's exit looks up 27
 /// cells: as a hash map's keys they took 15 % of a table's build).
 #[derive(Default)]
@@ -41,12 +44,23 @@ struct SampleGrid {
 }
 
 impl SampleGrid {
-    /// The grid of `samples` (position, normal, patch) in cells of `cell`.
+    /// The grid of `samples` (position, normal, patch) in cells of `cell`, coarser where that
+    /// would take more than [`MAX_SAMPLE_CELLS`] (a large hollow object at a high budget).
     fn new(cell: f32, samples: &[(Vec3, Vec3, u32)]) -> Self {
-        let key = |x: Vec3| (x / cell).floor().as_ivec3();
         let Some(first) = samples.first() else {
             return Self { cell, ..default() };
         };
+        let (low, high) = samples
+            .iter()
+            .fold((first.0, first.0), |(low, high), s| (low.min(s.0), high.max(s.0)));
+        let cells = ((high - low) / cell + 2.0).max(Vec3::ONE);
+        let count = cells.x as f64 * cells.y as f64 * cells.z as f64;
+        let cell = if count > MAX_SAMPLE_CELLS as f64 {
+            cell * (count / MAX_SAMPLE_CELLS as f64).cbrt() as f32 * 1.01
+        } else {
+            cell
+        };
+        let key = |x: Vec3| (x / cell).floor().as_ivec3();
         let (low, high) = samples.iter().fold((key(first.0), key(first.0)), |(low, high), s| {
             (low.min(key(s.0)), high.max(key(s.0)))
         });

@@ -380,3 +380,41 @@ impl LitCube {
         light
     }
 }
+
+/// A walk's exit patch (`ExitPatches::of`, a dense grid of each object's samples) is the one
+/// a search of every sample gives — the nearest facing the exit's way, else the nearest of
+/// any — for exits all over a ball (beside a floor, another object) and just off it: 2000
+/// exits, every one the same.
+#[test]
+fn exit_patches_are_the_nearest_samples_facing_the_exit() {
+    use crate::translucency::beam_table::ExitPatches;
+    let objects = vec![
+        mesh_object(Sphere::new(0.5).mesh().ico(3).unwrap(), Transform::from_xyz(0.0, 0.5, 0.0)),
+        mesh_object(Plane3d::default().mesh().size(3.0, 3.0).build(), Transform::IDENTITY),
+    ];
+    let patches = resample_into_patches(&views_of(&objects), 300);
+    let exits = ExitPatches::new(&patches);
+    let samples: Vec<(Vec3, Vec3, u32)> = (0..patches.patches.len())
+        .filter(|&i| patches.patches[i].object == 0)
+        .flat_map(|i| patches.samples_of(i).iter().map(move |s| (s.position, s.normal, i as u32)))
+        .collect();
+    for k in 0..2000 {
+        let (u, v) = ((k as f32 * 0.618_034).fract(), (k as f32 * 0.414_214).fract());
+        let outward = Vec3::new(
+            (1.0 - (2.0 * v - 1.0).powi(2)).sqrt() * (std::f32::consts::TAU * u).cos(),
+            2.0 * v - 1.0,
+            (1.0 - (2.0 * v - 1.0).powi(2)).sqrt() * (std::f32::consts::TAU * u).sin(),
+        );
+        let x = Vec3::new(0.0, 0.5, 0.0) + outward * (0.5 + 0.002 * (k % 3) as f32);
+        let nearest = |facing: bool| {
+            samples
+                .iter()
+                .filter(|s| !facing || s.1.dot(outward) > 0.0)
+                .map(|s| (s.0.distance_squared(x), s.2))
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .map(|s| s.1)
+        };
+        let expected = nearest(true).or(nearest(false));
+        assert_eq!(exits.of(0, x, outward), expected, "exit at {x}");
+    }
+}
