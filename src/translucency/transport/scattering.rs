@@ -105,14 +105,14 @@ pub(super) fn build(
         let (profile_channels_shape, c) = (&shapes[task / 3], task % 3);
         profile_channels_shape
             .as_ref()
-            .map(|(_, channels, shape)| boundary_correction(shape, channels[c]))
+            .and_then(|(_, channels, shape)| boundary_correction(shape, channels[c]))
     })
     .into_iter();
     let shape_solutions: Vec<Option<(DiffusionProfile, [Vec<f64>; 3])>> = shapes
         .iter()
         .enumerate()
         .map(|(object, solve)| {
-            let [r, g, b] = [(); 3].map(|_| corrections.next().flatten().flatten());
+            let [r, g, b] = [(); 3].map(|_| corrections.next().flatten());
             let (profile, ..) = solve.as_ref()?;
             let solved = r.zip(g).zip(b).map(|((r, g), b)| (*profile, [r, g, b]));
             if solved.is_none() {
