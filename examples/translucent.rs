@@ -12,6 +12,7 @@
 //! cargo run --example translucent -- [--frames N] [--out DIR] [--size WxH] [--headless]
 //!     [--patches N] [--injection light-view|shadow-rays] [--shape-diffusion true|false]
 //!     [--deep-exit-law true|false] [--max-iterations N] [--warm-start true|false] [--swing]
+//!     [--gather-resolution full|half]
 //! ```
 
 #[path = "common/mod.rs"]
@@ -23,7 +24,7 @@ mod meshes;
 
 use bevy::{camera::Exposure, camera::Hdr, prelude::*};
 use bevy_mesostructure::translucency::{
-    LightInjection, RadiosityReceiver, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings, Translucent,
+    GatherResolution, LightInjection, RadiosityReceiver, TranslucencyCamera, TranslucencyPlugin, TranslucencySettings, Translucent,
     TranslucentPreset, TransportSettings,
 };
 
@@ -67,6 +68,17 @@ struct Cli {
     /// injects and iterates anew (for timing; the shots still fix it in front and behind)
     #[arg(long)]
     swing: bool,
+    /// At how many pixels the gather walks the patches (`TranslucencySettings::gather_resolution`;
+    /// its default when not given)
+    #[arg(long, value_enum)]
+    gather_resolution: Option<Resolution>,
+}
+
+/// `--gather-resolution`: [`GatherResolution`]'s two.
+#[derive(clap::ValueEnum, Clone, Copy)]
+enum Resolution {
+    Full,
+    Half,
 }
 
 /// `--injection`: [`LightInjection`]'s two ways.
@@ -133,6 +145,11 @@ fn main() {
             },
             max_iterations: cli.max_iterations,
             warm_start: cli.warm_start,
+            gather_resolution: match cli.gather_resolution {
+                Some(Resolution::Full) => GatherResolution::Full,
+                Some(Resolution::Half) => GatherResolution::Half,
+                None => GatherResolution::default(),
+            },
             ..default()
         })
         .insert_resource(SpotPlace {

@@ -100,6 +100,8 @@ pub struct TranslucencySettings {
     pub cache_dir: Option<std::path::PathBuf>,
     /// How the patches' light reaches the pixels (changing it rebuilds nothing).
     pub gather: GatherMethod,
+    /// At how many pixels the gather runs (changing it rebuilds nothing).
+    pub gather_resolution: GatherResolution,
     /// How the lights' direct light reaches the patches (changing it rebuilds nothing).
     pub light_injection: LightInjection,
 }
@@ -154,6 +156,23 @@ pub enum GatherMethod {
     PhotonDensity,
 }
 
+/// At how many pixels the gather walks the patches. The light it adds changes on the scale
+/// of a patch's reach, which at the sizes games show is several pixels.
+#[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum GatherResolution {
+    /// Every pixel walks the patches about it.
+    Full,
+    /// One pixel in 2×2 walks them; every pixel then takes the light of the four such pixels
+    /// about it that show its own surface (normals within ~25°, off its tangent plane by at
+    /// most a quarter of their distance, within the reach of the patches they took), weighted
+    /// bilinearly, and a pixel none of them serves (at a depth edge or a crease) walks the
+    /// patches itself. Only where the view's main images take storage writes (the compute
+    /// form of the gather; a view without them gathers every pixel). Measured against `Full`
+    /// in `docs/translucent.md`.
+    #[default]
+    Half,
+}
+
 impl Default for TranslucencySettings {
     /// 4000 patches: a precompute of ~0.4 s on two CPU cores for a small room
     /// (`docs/translucent.md`); a threshold of 1e-2 (10 iterations in that room, within
@@ -171,6 +190,7 @@ impl Default for TranslucencySettings {
             transport: TransportSettings::default(),
             cache_dir: None,
             gather: GatherMethod::default(),
+            gather_resolution: GatherResolution::default(),
             light_injection: LightInjection::default(),
         }
     }

@@ -10,7 +10,9 @@
 // lighting is: by additive blending (`gather`, a fullscreen fragment pass), or, where the
 // view's main images take storage writes, by a compute pass writing lit + gathered into the
 // view's other main image (`gather_compute`), whose 8×8 tiles walk the grids once for their
-// pixels (`collect_tile_patches`).
+// pixels (`collect_tile_patches`), or (HALF_RESOLUTION) the same at one pixel in 2×2 and the
+// rest upsampled from the samples on their own surface (`gather_half`, `gather_upsample`,
+// `gather_unserved`).
 
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_render::view::View
@@ -192,10 +194,13 @@ struct Gathered {
     shape_key_b: vec4<f32>,
     shape_key_eta: f32,
     shape: vec3<f32>,
+    // The smallest reach among the patches that reached the pixel (the half-resolution
+    // gather's upsample takes a sample only within it).
+    reach: f32,
 }
 
 fn no_light() -> Gathered {
-    return Gathered(vec3(0.0), 0.0, vec4(-1.0), vec4(-1.0), vec4(-1.0), -1.0, vec3(1.0));
+    return Gathered(vec3(0.0), 0.0, vec4(-1.0), vec4(-1.0), vec4(-1.0), -1.0, vec3(1.0), 3.0e38);
 }
 
 // Patch `i`'s light at the pixel `s`, if it reaches it.
@@ -259,6 +264,7 @@ fn add_patch(i: u32, s: Surface, acc: ptr<function, Gathered>) {
         }
     }
     (*acc).weights += w;
+    (*acc).reach = min((*acc).reach, record.centre.w);
 }
 
 // The light gathered, times the exposure; `w` = 0 where no patch reaches the pixel.
@@ -276,10 +282,15 @@ fn finish(acc: Gathered) -> vec4<f32> {
 // The light the patches give the pixel `s` by its own walk of the grids: the 27 cells about
 // it in each.
 fn gathered(s: Surface) -> vec4<f32> {
-    if !s.valid {
-        return vec4(0.0);
-    }
+    return finish(walked(s));
+}
+
+// `gathered`'s sums.
+fn walked(s: Surface) -> Gathered {
     var acc = no_light();
+    if !s.valid {
+        return acc;
+    }
     for (var level = 0u; level < params.levels; level += 1u) {
         let g = grid_level(level);
         let centre_cell = vec3<i32>(floor(s.x / g.cell_size));
@@ -298,7 +309,7 @@ fn gathered(s: Surface) -> vec4<f32> {
             }
         }
     }
-    return finish(acc);
+    return acc;
 }
 
 #ifdef COMPUTE_GATHER
@@ -373,11 +384,9 @@ fn collect_tile_patches(thread: u32, lo: vec3<f32>, hi: vec3<f32>) {
     }
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn gather_compute(
-    @builtin(global_invocation_id) id: vec3<u32>,
-    @builtin(local_invocation_index) thread: u32,
-) {
+// The sums for each thread's surface `s` (invalid: none wanted) by the tile's one walk of the
+// grids. Every thread of the workgroup calls it (it holds barriers).
+fn tile_walked(thread: u32, s: Surface) -> Gathered {
     if thread == 0u {
         for (var k = 0u; k < 3u; k += 1u) {
             atomicStore(&tile_box[k], 0xffffffffu);
@@ -387,12 +396,6 @@ fn gather_compute(
         atomicStore(&tile_overflow, 0u);
     }
     workgroupBarrier();
-    let inside = all(id.xy < textureDimensions(lit));
-    let p = vec2<i32>(id.xy);
-    var s = no_surface();
-    if inside {
-        s = pixel_surface(p, vec2<f32>(id.xy) + 0.5);
-    }
     if s.valid {
         atomicMin(&tile_box[0], ordered_bits(s.x.x));
         atomicMin(&tile_box[1], ordered_bits(s.x.y));
@@ -413,25 +416,192 @@ fn gather_compute(
         );
     }
     workgroupBarrier();
-    if !inside {
-        return;
-    }
-    var added = vec4(0.0);
+    var acc = no_light();
     let count = atomicLoad(&tile_count);
     if s.valid {
         if atomicLoad(&tile_overflow) != 0u || count > TILE_PATCHES {
-            added = gathered(s);
+            acc = walked(s);
         } else {
-            var acc = no_light();
             for (var k = 0u; k < count; k += 1u) {
                 add_patch(tile_patches[k], s, &acc);
             }
-            added = finish(acc);
         }
+    }
+    return acc;
+}
+
+#ifdef HALF_RESOLUTION
+// `GatherResolution::Half`: the tiled gather at one pixel in 2×2 (`gather_half`, into
+// `half_light`), then every pixel of the view from the four samples about it whose surface is
+// its own (`gather_upsample`), and last the pixels none of them serves (at a depth edge or a
+// crease), which gather themselves as the full-resolution gather does (`gather_unserved`, its
+// own pass so that the upsample keeps the few registers it needs; only the tiles that hold such
+// a pixel work).
+
+// Per sample (the top-left pixel of its 2×2): the gathered light times the exposure, and in
+// w the smallest reach of the patches that reached it, -1 where none reached its surface, 0
+// where it shows none.
+@group(0) @binding(9) var half_light_out: texture_storage_2d<rgba32float, write>;
+@group(0) @binding(10) var half_light: texture_2d<f32>;
+// Per 8×8 tile, 1 where some pixel of it is served by no sample.
+@group(0) @binding(11) var unserved_tiles_out: texture_storage_2d<r32uint, write>;
+@group(0) @binding(12) var unserved_tiles: texture_2d<u32>;
+
+@compute @workgroup_size(8, 8, 1)
+fn gather_half(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) thread: u32,
+) {
+    let inside = all(id.xy < textureDimensions(half_light_out));
+    let p = vec2<i32>(2u * id.xy);
+    var s = no_surface();
+    if inside && all(vec2<u32>(p) < textureDimensions(depth_prepass)) {
+        s = pixel_surface(p, vec2<f32>(p) + 0.5);
+    }
+    let acc = tile_walked(thread, s);
+    if !inside {
+        return;
+    }
+    var sample = vec4(0.0);
+    if acc.weights > 0.0 {
+        sample = vec4(finish(acc).rgb, acc.reach);
+    } else if s.valid {
+        sample = vec4(0.0, 0.0, 0.0, -1.0);
+    }
+    textureStore(half_light_out, id.xy, sample);
+}
+
+// Whether a sample's surface `r` (its light `sample`) is the pixel's surface `s`, seen alike:
+// its normal within ~18° (0.95) and its exit cosine towards the camera within 0.05 (the exit
+// law's limb darkening changes fast towards an outline), off the pixel's tangent plane by at
+// most a quarter of their distance (a depth step is along the view ray, a curved surface's
+// deviation second order), and, where patches reached it, within the smallest of their
+// reaches (the light changes on that scale).
+fn same_surface(s: Surface, r: Surface, sample: vec4<f32>) -> bool {
+    if !r.valid || sample.w == 0.0 || dot(s.n, r.n) < 0.95 || abs(s.mu - r.mu) > 0.05 {
+        return false;
+    }
+    let d = r.x - s.x;
+    let d2 = dot(d, d);
+    let off_plane = abs(dot(s.n, d));
+    return off_plane * off_plane <= 0.0625 * d2 + 1.0e-12 && (sample.w < 0.0 || d2 <= sample.w * sample.w);
+}
+
+// The light of the samples about pixel `p` (surface `s`) that show its surface, weighted
+// bilinearly; w: their weight, 0 where none serves it. The samples stand at the even pixels:
+// an even coordinate is its own sample, an odd one halfway between two.
+fn upsampled(p: vec2<i32>, s: Surface) -> vec4<f32> {
+    var sum = vec3(0.0);
+    var weight = 0.0;
+    if s.valid {
+        let base = p / 2;
+        let t = vec2<f32>(p - 2 * base) * 0.5;
+        let last = vec2<i32>(textureDimensions(half_light)) - 1;
+        for (var k = 0u; k < 4u; k += 1u) {
+            let c = vec2(i32(k & 1u), i32(k >> 1u));
+            let bilinear = mix(1.0 - t.x, t.x, f32(c.x)) * mix(1.0 - t.y, t.y, f32(c.y));
+            let q = base + c;
+            if bilinear <= 0.0 || any(q > last) {
+                continue;
+            }
+            let sample = textureLoad(half_light, q, 0);
+            let r = pixel_surface(2 * q, vec2<f32>(2 * q) + 0.5);
+            if same_surface(s, r, sample) {
+                sum += bilinear * sample.rgb;
+                weight += bilinear;
+            }
+        }
+    }
+    if weight <= 0.0 {
+        return vec4(0.0);
+    }
+    return vec4(sum / weight, weight);
+}
+
+var<workgroup> tile_unserved: atomic<u32>;
+var<workgroup> tile_unserved_uniform: u32;
+
+@compute @workgroup_size(8, 8, 1)
+fn gather_upsample(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) thread: u32,
+    @builtin(workgroup_id) tile: vec3<u32>,
+) {
+    if thread == 0u {
+        atomicStore(&tile_unserved, 0u);
+    }
+    workgroupBarrier();
+    let inside = all(id.xy < textureDimensions(lit));
+    let p = vec2<i32>(id.xy);
+    var s = no_surface();
+    if inside {
+        s = pixel_surface(p, vec2<f32>(id.xy) + 0.5);
+    }
+    let added = upsampled(p, s);
+    if s.valid && added.w <= 0.0 {
+        atomicStore(&tile_unserved, 1u);
+    }
+    workgroupBarrier();
+    if thread == 0u {
+        textureStore(unserved_tiles_out, tile.xy, vec4(atomicLoad(&tile_unserved), 0u, 0u, 0u));
+    }
+    if !inside {
+        return;
     }
     let colour = textureLoad(lit, p, 0);
     textureStore(lit_out, p, vec4(colour.rgb + added.rgb, colour.a));
 }
+
+@compute @workgroup_size(8, 8, 1)
+fn gather_unserved(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) thread: u32,
+    @builtin(workgroup_id) tile: vec3<u32>,
+) {
+    if thread == 0u {
+        tile_unserved_uniform = textureLoad(unserved_tiles, tile.xy, 0).x;
+    }
+    if workgroupUniformLoad(&tile_unserved_uniform) == 0u {
+        return;
+    }
+    let inside = all(id.xy < textureDimensions(lit));
+    let p = vec2<i32>(id.xy);
+    var s = no_surface();
+    if inside {
+        s = pixel_surface(p, vec2<f32>(id.xy) + 0.5);
+    }
+    let unserved = s.valid && upsampled(p, s).w <= 0.0;
+    // The tile's box only about the pixels that gather themselves.
+    var own = no_surface();
+    if unserved {
+        own = s;
+    }
+    let acc = tile_walked(thread, own);
+    if unserved {
+        let colour = textureLoad(lit, p, 0);
+        textureStore(lit_out, p, vec4(colour.rgb + finish(acc).rgb, colour.a));
+    }
+}
+#else
+@compute @workgroup_size(8, 8, 1)
+fn gather_compute(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) thread: u32,
+) {
+    let inside = all(id.xy < textureDimensions(lit));
+    let p = vec2<i32>(id.xy);
+    var s = no_surface();
+    if inside {
+        s = pixel_surface(p, vec2<f32>(id.xy) + 0.5);
+    }
+    let added = finish(tile_walked(thread, s));
+    if !inside {
+        return;
+    }
+    let colour = textureLoad(lit, p, 0);
+    textureStore(lit_out, p, vec4(colour.rgb + added.rgb, colour.a));
+}
+#endif
 #else
 @fragment
 fn gather(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {

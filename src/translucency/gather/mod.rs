@@ -1,7 +1,8 @@
 //! The translucency's render-world passes: the iteration (once a frame, when the lights
 //! changed; `iteration/`) and the gather that puts the patches' light into each view
 //! (`gather.wgsl`: a compute pass culling the patches per 8×8 tile where the view's main
-//! images take storage writes, else a fullscreen pass added to the lit image).
+//! images take storage writes — at one pixel in 2×2 and upsampled by surface, by default
+//! ([`GatherResolution`]) — else a fullscreen pass added to the lit image).
 
 use std::sync::Arc;
 
@@ -12,6 +13,7 @@ use bevy::{
         diagnostic::RecordDiagnostics,
         render_resource::{binding_types::*, *},
         renderer::{RenderAdapterInfo, RenderContext, RenderDevice, RenderQueue, ViewQuery},
+        texture::{CachedTexture, TextureCache},
         view::{ViewTarget, ViewUniform, ViewUniformOffset, ViewUniforms},
     },
 };
@@ -20,7 +22,7 @@ use bytemuck::{Pod, Zeroable};
 use super::{
     injection::GpuInjection,
     iteration::{FlowFrame, GpuTransport, IterationLimits, RowLanes},
-    plugin::{GatherMethod, TranslucencyFrame, TranslucencyScene},
+    plugin::{GatherMethod, GatherResolution, TranslucencyFrame, TranslucencyScene},
     transport::ExitLaw,
 };
 
@@ -504,6 +506,17 @@ pub struct GatherPipeline {
     compute_layout: BindGroupLayoutDescriptor,
     /// The compute form, by gather method ([`GatherMethod`] as index).
     compute: [CachedComputePipelineId; 2],
+    /// [`GatherResolution::Half`]'s three passes' layouts: the inputs and the samples
+    /// written; the compute layout's bindings, the samples read and the tiles' flags written;
+    /// the same with the flags read.
+    half_layout: BindGroupLayoutDescriptor,
+    upsample_layout: BindGroupLayoutDescriptor,
+    unserved_layout: BindGroupLayoutDescriptor,
+    /// Its gather at one pixel in 2×2, its upsample and its gather of the pixels no sample
+    /// serves, by gather method.
+    half: [CachedComputePipelineId; 2],
+    upsample: [CachedComputePipelineId; 2],
+    unserved: [CachedComputePipelineId; 2],
     fullscreen: FullscreenShader,
     shader: Handle<Shader>,
 }
@@ -547,25 +560,69 @@ pub fn init_gather_pipeline(
             ),
         ),
     ).iter());
+    let mut half_entries = inputs(ShaderStages::COMPUTE).to_vec();
+    half_entries.extend(BindGroupLayoutEntries::with_indices(
+        ShaderStages::COMPUTE,
+        ((9, texture_storage_2d(HALF_LIGHT_FORMAT, StorageTextureAccess::WriteOnly)),),
+    ).iter());
+    let mut upsample_entries = compute_entries.clone();
+    upsample_entries.extend(BindGroupLayoutEntries::with_indices(
+        ShaderStages::COMPUTE,
+        (
+            (10, texture_2d(TextureSampleType::Float { filterable: false })),
+            (11, texture_storage_2d(UNSERVED_TILES_FORMAT, StorageTextureAccess::WriteOnly)),
+        ),
+    ).iter());
+    let mut unserved_entries = compute_entries.clone();
+    unserved_entries.extend(BindGroupLayoutEntries::with_indices(
+        ShaderStages::COMPUTE,
+        (
+            (10, texture_2d(TextureSampleType::Float { filterable: false })),
+            (12, texture_2d(TextureSampleType::Uint)),
+        ),
+    ).iter());
     let compute_layout =
         BindGroupLayoutDescriptor::new("translucency_gather_compute_layout", &compute_entries);
+    let half_layout =
+        BindGroupLayoutDescriptor::new("translucency_gather_half_layout", &half_entries);
+    let upsample_layout =
+        BindGroupLayoutDescriptor::new("translucency_gather_upsample_layout", &upsample_entries);
+    let unserved_layout =
+        BindGroupLayoutDescriptor::new("translucency_gather_unserved_layout", &unserved_entries);
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "gather.wgsl");
-    let compute = [GatherMethod::Interpolation, GatherMethod::PhotonDensity].map(|method| {
-        let mut shader_defs = vec!["COMPUTE_GATHER".into()];
-        shader_defs.extend(method_def(method));
-        pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
-            label: Some("translucency_gather_compute_pipeline".into()),
-            layout: vec![compute_layout.clone()],
-            shader: shader.clone(),
-            shader_defs,
-            entry_point: Some("gather_compute".into()),
-            ..default()
+    let queue = |label: &'static str, layout: &BindGroupLayoutDescriptor, entry: &'static str, half: bool| {
+        [GatherMethod::Interpolation, GatherMethod::PhotonDensity].map(|method| {
+            let mut shader_defs = vec!["COMPUTE_GATHER".into()];
+            if half {
+                shader_defs.push("HALF_RESOLUTION".into());
+            }
+            shader_defs.extend(method_def(method));
+            pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
+                label: Some(label.into()),
+                layout: vec![layout.clone()],
+                shader: shader.clone(),
+                shader_defs,
+                entry_point: Some(entry.into()),
+                ..default()
+            })
         })
-    });
+    };
+    let compute = queue("translucency_gather_compute_pipeline", &compute_layout, "gather_compute", false);
+    let half = queue("translucency_gather_half_pipeline", &half_layout, "gather_half", true);
+    let upsample =
+        queue("translucency_gather_upsample_pipeline", &upsample_layout, "gather_upsample", true);
+    let unserved =
+        queue("translucency_gather_unserved_pipeline", &unserved_layout, "gather_unserved", true);
     commands.insert_resource(GatherPipeline {
         layout,
         compute_layout,
         compute,
+        half_layout,
+        upsample_layout,
+        unserved_layout,
+        half,
+        upsample,
+        unserved,
         fullscreen: fullscreen.clone(),
         shader,
     });
@@ -600,6 +657,22 @@ impl SpecializedRenderPipeline for GatherPipeline {
 #[derive(Component)]
 pub struct ViewGatherPipeline(CachedRenderPipelineId);
 
+/// The format of [`GatherResolution::Half`]'s samples: the light (HDR, times the exposure) and
+/// the reach the upsample takes a sample within, which may be far below a half float's
+/// precision in a small scene.
+const HALF_LIGHT_FORMAT: TextureFormat = TextureFormat::Rgba32Float;
+
+/// The format of [`GatherResolution::Half`]'s flags, one per 8×8 tile: whether a pixel of it
+/// is served by no sample.
+const UNSERVED_TILES_FORMAT: TextureFormat = TextureFormat::R32Uint;
+
+/// A view's [`GatherResolution::Half`] samples, one per 2×2 pixels, and its tiles' flags.
+#[derive(Component)]
+pub struct ViewHalfGatherTextures {
+    half_light: CachedTexture,
+    unserved_tiles: CachedTexture,
+}
+
 /// Specialises the gather for each translucency camera's target format (render `Prepare`);
 /// a camera with MSAA on gets one warning and no gather (its prepass images are multisampled).
 pub(crate) fn prepare_gather_pipelines(
@@ -613,6 +686,8 @@ pub(crate) fn prepare_gather_pipelines(
     >,
     mut warned: ResMut<crate::warn_once::WarnedOnce>,
     frame: Res<TranslucencyFrame>,
+    mut texture_cache: ResMut<TextureCache>,
+    device: Res<RenderDevice>,
 ) {
     for (entity, target, msaa) in &views {
         if msaa.is_some_and(|m| *m != bevy::render::view::Msaa::Off) {
@@ -627,6 +702,37 @@ pub(crate) fn prepare_gather_pipelines(
         let key = (target.main_texture_format(), frame.settings.gather);
         let id = pipelines.specialize(&pipeline_cache, &pipeline, key);
         commands.entity(entity).insert(ViewGatherPipeline(id));
+        // The half-resolution samples, where the gather runs as compute at half resolution.
+        if frame.settings.gather_resolution == GatherResolution::Half
+            && crate::render::composites_in_compute(target)
+        {
+            let size = target.main_texture().size();
+            let mut texture = |label, divisor: u32, format| {
+                texture_cache.get(
+                    &device,
+                    TextureDescriptor {
+                        label: Some(label),
+                        size: Extent3d {
+                            width: size.width.div_ceil(divisor),
+                            height: size.height.div_ceil(divisor),
+                            depth_or_array_layers: 1,
+                        },
+                        mip_level_count: 1,
+                        sample_count: 1,
+                        dimension: TextureDimension::D2,
+                        format,
+                        usage: TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING,
+                        view_formats: &[],
+                    },
+                )
+            };
+            commands.entity(entity).insert(ViewHalfGatherTextures {
+                half_light: texture("translucency_gather_half_light", 2, HALF_LIGHT_FORMAT),
+                unserved_tiles: texture("translucency_gather_unserved_tiles", 8, UNSERVED_TILES_FORMAT),
+            });
+        } else {
+            commands.entity(entity).remove::<ViewHalfGatherTextures>();
+        }
     }
 }
 
@@ -639,6 +745,7 @@ pub fn translucency_gather_pass(
         &ViewPrepassTextures,
         &ViewUniformOffset,
         &ViewGatherPipeline,
+        Option<&ViewHalfGatherTextures>,
     )>,
     gpu: Res<TranslucencyGpu>,
     frame: Res<TranslucencyFrame>,
@@ -647,7 +754,7 @@ pub fn translucency_gather_pass(
     view_uniforms: Res<ViewUniforms>,
     mut ctx: RenderContext,
 ) {
-    let (target, prepass, view_offset, gather) = view.into_inner();
+    let (target, prepass, view_offset, gather, half_texture) = view.into_inner();
     let (Some(transport), Some((patches, grid, params))) = (&gpu.transport, &gpu.gather) else {
         return;
     };
@@ -673,9 +780,95 @@ pub fn translucency_gather_pass(
         vectors.as_entire_binding(),
         grid.as_entire_binding(),
     );
+    let method = frame.settings.gather as usize;
+    // At half resolution: the samples, every pixel from them, then the pixels they do not
+    // serve, in one timed span.
     if crate::render::composites_in_compute(target)
-        && let Some(compute) =
-            pipeline_cache.get_compute_pipeline(pipeline.compute[frame.settings.gather as usize])
+        && let Some(ViewHalfGatherTextures { half_light, unserved_tiles }) = half_texture
+        && let (Some(half), Some(upsample), Some(unserved)) = (
+            pipeline_cache.get_compute_pipeline(pipeline.half[method]),
+            pipeline_cache.get_compute_pipeline(pipeline.upsample[method]),
+            pipeline_cache.get_compute_pipeline(pipeline.unserved[method]),
+        )
+    {
+        let post = target.post_process_write();
+        let (a, b, c, d, e, f, g) = inputs;
+        let half_group = device.create_bind_group(
+            "translucency_gather_half_bind_group",
+            &pipeline_cache.get_bind_group_layout(&pipeline.half_layout),
+            &BindGroupEntries::with_indices((
+                (0, a.clone()),
+                (1, b),
+                (2, c),
+                (3, d.clone()),
+                (4, e.clone()),
+                (5, f.clone()),
+                (6, g.clone()),
+                (9, &half_light.default_view),
+            )),
+        );
+        let upsample_group = device.create_bind_group(
+            "translucency_gather_upsample_bind_group",
+            &pipeline_cache.get_bind_group_layout(&pipeline.upsample_layout),
+            &BindGroupEntries::with_indices((
+                (0, a.clone()),
+                (1, b),
+                (2, c),
+                (3, d.clone()),
+                (4, e.clone()),
+                (5, f.clone()),
+                (6, g.clone()),
+                (7, post.source),
+                (8, post.destination),
+                (10, &half_light.default_view),
+                (11, &unserved_tiles.default_view),
+            )),
+        );
+        let unserved_group = device.create_bind_group(
+            "translucency_gather_unserved_bind_group",
+            &pipeline_cache.get_bind_group_layout(&pipeline.unserved_layout),
+            &BindGroupEntries::with_indices((
+                (0, a),
+                (1, b),
+                (2, c),
+                (3, d),
+                (4, e),
+                (5, f),
+                (6, g),
+                (7, post.source),
+                (8, post.destination),
+                (10, &half_light.default_view),
+                (12, &unserved_tiles.default_view),
+            )),
+        );
+        let size = target.main_texture().size();
+        let (width, height) = (size.width, size.height);
+        let diagnostics = ctx.diagnostic_recorder();
+        let diagnostics = diagnostics.as_deref();
+        let span = diagnostics.time_span(ctx.command_encoder(), "translucency/gather");
+        let encoder = ctx.command_encoder();
+        encoder.push_debug_group("translucency/gather");
+        {
+            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
+                label: Some("translucency_gather_half"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(half);
+            pass.set_bind_group(0, &half_group, &[view_offset.offset]);
+            pass.dispatch_workgroups(width.div_ceil(2).div_ceil(8), height.div_ceil(2).div_ceil(8), 1);
+            pass.set_pipeline(upsample);
+            pass.set_bind_group(0, &upsample_group, &[view_offset.offset]);
+            pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+            pass.set_pipeline(unserved);
+            pass.set_bind_group(0, &unserved_group, &[view_offset.offset]);
+            pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+        }
+        encoder.pop_debug_group();
+        span.end(ctx.command_encoder());
+        return;
+    }
+    if crate::render::composites_in_compute(target)
+        && let Some(compute) = pipeline_cache.get_compute_pipeline(pipeline.compute[method])
     {
         // Bevy's post-process ping-pong: read the lit image, write lit + gathered into the
         // other main image, which becomes the view's main image.
