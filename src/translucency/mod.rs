@@ -109,6 +109,7 @@ impl Plugin for TranslucencyPlugin {
                 (
                     gather::prepare_gather_pipelines.in_set(RenderSystems::Prepare),
                     gather::prepare_translucency.in_set(RenderSystems::PrepareResources),
+                    gather::map_products_readback.in_set(RenderSystems::Cleanup),
                 ),
             )
             .add_systems(

@@ -86,7 +86,8 @@ pub struct TranslucencySettings {
     /// 2.3 – 2.6 products instead of 10 in the room of `docs/translucent.md`, within 6.6e-4
     /// of the converged exitance against a cold start's 2.8e-4 (it stops at a tenth of
     /// `iteration_threshold`). A warm start takes at most
-    /// [`WARM_MAX_ITERATIONS`](super::transport::WARM_MAX_ITERATIONS) products a frame and
+    /// [`WARM_MAX_ITERATIONS`](super::transport::WARM_MAX_ITERATIONS) products a frame (on
+    /// the GPU it records one more than the last solve took, read back without waiting) and
     /// goes on warm for [`settle_frames`](super::transport::settle_frames) frames after the
     /// lights stop: a quarter turn at once comes within 7.6e-4, 5.1e-4 after settling. On an
     /// H100 (1080p, 17.9 k patches) a moving spot's iteration takes 0.32–0.36 ms warm against

@@ -14,7 +14,7 @@ use bevy::{
 use bevy_mesostructure::translucency::{
     DiffusionKernel, EnergyTransport, PatchLight, PatchObject, PatchSurface, SceneRays,
     TranslucentPreset, TransportSettings, direct_light, patch_albedos,
-    iteration::{FlowFrame, GpuTransport, IterationLimits, RowLanes},
+    iteration::{FlowFrame, GpuTransport, IterationLimits, ProductsReadback, RowLanes},
     Patches,
     injection::{GpuInjection, MAX_INJECTED_LIGHTS},
     resample_into_patches_with_caps, translucent_patch_cap,
@@ -267,6 +267,32 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
             worst / peak
         );
         assert!(peak > 0.0 && worst <= 1e-5 * peak, "warm {row_lanes:?}: worst {worst} of {peak}");
+
+        // The plugin's read-back of the products a solve took (`ProductsReadback`): after
+        // this warm solve it asks for one more than it took, and the next warm solve (the
+        // spot moved on) recorded with just that many matches `solve_from` with that cap.
+        let cap = gpu.recorded_products(true, u32::MAX);
+        let mut readback = ProductsReadback::new(&device);
+        assert_eq!(readback.products_to_record(cap), cap, "nothing read back yet: the cap");
+        let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
+        readback.copy(&mut encoder, &gpu, cap);
+        queue.submit([encoder.finish()]);
+        readback.map();
+        device.poll(PollType::wait_indefinitely()).expect("the GPU finishes");
+        let asked = readback.products_to_record(cap);
+        assert_eq!(asked, (cpu.iterations + 1).min(cap), "{row_lanes:?}: one more than the {} taken", cpu.iterations);
+        let further = direct_light(&patches, Some(&transport), &[spot_round_the_ball(0.026)], &rays);
+        let cpu_further = transport.solve_from(&further, limits.threshold, asked, Some(&cpu));
+        gpu.write_direct(&queue, &further);
+        let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
+        gpu.record_at_most(&mut encoder, true, asked);
+        queue.submit([encoder.finish()]);
+        let state = read_back(&device, &queue, gpu.state(), 0, 28);
+        let taken = u32::from_le_bytes(state[24..28].try_into().unwrap());
+        assert_eq!(taken, cpu_further.iterations, "{row_lanes:?}");
+        let (peak, worst, _) = peak_and_worst(&device, &queue, &gpu, &cpu_further.exitance);
+        eprintln!("read back: {asked} products asked, {taken} taken; worst |GPU − CPU| {:.2e} of peak", worst / peak);
+        assert!(peak > 0.0 && worst <= 1e-5 * peak, "read back {row_lanes:?}: worst {worst} of {peak}");
     }
 }
 

@@ -21,7 +21,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{
     injection::GpuInjection,
-    iteration::{FlowFrame, GpuTransport, IterationLimits, RowLanes},
+    iteration::{FlowFrame, GpuTransport, IterationLimits, ProductsReadback, RowLanes},
     plugin::{GatherMethod, GatherResolution, TranslucencyFrame, TranslucencyScene},
     transport::ExitLaw,
 };
@@ -239,6 +239,8 @@ pub struct TranslucencyGpu {
     /// on from where it stopped ([`settle_frames`](super::transport::settle_frames)).
     settle_frames: u32,
     transport: Option<GpuTransport>,
+    /// The products the last solve took, read back: what the next warm solve records.
+    products: Option<ProductsReadback>,
     injection: Option<GpuInjection>,
     gather: Option<(Buffer, Buffer, Buffer)>,
 }
@@ -277,6 +279,7 @@ pub fn prepare_translucency(
         let transport = GpuTransport::with_flow(&device, &scene.transport, limits, row_lanes, &frames);
         gpu.gather = Some(gather_buffers(&device, scene, &transport));
         gpu.transport = Some(transport);
+        gpu.products = Some(ProductsReadback::new(&device));
         gpu.solved = false;
         gpu.settle_frames = 0;
         gpu.injection = None;
@@ -466,16 +469,35 @@ pub fn translucency_iteration_pass(
     } else {
         return;
     }
+    let gpu = &mut *gpu;
     let Some(transport) = &gpu.transport else {
         return;
     };
+    // A warm solve records one product more than the last solve took (read back), a cold
+    // one its whole cap.
+    let asked = match (&gpu.products, warm) {
+        (Some(products), true) => products.products_to_record(transport.recorded_products(true, u32::MAX)),
+        _ => u32::MAX,
+    };
+    let recorded = transport.recorded_products(warm, asked);
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let span = diagnostics.time_span(ctx.command_encoder(), "translucency/iteration");
-    transport.record(ctx.command_encoder(), warm);
+    transport.record_at_most(ctx.command_encoder(), warm, recorded);
     span.end(ctx.command_encoder());
+    if let Some(products) = &mut gpu.products {
+        products.copy(ctx.command_encoder(), transport, recorded);
+    }
     gpu.iteration_pending = false;
     gpu.solved = true;
+}
+
+/// Render `Cleanup`, after the frame's submission: maps the read-back of the products the
+/// frame's solve took ([`ProductsReadback`]).
+pub fn map_products_readback(mut gpu: ResMut<TranslucencyGpu>) {
+    if let Some(products) = &mut gpu.products {
+        products.map();
+    }
 }
 
 /// A camera that shows the translucency: put on a `Camera3d` (with `Msaa::Off`). Brings the

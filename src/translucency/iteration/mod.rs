@@ -5,7 +5,9 @@
 //! patterns) and all vectors in one `vec4<f32>` buffer, so the pass needs four storage
 //! buffers whatever the device's per-stage limit. The loop is recorded `max_iterations` times
 //! with indirect dispatches whose group counts the GPU zeroes once the energy still moving is
-//! below the threshold: the CPU never waits for the GPU to know when to stop.
+//! below the threshold: the CPU never waits for the GPU to know when to stop. (The plugin
+//! records a warm solve's loop one product more often than the last solve took, read back a
+//! frame or more later: [`ProductsReadback`].)
 
 use bevy::{
     math::{Vec3, Vec4},
@@ -24,6 +26,10 @@ use bevy::{
     },
 };
 use bytemuck::{Pod, Zeroable};
+use std::sync::{
+    Arc,
+    atomic::{AtomicBool, AtomicU64, Ordering},
+};
 
 use super::transport::{EnergyTransport, warm_iterations};
 
@@ -547,6 +553,14 @@ impl GpuTransport {
     /// exitance is not this transport's), with at most
     /// [`warm_iterations`]`(max_iterations)` products.
     pub fn record(&self, encoder: &mut CommandEncoder, warm: bool) {
+        self.record_at_most(encoder, warm, u32::MAX);
+    }
+
+    /// [`record`](Self::record) with at most `products` products recorded (at least one; the
+    /// transport's own caps still hold): the plugin records one more than the last solve took
+    /// ([`ProductsReadback`]), since every recorded product costs its dispatches on the GPU
+    /// even after the stop.
+    pub fn record_at_most(&self, encoder: &mut CommandEncoder, warm: bool, products: u32) {
         let n = self.layout.patches;
         if n == 0 {
             return;
@@ -594,11 +608,7 @@ impl GpuTransport {
             pass.dispatch_workgroups(1, 1, 1);
             let scatter = if warm { &self.scatter_warm } else { &self.scatter };
             // A warm start's application was its first product.
-            let loops = if warm {
-                warm_iterations(self.layout.max_iterations).saturating_sub(1)
-            } else {
-                self.layout.max_iterations
-            };
+            let loops = self.recorded_products(warm, products) - u32::from(warm);
             for _ in 0..loops {
                 if self.layout.clusters > 0 {
                     pass.set_pipeline(&self.restrict);
@@ -615,6 +625,18 @@ impl GpuTransport {
             pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
         }
         encoder.pop_debug_group();
+    }
+
+    /// The products a solve records when asked for at most `products`: a warm one
+    /// [`warm_iterations`] at most (its application one of them), a cold one `max_iterations`
+    /// at most; at least one.
+    pub fn recorded_products(&self, warm: bool, products: u32) -> u32 {
+        let cap = if warm {
+            warm_iterations(self.layout.max_iterations).max(1)
+        } else {
+            self.layout.max_iterations
+        };
+        products.clamp(1, cap.max(1))
     }
 
     /// The buffer holding every vector, and the byte range of the exitance `B` in it
@@ -678,5 +700,96 @@ impl GpuTransport {
     /// `energy_left: f32` at byte 32, `tail_ratio: f32` at byte 52, `warm: u32` at byte 56).
     pub fn state(&self) -> &Buffer {
         &self.state
+    }
+}
+
+/// Byte offset of `State::iterations`, the products the last solve took.
+const ITERATIONS_OFFSET: u64 = std::mem::offset_of!(State, iterations) as u64;
+
+/// The products the last solve took, read back from the GPU without waiting for it: a copy of
+/// the iteration's `iterations` after a solve, mapped once the frame is submitted and read a
+/// frame or more later. Each recorded product costs its four dispatches (~22 µs on an H100)
+/// even after the stop, so the next warm solve records one more than the last one took, and
+/// all of its cap where the last one used every product it was given or none was read back
+/// yet. One copy at a time: solves while it is in flight are not read.
+pub struct ProductsReadback {
+    buffer: Buffer,
+    /// A copy was recorded and not yet read.
+    in_flight: Arc<AtomicBool>,
+    /// The copy's frame was submitted: map it.
+    to_map: bool,
+    /// The products recorded and taken by the solve read last (`recorded << 32 | taken`);
+    /// `u64::MAX` before the first.
+    last: Arc<AtomicU64>,
+    /// The products recorded by the solve whose copy is in flight.
+    recorded: u32,
+}
+
+impl ProductsReadback {
+    /// Nothing read back yet: the next solve records its whole cap.
+    pub fn new(device: &RenderDevice) -> Self {
+        Self {
+            buffer: device.create_buffer(&BufferDescriptor {
+                label: Some("translucency_products_readback"),
+                size: 4,
+                usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            in_flight: Arc::new(AtomicBool::new(false)),
+            to_map: false,
+            last: Arc::new(AtomicU64::new(u64::MAX)),
+            recorded: 0,
+        }
+    }
+
+    /// How many products the next solve should record, of a cap of `cap`.
+    pub fn products_to_record(&self, cap: u32) -> u32 {
+        let last = self.last.load(Ordering::Acquire);
+        if last == u64::MAX {
+            return cap;
+        }
+        next_products(cap, (last >> 32) as u32, last as u32)
+    }
+
+    /// After a solve recorded with `recorded` products: copies its `iterations` out, unless a
+    /// copy is still in flight.
+    pub fn copy(&mut self, encoder: &mut CommandEncoder, transport: &GpuTransport, recorded: u32) {
+        if self.in_flight.swap(true, Ordering::AcqRel) {
+            return;
+        }
+        encoder.copy_buffer_to_buffer(transport.state(), ITERATIONS_OFFSET, &self.buffer, 0, 4);
+        self.recorded = recorded;
+        self.to_map = true;
+    }
+
+    /// Once the frame holding the copy was submitted (render `Cleanup`): maps it; the value
+    /// lands when the GPU is done, read by [`products_to_record`](Self::products_to_record).
+    pub fn map(&mut self) {
+        if !std::mem::take(&mut self.to_map) {
+            return;
+        }
+        let (buffer, in_flight, last) = (self.buffer.clone(), self.in_flight.clone(), self.last.clone());
+        let recorded = self.recorded;
+        self.buffer.slice(..).map_async(bevy::render::render_resource::MapMode::Read, move |result| {
+            if result.is_ok() {
+                let taken = {
+                    let data = buffer.slice(..).get_mapped_range();
+                    u32::from_le_bytes([data[0], data[1], data[2], data[3]])
+                };
+                buffer.unmap();
+                last.store((u64::from(recorded) << 32) | u64::from(taken), Ordering::Release);
+            }
+            in_flight.store(false, Ordering::Release);
+        });
+    }
+}
+
+/// The products to record after a solve that took `taken` of the `recorded` it was given:
+/// one more than it took, or the whole `cap` where it took them all (it may have needed more).
+pub fn next_products(cap: u32, recorded: u32, taken: u32) -> u32 {
+    if taken >= recorded {
+        cap
+    } else {
+        (taken + 1).clamp(1, cap.max(1))
     }
 }

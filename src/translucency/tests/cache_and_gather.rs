@@ -116,3 +116,16 @@ fn the_gathers_grid_keeps_each_members_own_cell() {
     }
     assert!(seen.iter().all(|&n| n == 1));
 }
+
+/// The products the next warm solve records after one that took `taken` of `recorded`: one
+/// more than it took, or the whole cap where it took all it was given (it may have needed
+/// more) — `ProductsReadback`'s rule.
+#[test]
+fn a_solve_that_took_every_recorded_product_asks_for_the_whole_cap_next() {
+    use crate::translucency::iteration::next_products;
+    assert_eq!(next_products(6, 6, 2), 3);
+    assert_eq!(next_products(6, 3, 2), 3);
+    assert_eq!(next_products(6, 4, 4), 6, "stopped by what was recorded");
+    assert_eq!(next_products(6, 16, 10), 6, "after a cold solve: the warm cap");
+    assert_eq!(next_products(6, 6, 0), 1, "at least one");
+}
