@@ -318,6 +318,14 @@ fn walked(s: Surface) -> Gathered {
 @group(0) @binding(7) var lit: texture_2d<f32>;
 @group(0) @binding(8) var lit_out: texture_storage_2d<rgba16float, write>;
 
+// The surface the view's pixel `id` shows; none outside the view.
+fn view_surface(id: vec2<u32>) -> Surface {
+    if any(id >= textureDimensions(lit)) {
+        return no_surface();
+    }
+    return pixel_surface(vec2<i32>(id), vec2<f32>(id) + 0.5);
+}
+
 // A workgroup's 8×8 pixels walk the grids once together (tiled culling, as Forward+ does for
 // lights): the cells about the box of their world points give the patches that reach the
 // box, and each pixel then takes its own from that list — instead of each pixel hashing its
@@ -533,10 +541,7 @@ fn gather_upsample(
     workgroupBarrier();
     let inside = all(id.xy < textureDimensions(lit));
     let p = vec2<i32>(id.xy);
-    var s = no_surface();
-    if inside {
-        s = pixel_surface(p, vec2<f32>(id.xy) + 0.5);
-    }
+    let s = view_surface(id.xy);
     let added = upsampled(p, s);
     if s.valid && added.w <= 0.0 {
         atomicStore(&tile_unserved, 1u);
@@ -566,10 +571,7 @@ fn gather_unserved(
     }
     let inside = all(id.xy < textureDimensions(lit));
     let p = vec2<i32>(id.xy);
-    var s = no_surface();
-    if inside {
-        s = pixel_surface(p, vec2<f32>(id.xy) + 0.5);
-    }
+    let s = view_surface(id.xy);
     let unserved = s.valid && upsampled(p, s).w <= 0.0;
     // The tile's box only about the pixels that gather themselves.
     var own = no_surface();
@@ -590,10 +592,7 @@ fn gather_compute(
 ) {
     let inside = all(id.xy < textureDimensions(lit));
     let p = vec2<i32>(id.xy);
-    var s = no_surface();
-    if inside {
-        s = pixel_surface(p, vec2<f32>(id.xy) + 0.5);
-    }
+    let s = view_surface(id.xy);
     let added = finish(tile_walked(thread, s));
     if !inside {
         return;

@@ -829,39 +829,36 @@ pub fn translucency_gather_pass(
                 (9, &half_light.default_view),
             )),
         );
-        let upsample_group = device.create_bind_group(
+        // The upsample and the pass after it: the view's images, the samples, and the tiles'
+        // flags (written at binding 11, read at 12).
+        let full_resolution_group = |label, layout, flags: u32| {
+            device.create_bind_group(
+                label,
+                &pipeline_cache.get_bind_group_layout(layout),
+                &BindGroupEntries::with_indices((
+                    (0, a.clone()),
+                    (1, b),
+                    (2, c),
+                    (3, d.clone()),
+                    (4, e.clone()),
+                    (5, f.clone()),
+                    (6, g.clone()),
+                    (7, post.source),
+                    (8, post.destination),
+                    (10, &half_light.default_view),
+                    (flags, &unserved_tiles.default_view),
+                )),
+            )
+        };
+        let upsample_group = full_resolution_group(
             "translucency_gather_upsample_bind_group",
-            &pipeline_cache.get_bind_group_layout(&pipeline.upsample_layout),
-            &BindGroupEntries::with_indices((
-                (0, a.clone()),
-                (1, b),
-                (2, c),
-                (3, d.clone()),
-                (4, e.clone()),
-                (5, f.clone()),
-                (6, g.clone()),
-                (7, post.source),
-                (8, post.destination),
-                (10, &half_light.default_view),
-                (11, &unserved_tiles.default_view),
-            )),
+            &pipeline.upsample_layout,
+            11,
         );
-        let unserved_group = device.create_bind_group(
+        let unserved_group = full_resolution_group(
             "translucency_gather_unserved_bind_group",
-            &pipeline_cache.get_bind_group_layout(&pipeline.unserved_layout),
-            &BindGroupEntries::with_indices((
-                (0, a),
-                (1, b),
-                (2, c),
-                (3, d),
-                (4, e),
-                (5, f),
-                (6, g),
-                (7, post.source),
-                (8, post.destination),
-                (10, &half_light.default_view),
-                (12, &unserved_tiles.default_view),
-            )),
+            &pipeline.unserved_layout,
+            12,
         );
         let size = target.main_texture().size();
         let (width, height) = (size.width, size.height);
