@@ -793,15 +793,25 @@ pub fn translucency_gather_pass(
     };
     let device = ctx.render_device().clone();
     let (vectors, _) = transport.exitance();
-    let inputs = (
+    // The seven inputs every form of the gather reads (bindings 0 – 6); each form's bind
+    // group adds its own images at the bindings its layout gives them.
+    let inputs = [
         view_binding,
-        depth,
-        normal,
+        depth.into_binding(),
+        normal.into_binding(),
         params.as_entire_binding(),
         patches.as_entire_binding(),
         vectors.as_entire_binding(),
         grid.as_entire_binding(),
-    );
+    ];
+    let bind_group = |label, layout: &BindGroupLayoutDescriptor, own: &[(u32, &TextureView)]| {
+        let entries: Vec<BindGroupEntry> = (0u32..)
+            .zip(inputs.iter().cloned())
+            .chain(own.iter().map(|&(binding, view)| (binding, view.into_binding())))
+            .map(|(binding, resource)| BindGroupEntry { binding, resource })
+            .collect();
+        device.create_bind_group(label, &pipeline_cache.get_bind_group_layout(layout), &entries)
+    };
     let method = frame.settings.gather as usize;
     // At half resolution: the samples, every pixel from them, then the pixels they do not
     // serve, in one timed span.
@@ -814,51 +824,22 @@ pub fn translucency_gather_pass(
         )
     {
         let post = target.post_process_write();
-        let (a, b, c, d, e, f, g) = inputs;
-        let half_group = device.create_bind_group(
+        let (samples, flags) = (&half_light.default_view, &unserved_tiles.default_view);
+        let half_group = bind_group(
             "translucency_gather_half_bind_group",
-            &pipeline_cache.get_bind_group_layout(&pipeline.half_layout),
-            &BindGroupEntries::with_indices((
-                (0, a.clone()),
-                (1, b),
-                (2, c),
-                (3, d.clone()),
-                (4, e.clone()),
-                (5, f.clone()),
-                (6, g.clone()),
-                (9, &half_light.default_view),
-            )),
+            &pipeline.half_layout,
+            &[(9, samples)],
         );
-        // The upsample and the pass after it: the view's images, the samples, and the tiles'
-        // flags (written at binding 11, read at 12).
-        let full_resolution_group = |label, layout, flags: u32| {
-            device.create_bind_group(
-                label,
-                &pipeline_cache.get_bind_group_layout(layout),
-                &BindGroupEntries::with_indices((
-                    (0, a.clone()),
-                    (1, b),
-                    (2, c),
-                    (3, d.clone()),
-                    (4, e.clone()),
-                    (5, f.clone()),
-                    (6, g.clone()),
-                    (7, post.source),
-                    (8, post.destination),
-                    (10, &half_light.default_view),
-                    (flags, &unserved_tiles.default_view),
-                )),
-            )
-        };
-        let upsample_group = full_resolution_group(
+        // The tiles' flags written at binding 11, read at 12.
+        let upsample_group = bind_group(
             "translucency_gather_upsample_bind_group",
             &pipeline.upsample_layout,
-            11,
+            &[(7, post.source), (8, post.destination), (10, samples), (11, flags)],
         );
-        let unserved_group = full_resolution_group(
+        let unserved_group = bind_group(
             "translucency_gather_unserved_bind_group",
             &pipeline.unserved_layout,
-            12,
+            &[(7, post.source), (8, post.destination), (10, samples), (12, flags)],
         );
         let size = target.main_texture().size();
         let (width, height) = (size.width, size.height);
@@ -892,11 +873,10 @@ pub fn translucency_gather_pass(
         // Bevy's post-process ping-pong: read the lit image, write lit + gathered into the
         // other main image, which becomes the view's main image.
         let post = target.post_process_write();
-        let (a, b, c, d, e, f, g) = inputs;
-        let bind_group = device.create_bind_group(
+        let bind_group = bind_group(
             "translucency_gather_compute_bind_group",
-            &pipeline_cache.get_bind_group_layout(&pipeline.compute_layout),
-            &BindGroupEntries::sequential((a, b, c, d, e, f, g, post.source, post.destination)),
+            &pipeline.compute_layout,
+            &[(7, post.source), (8, post.destination)],
         );
         let size = target.main_texture().size();
         crate::render::dispatch_per_pixel(
@@ -913,11 +893,7 @@ pub fn translucency_gather_pass(
     let Some(render_pipeline) = pipeline_cache.get_render_pipeline(gather.0) else {
         return;
     };
-    let bind_group = device.create_bind_group(
-        "translucency_gather_bind_group",
-        &pipeline_cache.get_bind_group_layout(&pipeline.layout),
-        &BindGroupEntries::sequential(inputs),
-    );
+    let bind_group = bind_group("translucency_gather_bind_group", &pipeline.layout, &[]);
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     ctx.command_encoder()
