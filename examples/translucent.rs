@@ -56,9 +56,9 @@ struct Cli {
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     warm_start: bool,
     /// Carry the lights' beams into the translucent objects by a table of beam columns from
-    /// random walks (`TransportSettings::beam_table`, default settings; ~0.1 s a translucent
-    /// patch on one core to precompute: the default room ~1 min on 2 cores)
-    #[arg(long)]
+    /// random walks (`TransportSettings::beam_table`, on by default; ~0.05 s a translucent
+    /// patch on one core in release to precompute); `false`: the diffusion profile alone
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     beam_table: bool,
     /// With the beam table, light from afar leaves by lobes leaning the way it travelled
     /// (`TransportSettings::exit_lobes`)

@@ -506,13 +506,16 @@ fn main() {
                 last_order: cli.beam_orders.map_or(16, |(_, last)| last),
                 exit_directions: cli.exit_axis == Axis::Lobe,
                 seed: cli.table_seed,
+                ..default()
             };
             (
                 ScatteringSource::BeamTable(table),
                 format!(
                     // `_pastterminator`: single scattering out past the terminator kept in
-                    // the table (`law_gives_single_scattering`; rows before it lack it).
-                    "_beamtable{cosines}x{azimuths}_bilinear_pastterminator_walks{}_late{}_orders{}{}",
+                    // the table (`law_gives_single_scattering`; rows before it lack it);
+                    // `_lateheld`: the late light held to the light still inside (rows
+                    // before it lack it).
+                    "_beamtable{cosines}x{azimuths}_bilinear_pastterminator_lateheld_walks{}_late{}_orders{}{}",
                     table.walks,
                     table.late_walks,
                     table.last_order,

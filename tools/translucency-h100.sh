@@ -27,19 +27,19 @@ if [ -x "$BIN/translucent_precompute_release" ]; then
 fi
 # Without the table both gather resolutions (GatherResolution; half the default), the light
 # moving twice over (A/B pairs on the same machine), with it the default alone.
-for table in "" "--beam-table"; do
+for table in "--beam-table false" "--beam-table true"; do
   motions='--swing "" --swing'
   resolutions="half full"
-  if [ -n "$table" ]; then motions='--swing ""'; resolutions=half; fi
+  if [ "$table" = "--beam-table true" ]; then motions='--swing ""'; resolutions=half; fi
   eval "set -- $motions"
   run=0
   for motion in "$@"; do
     run=$((run + 1))
     for resolution in $resolutions; do
-      name="table${table:+_on}${motion:+_moving}_${resolution}_$run"
+      name="table_${table##* }${motion:+_moving}_${resolution}_$run"
       timeout 240 "$BIN/translucent" --headless --size "$SIZE" --patches "$PATCHES" --frames "$FRAMES" \
         $motion $table --gather-resolution "$resolution" --out "$OUT/$name" > "$OUT/$name.log" 2>&1
-      echo "${table:-no table} ${motion:-lights still} gather $resolution: $(grep -E 'precomputed|average' "$OUT/$name.log" | tr '\n' ' ')"
+      echo "${table} ${motion:-lights still} gather $resolution: $(grep -E 'precomputed|average' "$OUT/$name.log" | tr '\n' ' ')"
     done
   done
 done

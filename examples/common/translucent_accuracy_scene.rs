@@ -505,6 +505,9 @@ pub fn plugin_picture(
     let start = Instant::now();
     let patches = resample_into_patches(&views, budget as usize);
     let rays = SceneRays::new(&views);
+    // The beam table is the oracles' to build (`ScatteringSource::BeamTable`: only the lit
+    // patches' directions walked), whatever `settings` asks.
+    let settings = &TransportSettings { beam_table: None, ..*settings };
     let mut transport = EnergyTransport::build(&patches, &surfaces, &rays, settings);
     // Each patch's launch: diffuse, the light's beam, or its beam snapped to a table's.
     let beam = match lighting {

@@ -17,7 +17,7 @@ use super::{
     transport::{EnergyTransport, PatchSurface, SparseMatrix, TransportReport, TransportSettings},
 };
 
-const MAGIC: &[u8; 8] = b"BMSTRN07";
+const MAGIC: &[u8; 8] = b"BMSTRN08";
 
 /// FNV-1a, 64 bits: the cache's key and the plugin's change signatures.
 #[derive(Clone, Copy)]
@@ -234,6 +234,7 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
             r.rays as u32,
             r.shape_solved_objects as u32,
             r.shape_too_large_objects as u32,
+            r.beam_table_skipped as u32,
         ])?;
         w.f32s(
             [
@@ -347,7 +348,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
     let areas = r.f32s()?;
     let counts = r.u32s()?;
     let figures = r.f32s()?;
-    if single_scattering.len() != n || areas.len() != n || counts.len() != 6 || figures.len() != 9 {
+    if single_scattering.len() != n || areas.len() != n || counts.len() != 7 || figures.len() != 9 {
         return Err(invalid("transport vectors"));
     }
     let beam_table = read_beam_table(&mut r, n)?;
@@ -382,6 +383,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
             rays: counts[3] as usize,
             shape_solved_objects: counts[4] as usize,
             shape_too_large_objects: counts[5] as usize,
+            beam_table_skipped: counts[6] as usize,
             dropped_form_factor_mean: figures[0],
             dropped_form_factor_max: figures[1],
             diffusion_kept_mean: Vec3::new(figures[2], figures[3], figures[4]),
@@ -410,6 +412,8 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
         last_order,
         exit_directions: exit_directions != 0,
         seed,
+        // Not kept: it decides whether a table is built, not what it holds.
+        max_patches: BeamTableSettings::default().max_patches,
     };
     if settings.invalid_reason().is_some() {
         return Err(invalid("beam table settings"));

@@ -406,8 +406,8 @@ pub(crate) fn run_precompute(
             settings.transport.exit_lobes as u32 as f32,
         ]),
         // The beam table's settings (none: all zero).
-        hash_f32s(settings.transport.beam_table.map_or([0.0; 6], |t| {
-            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order, t.seed].map(|v| v as f32)
+        hash_f32s(settings.transport.beam_table.map_or([0.0; 7], |t| {
+            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order, t.seed, t.max_patches].map(|v| v as f32)
         })),
     ];
     for (entity, mesh, material, transform, translucent, _) in &list {
@@ -565,6 +565,13 @@ pub(crate) fn run_precompute(
                 }
                 (patches, transport)
             });
+            if let (Some(table), skipped @ 1..) = (transport_settings.beam_table, transport.report.beam_table_skipped) {
+                notes.push(format!(
+                    "translucency: {skipped} translucent patches are more than the beam table's max_patches ({}); \
+                     their beams enter by the diffusion profile (raise BeamTableSettings::max_patches, or lower the patch budget)",
+                    table.max_patches
+                ));
+            }
             transport.incidence = EnergyTransport::incidence_weights(&surfaces, &transport_settings);
             let albedo = super::transport::patch_albedos(&patches, &surfaces);
             let exit_laws = transport.exit_laws(&patches, &surfaces, &transport_settings);

@@ -169,6 +169,7 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
     // The dipole: its single-scattering term exercises the first bounce's extra exitance.
     let (patches, _, transport, rays) = marble_ball_on_a_floor(TransportSettings {
         kernel: DiffusionKernel::Dipole,
+        beam_table: None,
         ..default()
     });
     assert!(transport.report.clusters > 0, "the far field takes part");
@@ -305,7 +306,7 @@ fn the_gpu_iteration_matches_the_cpu_oracle() {
 #[test]
 fn a_warm_start_follows_a_moving_spot_in_fewer_products() {
     use bevy_mesostructure::translucency::transport::{settle_frames, warm_iterations};
-    let (patches, _, transport, rays) = marble_ball_on_a_floor(TransportSettings::default());
+    let (patches, _, transport, rays) = marble_ball_on_a_floor(TransportSettings { beam_table: None, ..default() });
     let relative_l1 = |a: &[Vec3], b: &[Vec3]| {
         let difference: Vec<Vec3> = a.iter().zip(b).map(|(x, y)| *x - *y).collect();
         transport.absolute_flux(&difference) / transport.flux(b)
@@ -563,7 +564,7 @@ fn the_gpu_light_injection_matches_the_shadow_rays() {
     // The scaled dipole weighs each beam by its incidence; the dipole adds single scattering.
     for kernel in [DiffusionKernel::ScaledDipole, DiffusionKernel::Dipole] {
         let (patches, albedo, transport, rays) =
-            marble_ball_on_a_floor(TransportSettings { kernel, ..default() });
+            marble_ball_on_a_floor(TransportSettings { kernel, beam_table: None, ..default() });
         let gpu_transport = GpuTransport::new(
             &device,
             &transport,
@@ -714,7 +715,7 @@ fn the_gpu_light_injection_matches_the_shadow_rays_in_the_examples_room() {
         translucent_scene::translucent_room(&crate::meshes::asset_path("meshes/bunny.obj"));
     let views: Vec<PatchObject> = scene.iter().map(|o| o.view()).collect();
     let surfaces: Vec<PatchSurface> = scene.iter().map(|o| o.surface).collect();
-    let settings = TransportSettings::default();
+    let settings = TransportSettings { beam_table: None, ..default() };
     let caps: Vec<Option<f32>> = surfaces
         .iter()
         .map(|s| translucent_patch_cap(s, &settings))
@@ -883,6 +884,8 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
         patch_budget: 600,
         light_injection: LightInjection::ShadowRays,
         gather_resolution: GatherResolution::Full,
+        // The diffusion profile alone (the beam table's own tests are below).
+        transport: TransportSettings { beam_table: None, ..default() },
         ..default()
     });
     // Sunlight from the right: the left of the ball is lit only through the marble.
@@ -1108,7 +1111,8 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         app.add_plugins(TranslucencyPlugin);
     });
     // A budget below the least (16); a beam table asking for the CPU oracle's exit
-    // directions; a NaN medium, a zero scale and a good one.
+    // directions, for a scene of more translucent patches than it allows (one); a NaN
+    // medium, a zero scale and a good one.
     let mut settings = TranslucencySettings {
         patch_budget: 0,
         ..default()
@@ -1117,6 +1121,7 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         walks: 4,
         late_walks: 4,
         exit_directions: true,
+        max_patches: 1,
         ..default()
     });
     app.insert_resource(settings);
@@ -1179,6 +1184,10 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     ));
     run_until_ready(&mut app);
     let causes = warnings(&app);
+    assert!(
+        causes.iter().any(|c| c.starts_with("translucency: ") && c.contains("max_patches (1)")),
+        "no warning of the beam table's patch limit: {causes:?}"
+    );
     for key in [
         "translucency-budget",
         &format!("translucency-medium-{bad}"),
@@ -1269,6 +1278,8 @@ fn a_kept_transport_is_read_back_instead_of_built_again() {
         app.insert_resource(TranslucencySettings {
             patch_budget: 300,
             cache_dir: Some(dir.to_path_buf()),
+            // The profile alone: the cache's round trip of a table is `cache_and_gather`'s.
+            transport: TransportSettings { beam_table: None, ..default() },
             ..default()
         });
         sun(&mut app, Vec3::new(-1.0, -1.0, -1.0), 2000.0);
@@ -1343,6 +1354,7 @@ fn ambient_light_reaches_translucent_objects() {
     });
     app.insert_resource(TranslucencySettings {
         patch_budget: 300,
+        transport: TransportSettings { beam_table: None, ..default() },
         ..default()
     });
     let ball = mesh(&mut app, Sphere::new(0.05).mesh().uv(48, 24));
@@ -1692,12 +1704,14 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         // flow's law alone: 0.0802, 0.2581, 0.0763), single scattering past the terminator
         // kept in the table (`law_gives_single_scattering`; before: 0.0720, 0.2360, 0.0749).
         // Walks shared by the channels, 384 and 3072 late (before, 256 and 1024 a channel:
-        // 0.0713, 0.2204, 0.0749).
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0758, [1.007, 1.042, 1.060]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.2171, [0.936, 0.851, 0.816]),
-        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0755, [0.989, 0.987, 0.983]),
+        // 0.0713, 0.2204, 0.0749). The late light held to the light still inside after the
+        // last order (before: 0.0758, 0.2171, 0.0755; the ears gave out up to 10⁴× what they
+        // held).
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0594, [1.005, 1.004, 0.997]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.2181, [0.920, 0.842, 0.807]),
+        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0756, [0.989, 0.987, 0.983]),
         // The table with the deep law about the normal, as before the flow.
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2713, [0.867, 0.825, 0.808]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2722, [0.850, 0.817, 0.799]),
     ];
     for (preset, name, lighting, how, object_exit_share, oracles, rel_l1, ratio) in cases {
         let label = format!(
@@ -1762,6 +1776,7 @@ fn the_tiled_gather_draws_what_the_fragment_gather_does_across_depth_edges() {
     app.insert_resource(TranslucencySettings {
         patch_budget: 600,
         gather_resolution: GatherResolution::Full,
+        transport: TransportSettings { beam_table: None, ..default() },
         ..default()
     });
     sun(&mut app, Vec3::new(-1.0, -0.4, -0.6).normalize(), 2_000.0);

@@ -71,6 +71,11 @@ pub struct BeamTableSettings {
     /// different seeds differ by their walks' noise alone, which moves the accuracy figures
     /// by ~±0.005 from the front (`docs/translucent.md`): what a variant must beat.
     pub seed: u32,
+    /// The most translucent patches a scene may have for a table to be built (its precompute
+    /// and memory grow with them: ~0.05 s a translucent patch on one core in release, ~15 kB
+    /// a patch); a scene with more keeps the profile's `K`, with one warning
+    /// ([`TransportReport::beam_table_skipped`](super::transport::TransportReport::beam_table_skipped)).
+    pub max_patches: u32,
 }
 
 impl Default for BeamTableSettings {
@@ -90,6 +95,9 @@ impl Default for BeamTableSettings {
             last_order: 16,
             exit_directions: false,
             seed: 0,
+            // ~3.3× the `translucent` example's room at a 20 000 budget (1224 translucent
+            // patches): about 12 s on 16 cores, 100 s on 2, 60 MB.
+            max_patches: 4096,
         }
     }
 }

@@ -81,7 +81,7 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
         albedo: Vec3::splat(0.7),
     };
     assert_ne!(base, key(&other, 200));
-    let without = TransportSettings::default();
+    let without = TransportSettings { beam_table: None, ..default() };
     let keyed: Vec<_> = objects
         .iter()
         .zip(&surfaces)

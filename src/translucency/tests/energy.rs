@@ -216,8 +216,9 @@ fn the_sparse_iteration_converges_to_the_dense_solution() {
             albedo: Vec3::new(0.8, 0.1, 0.1),
         },
     ];
+    // `K` and `F` alone: the beam table's own tests are in `beam_table.rs`.
     let transport =
-        EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings::default());
+        EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings { beam_table: None, ..default() });
     let lights = [PatchLight::Spot {
         position: Vec3::new(0.15, 0.25, 0.1),
         direction: (Vec3::new(0.0, 0.05, 0.0) - Vec3::new(0.15, 0.25, 0.1)).normalize(),
@@ -316,6 +317,7 @@ fn the_oriented_dipole_changes_only_its_own_objects_transport() {
     let settings = TransportSettings {
         object_exit_share: false,
         shape_diffusion: false,
+        beam_table: None,
         ..default()
     };
     let flat = [surface(false), surface(false)];

@@ -23,7 +23,7 @@ fn invalid_media_scatter_nothing_and_say_why() {
         world_units_per_mm: 1.0,
         oriented_dipole: false,
     }];
-    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &default());
+    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings { beam_table: None, ..default() });
     assert_eq!(transport.scattering.entries(), 0);
     let solution = transport.solve(&vec![Vec3::ONE; patches.patches.len()], 1e-4, 10);
     assert!(solution.exitance.iter().all(|b| *b == Vec3::ZERO));

@@ -266,12 +266,18 @@ pub struct TransportSettings {
     pub deep_exit_law: bool,
     /// Carry each light's beam into translucent patches by a per-patch table of beam columns
     /// from random walks ([`BeamTable`](super::beam_table::BeamTable)) instead of `K`, and
-    /// give single scattering by the lit face in its own law per pixel. Off by default: it
-    /// takes ~0.1 s a translucent patch on one core to build (the `translucent` example's
-    /// room at a 20 000 budget: 58 s on 2 cores, 19 MB); against path-traced references every
-    /// front-lit case comes within 0.08 in relative L1 with it (the Stanford bunny's skin
-    /// 0.160 → 0.072, marble 0.089 → 0.075, over three table seeds at most 0.078;
-    /// `docs/translucent.md`).
+    /// give single scattering by the lit face in its own law per pixel (`None`: the
+    /// diffusion profile's `K` alone). On by default: against path-traced references every
+    /// front-lit case comes within 0.08 in relative L1 with it and not without (the Stanford
+    /// bunny's skin 0.160 → 0.059–0.064 over three table seeds, marble 0.089 → 0.072–0.076;
+    /// lit from behind a 1 cm skin ball 0.431 → 0.132–0.154; `docs/translucent.md`). Its
+    /// price: ~0.05 s a translucent patch on one core in release to build (the `translucent`
+    /// example's room at a 20 000 budget, 1224 translucent patches: 8.7 s with the rest of
+    /// the precompute on 16 cores, the table alone 29.7 s on 2; 18 MB), in the background
+    /// (cached on disk with [`cache_dir`](super::TranslucencySettings::cache_dir)); and per frame on an
+    /// H100 0.06 ms with the lights still, 0.1–0.2 ms with a light moving (the room at
+    /// 1920×1080). Scenes of more than [`max_patches`](super::beam_table::BeamTableSettings::max_patches)
+    /// translucent patches keep the profile, with a warning.
     pub beam_table: Option<super::beam_table::BeamTableSettings>,
     /// With a beam table, give the light a translucent patch receives from more than
     /// [`LOBE_SOURCE_DISTANCE`](super::beam_table::LOBE_SOURCE_DISTANCE) patch sizes away out
@@ -293,8 +299,8 @@ impl Default for TransportSettings {
     /// memory, +3 % in the test room's); form factors down to 1e-5 (a
     /// patch of 1/1000 of a room's wall area seen face-on from 5 wall widths away); clusters
     /// 4 patches wide linked as one beyond 3 radii; each object's own random walks and each
-    /// beam's incidence, and with a beam table its exit lobes (all measured closer to
-    /// light-traced references; see `docs/translucent.md` for what each costs and changes).
+    /// beam's incidence, a beam table and its exit lobes (all measured closer to light-traced
+    /// references; see `docs/translucent.md` for what each costs and changes).
     fn default() -> Self {
         Self {
             kernel: DiffusionKernel::ScaledDipole,
@@ -306,7 +312,7 @@ impl Default for TransportSettings {
             beam_incidence: true,
             shape_diffusion: true,
             deep_exit_law: true,
-            beam_table: None,
+            beam_table: Some(super::beam_table::BeamTableSettings::default()),
             exit_lobes: true,
         }
     }
@@ -344,6 +350,10 @@ pub struct TransportReport {
     pub shape_too_large_objects: usize,
     /// Entries of the beam table (early and late columns; 0 without one).
     pub beam_table_entries: usize,
+    /// The scene's translucent patches where a beam table was asked for but not built, since
+    /// they were more than [`BeamTableSettings::max_patches`](super::beam_table::BeamTableSettings::max_patches)
+    /// (0: built, or none asked for).
+    pub beam_table_skipped: usize,
     /// Wall-clock seconds to build.
     pub seconds: f32,
 }
@@ -444,7 +454,13 @@ impl EnergyTransport {
         let n = patches.patches.len();
         let f = form_factors::build(patches, rays, settings);
         let k = scattering::build(patches, surfaces, rays, settings);
-        let beam_table = settings.beam_table.map(|table| {
+        let translucent = patches
+            .patches
+            .iter()
+            .filter(|q| matches!(surfaces.get(q.object as usize), Some(PatchSurface::Translucent { .. })))
+            .count();
+        let too_many = settings.beam_table.filter(|t| translucent > t.max_patches as usize).map(|_| translucent);
+        let beam_table = settings.beam_table.filter(|_| too_many.is_none()).map(|table| {
             super::beam_table::BeamTable::build(patches, surfaces, rays, &k.matrix, table, None)
         });
         let report = TransportReport {
@@ -461,6 +477,7 @@ impl EnergyTransport {
             beam_table_entries: beam_table
                 .as_ref()
                 .map_or(0, |t| t.early.entries() + t.late.entries()),
+            beam_table_skipped: too_many.unwrap_or(0),
             seconds: start.elapsed().as_secs_f32(),
         };
         Self {
