@@ -95,8 +95,9 @@ impl Default for BeamTableSettings {
             last_order: 16,
             exit_directions: false,
             seed: 0,
-            // ~3.3× the `translucent` example's room at a 20 000 budget (1224 translucent
-            // patches): about 12 s on 16 cores, 100 s on 2, 60 MB.
+            // 3.3× the `translucent` example's room at a 20 000 budget (1224 translucent
+            // patches, 18 MB): by its measured rate about 12 s on 16 cores and 100 s on 2
+            // in release, ~60 MB.
             max_patches: 4096,
         }
     }
