@@ -68,13 +68,14 @@ use translucent_accuracy_scene::{
     ShapeView, plugin_picture, score,
 };
 
-/// The translucency's picture of a ball or the bunny against a path tracer's, per patch
+/// The translucency's picture of a ball, the bunny or a torus against a path tracer's, per patch
 /// budget, into a CSV.
 #[derive(clap::Parser)]
 #[command(long_about = None)]
 struct Cli {
-    /// The object: the 1 cm ball, or the Stanford bunny 4 cm long (its reference is
-    /// Mitsuba's, index-matched: the light tracer traces the ball only)
+    /// The object: the 1 cm ball, the Stanford bunny 4 cm long, or a torus (ring radius 1 cm,
+    /// tube radius 3 mm); the bunny's and the torus's reference is Mitsuba's, index-matched
+    /// (the light tracer traces the ball only)
     #[arg(long, value_enum, default_value_t = ShapeArg::Ball)]
     shape: ShapeArg,
     /// Jensen's medium
@@ -235,6 +236,7 @@ enum Medium {
 enum ShapeArg {
     Ball,
     Bunny,
+    Torus,
 }
 
 /// `--exit-axis` ([`ExitAxis`]).
@@ -351,9 +353,10 @@ fn main() {
     let shape = match cli.shape {
         ShapeArg::Ball => Shape::Ball,
         ShapeArg::Bunny => Shape::Bunny,
+        ShapeArg::Torus => Shape::Torus,
     };
-    if shape == Shape::Bunny && (cli.eta != 1.0 || cli.uniform) {
-        fail("the bunny is index-matched under the directional light only (its reference is Mitsuba's; drop --eta and --uniform)".into());
+    if shape != Shape::Ball && (cli.eta != 1.0 || cli.uniform) {
+        fail("the bunny and the torus are index-matched under the directional light only (their reference is Mitsuba's; drop --eta and --uniform)".into());
     }
     if cli.scattering == Scattering::BeamWalks && (cli.eta != 1.0 || cli.uniform) {
         fail("--scattering beam-walks takes the directional light into an index-matched object only (drop --eta and --uniform)".into());

@@ -35,6 +35,11 @@ pub const EYE: Vec3 = Vec3::new(0.0, 0.0, 0.04);
 pub const BUNNY_EYE: Vec3 = Vec3::new(0.025, 0.03, 0.055);
 /// The bunny's longest side, metres.
 pub const BUNNY_LENGTH: f32 = 0.04;
+/// The torus's ring and tube radii, metres: a tube 6 mm thick, thinner than skin's red
+/// light travels, curved both ways.
+pub const TORUS_RADII: (f32, f32) = (0.01, 0.003);
+/// Where the camera looking at the torus stands: above it, to one side.
+pub const TORUS_EYE: Vec3 = Vec3::new(0.01, 0.022, 0.036);
 /// The default light: from the right, slightly above and in front.
 pub const FRONT_LIGHT: Vec3 = Vec3::new(-1.0, -0.2, -0.3);
 /// Lit from behind, a little from the left and above.
@@ -50,6 +55,9 @@ pub enum Shape {
     /// The Stanford bunny (`assets/meshes/bunny.obj`, 3 674 triangles) 4 cm long: thin ears,
     /// concave creases and flat flanks, seen from above and aside.
     Bunny,
+    /// A torus lying flat, ring radius 1 cm, tube radius 3 mm (Bevy's torus mesh, 48 × 24
+    /// segments): a thin, doubly curved part, with a hole, seen from above and aside.
+    Torus,
 }
 
 impl Shape {
@@ -68,6 +76,15 @@ impl Shape {
                 let scale = BUNNY_LENGTH / 1.6;
                 (positions.into_iter().map(|v| v * scale).collect(), indices)
             }
+            Shape::Torus => world_triangles(
+                &Torus { minor_radius: TORUS_RADII.1, major_radius: TORUS_RADII.0 }
+                    .mesh()
+                    .minor_resolution(24)
+                    .major_resolution(48)
+                    .build(),
+                &GlobalTransform::IDENTITY,
+            )
+            .expect("a triangle list"),
         }
     }
 
@@ -76,6 +93,7 @@ impl Shape {
         match self {
             Shape::Ball => EYE,
             Shape::Bunny => BUNNY_EYE,
+            Shape::Torus => TORUS_EYE,
         }
     }
 
@@ -84,6 +102,7 @@ impl Shape {
         match self {
             Shape::Ball => "ball",
             Shape::Bunny => "bunny",
+            Shape::Torus => "torus",
         }
     }
 
@@ -92,6 +111,7 @@ impl Shape {
         match self {
             Shape::Ball => "r10mm",
             Shape::Bunny => "4cm",
+            Shape::Torus => "R10r3mm",
         }
     }
 }
@@ -138,7 +158,7 @@ pub struct ShapeView {
 }
 
 impl ShapeView {
-    /// The view of `shape`: the ball's hits in closed form, the bunny's by rays.
+    /// The view of `shape`: the ball's hits in closed form, the others' by rays.
     pub fn new(shape: Shape, size: u32) -> Self {
         let eye = shape.eye();
         let (positions, indices) = shape.triangles();
@@ -160,7 +180,7 @@ impl ShapeView {
                     })
                 })
                 .collect(),
-            Shape::Bunny => {
+            Shape::Bunny | Shape::Torus => {
                 let rays = SceneRays::new(&[PatchObject {
                     positions: &positions,
                     indices: &indices,
