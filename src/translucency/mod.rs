@@ -109,16 +109,16 @@ impl Plugin for TranslucencyPlugin {
                 (
                     gather::prepare_gather_pipelines.in_set(RenderSystems::Prepare),
                     gather::prepare_translucency.in_set(RenderSystems::PrepareResources),
-                    gather::map_products_readback.in_set(RenderSystems::Cleanup),
+                    iteration::map_products_readback.in_set(RenderSystems::Cleanup),
                 ),
             )
             .add_systems(
                 Core3d,
                 (
-                    gather::translucency_injection_pass
+                    injection::translucency_injection_pass
                         .in_set(Core3dSystems::MainPass)
-                        .before(gather::translucency_iteration_pass),
-                    gather::translucency_iteration_pass
+                        .before(iteration::translucency_iteration_pass),
+                    iteration::translucency_iteration_pass
                         .in_set(Core3dSystems::MainPass)
                         .before(main_opaque_pass_3d),
                     // After the bleeding, which may flip the view's main images (its compute

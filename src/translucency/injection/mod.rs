@@ -13,20 +13,23 @@
 //! (`translucency::the_gpu_light_injection_matches_the_shadow_rays`).
 
 use bevy::{
+    ecs::system::ResMut,
     math::Vec3,
     render::{
+        diagnostic::RecordDiagnostics,
         render_resource::{
             BindGroup, BindGroupEntries, BindGroupLayout, Buffer, BufferDescriptor,
             BufferInitDescriptor, BufferUsages, CommandEncoder, ComputePassDescriptor,
             ComputePipeline, PipelineLayoutDescriptor, ShaderModuleDescriptor, ShaderSource,
         },
-        renderer::{RenderDevice, RenderQueue},
+        renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
     },
 };
 use bytemuck::{Pod, Zeroable};
 
 use super::{
     diffusion::{IncidenceWeight, diffuse_single_scattering_shape, single_scattering_shape},
+    gather::{TranslucencyCamera, TranslucencyGpu},
     iteration::{GpuTransport, compute_pipeline, packed_buffers_layout},
     patches::Patches,
     transport::{EnergyTransport, PatchLight},
@@ -424,4 +427,27 @@ impl GpuInjection {
         }
         encoder.pop_debug_group();
     }
+}
+
+/// Core3d system before the iteration: where the GPU injects the lights
+/// ([`LightInjection::LightViewMaps`](crate::translucency::LightInjection)) and they changed, writes each
+/// patch's `E⁰` and `S⁰` (the first view of the frame does it), timed as
+/// `translucency/injection`. Its own system, so its own command encoder.
+pub fn translucency_injection_pass(
+    _view: ViewQuery<&TranslucencyCamera>,
+    mut gpu: ResMut<TranslucencyGpu>,
+    mut ctx: RenderContext,
+) {
+    if !gpu.injection_pending {
+        return;
+    }
+    let Some(injection) = &gpu.injection else {
+        return;
+    };
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let span = diagnostics.time_span(ctx.command_encoder(), "translucency/injection");
+    injection.record(ctx.command_encoder());
+    span.end(ctx.command_encoder());
+    gpu.injection_pending = false;
 }

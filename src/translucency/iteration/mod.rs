@@ -10,8 +10,10 @@
 //! frame or more later: [`ProductsReadback`].)
 
 use bevy::{
+    ecs::system::{Res, ResMut},
     math::{Vec3, Vec4},
     render::{
+        diagnostic::RecordDiagnostics,
         render_resource::{
             BindGroup, BindGroupEntries, BindGroupLayout, BindGroupLayoutEntries, Buffer,
             BufferDescriptor, PipelineLayout, ShaderModule,
@@ -22,7 +24,7 @@ use bevy::{
                 storage_buffer_read_only_sized, storage_buffer_sized, uniform_buffer_sized,
             },
         },
-        renderer::{RenderDevice, RenderQueue},
+        renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
     },
 };
 use bytemuck::{Pod, Zeroable};
@@ -31,7 +33,11 @@ use std::sync::{
     atomic::{AtomicBool, AtomicU64, Ordering},
 };
 
-use super::transport::{EnergyTransport, warm_iterations};
+use super::{
+    gather::{TranslucencyCamera, TranslucencyGpu},
+    plugin::TranslucencyFrame,
+    transport::{EnergyTransport, warm_iterations},
+};
 
 const WORKGROUP: u32 = 64;
 
@@ -791,5 +797,59 @@ pub fn next_products(cap: u32, recorded: u32, taken: u32) -> u32 {
         cap
     } else {
         (taken + 1).clamp(1, cap.max(1))
+    }
+}
+
+/// Core3d system before the opaque pass: iterates the transport when the lights changed (the
+/// first view of the frame does it; from the last solution where
+/// [`TranslucencySettings::warm_start`](crate::translucency::TranslucencySettings::warm_start) and there is
+/// one), and warm in the few frames after they stopped (`settle_frames`), timed as
+/// `translucency/iteration`.
+pub fn translucency_iteration_pass(
+    _view: ViewQuery<&TranslucencyCamera>,
+    frame: Res<TranslucencyFrame>,
+    mut gpu: ResMut<TranslucencyGpu>,
+    mut ctx: RenderContext,
+) {
+    let Some(max_iterations) = gpu.transport.as_ref().map(GpuTransport::max_iterations) else {
+        return;
+    };
+    let warm = gpu.solved && frame.settings.warm_start;
+    if gpu.iteration_pending {
+        // As many as the transport's own cap (the settings' when it was uploaded).
+        gpu.settle_frames = if warm { crate::translucency::transport::settle_frames(max_iterations) } else { 0 };
+    } else if warm && gpu.settle_frames > 0 {
+        gpu.settle_frames -= 1;
+    } else {
+        return;
+    }
+    let gpu = &mut *gpu;
+    let Some(transport) = &gpu.transport else {
+        return;
+    };
+    // A warm solve records one product more than the last solve took (read back), a cold
+    // one its whole cap.
+    let asked = match (&gpu.products, warm) {
+        (Some(products), true) => products.products_to_record(transport.recorded_products(true, u32::MAX)),
+        _ => u32::MAX,
+    };
+    let recorded = transport.recorded_products(warm, asked);
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let span = diagnostics.time_span(ctx.command_encoder(), "translucency/iteration");
+    transport.record_at_most(ctx.command_encoder(), warm, recorded);
+    span.end(ctx.command_encoder());
+    if let Some(products) = &mut gpu.products {
+        products.copy(ctx.command_encoder(), transport, recorded);
+    }
+    gpu.iteration_pending = false;
+    gpu.solved = true;
+}
+
+/// Render `Cleanup`, after the frame's submission: maps the read-back of the products the
+/// frame's solve took ([`ProductsReadback`]).
+pub fn map_products_readback(mut gpu: ResMut<TranslucencyGpu>) {
+    if let Some(products) = &mut gpu.products {
+        products.map();
     }
 }
