@@ -76,15 +76,8 @@ impl Shape {
                 let scale = BUNNY_LENGTH / 1.6;
                 (positions.into_iter().map(|v| v * scale).collect(), indices)
             }
-            Shape::Torus => world_triangles(
-                &Torus { minor_radius: TORUS_RADII.1, major_radius: TORUS_RADII.0 }
-                    .mesh()
-                    .minor_resolution(24)
-                    .major_resolution(48)
-                    .build(),
-                &GlobalTransform::IDENTITY,
-            )
-            .expect("a triangle list"),
+            Shape::Torus => world_triangles(&torus_mesh(), &GlobalTransform::IDENTITY)
+                .expect("a triangle list"),
         }
     }
 
@@ -114,6 +107,15 @@ impl Shape {
             Shape::Torus => "R10r3mm",
         }
     }
+}
+
+/// The torus's mesh (Bevy's, 48 × 24 segments), for the patches and for Bevy's fit alike.
+pub fn torus_mesh() -> Mesh {
+    Torus { minor_radius: TORUS_RADII.1, major_radius: TORUS_RADII.0 }
+        .mesh()
+        .minor_resolution(24)
+        .major_resolution(48)
+        .build()
 }
 
 /// The camera ray through the centre of pixel `(x, y)` of `size`²: unit direction.

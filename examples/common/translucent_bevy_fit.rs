@@ -7,7 +7,7 @@ use bevy::prelude::*;
 
 use super::{
     headless, meshes,
-    translucent_accuracy_scene::{BUNNY_LENGTH, FOV_Y, RADIUS, Shape, ShapeView, TORUS_RADII},
+    translucent_accuracy_scene::{self, BUNNY_LENGTH, FOV_Y, RADIUS, Shape, ShapeView},
 };
 
 /// Renders the ball with Bevy's `StandardMaterial` (white, no specular) for each diffuse
@@ -70,11 +70,7 @@ pub fn bevy_best_fit(
         Shape::Ball => Sphere::new(RADIUS).mesh().ico(5).expect("a valid subdivision"),
         Shape::Bunny => meshes::obj_mesh(&meshes::asset_path("meshes/bunny.obj"), 1.0)
             .scaled_by(Vec3::splat(BUNNY_LENGTH / 1.6)),
-        Shape::Torus => Torus { minor_radius: TORUS_RADII.1, major_radius: TORUS_RADII.0 }
-            .mesh()
-            .minor_resolution(24)
-            .major_resolution(48)
-            .build(),
+        Shape::Torus => translucent_accuracy_scene::torus_mesh(),
     };
     let mesh = app.world_mut().resource_mut::<Assets<Mesh>>().add(shape_mesh);
     let material = app

@@ -177,16 +177,7 @@ impl BeamTable {
             warn!("translucency: {reason} (got {settings:?}); no beam table");
             return Self { settings, slots: vec![u32::MAX; n], ..default() };
         }
-        let medium_of = |j: usize| match surfaces.get(p[j].object as usize) {
-            Some(&PatchSurface::Translucent { medium, world_units_per_mm, .. })
-                if medium.invalid_reason().is_none()
-                    && world_units_per_mm.is_finite()
-                    && world_units_per_mm > 0.0 =>
-            {
-                Some((medium, world_units_per_mm))
-            }
-            _ => None,
-        };
+        let medium_of = |j: usize| tabled_medium(surfaces, p[j].object);
         let mut slots = vec![u32::MAX; n];
         let mut tabled = Vec::new();
         let mut media = Vec::new();
@@ -329,6 +320,24 @@ impl BeamTable {
     }
 }
 
+/// Object `object`'s medium and scale where the table walks its patches: translucent, with a
+/// valid medium and a positive scale (else its patches keep the profile's `K`).
+pub(crate) fn tabled_medium(
+    surfaces: &[PatchSurface],
+    object: u32,
+) -> Option<(crate::translucency::medium::TranslucentMedium, f32)> {
+    match surfaces.get(object as usize) {
+        Some(&PatchSurface::Translucent { medium, world_units_per_mm, .. })
+            if medium.invalid_reason().is_none()
+                && world_units_per_mm.is_finite()
+                && world_units_per_mm > 0.0 =>
+        {
+            Some((medium, world_units_per_mm))
+        }
+        _ => None,
+    }
+}
+
 /// One patch's walks.
 struct ColumnWalks<'a> {
     patches: &'a Patches,
@@ -454,7 +463,7 @@ impl ColumnWalks<'_> {
             (near - early_flux).max(Vec3::ZERO) / near.max(Vec3::splat(1e-30)),
             Vec3::ZERO,
         );
-        let column: Vec<(u32, Vec3)> = profile_column
+        let mut column: Column = profile_column
             .iter()
             .map(|&(i, v)| {
                 let v = v * per_entered;
@@ -465,9 +474,10 @@ impl ColumnWalks<'_> {
         // the flat profile reaches patches the walks never do, and a fifth of the bunny's
         // skin patches gave out more (up to 10⁴× on an ear), which a beam's share
         // (`remaining / late remaining`) then multiplied into a red blotch.
-        let late_flux: Vec3 = column.iter().map(|&(i, v)| flux(v, i)).sum();
+        let late_flux: Vec3 = column.iter().map(|(&i, &v)| flux(v, i)).sum();
         let inside = remaining * p[self.j].area;
         let scale = Vec3::select(late_flux.cmpgt(inside), inside / late_flux.max(Vec3::splat(1e-30)), Vec3::ONE);
-        Some((column.into_iter().map(|(i, v)| (i, v * scale)).collect(), remaining))
+        column.values_mut().for_each(|v| *v *= scale);
+        Some((column, remaining))
     }
 }

@@ -31,7 +31,7 @@
 //! table's light flows in and leans as it leaves) and `build` (the walks that fill the
 //! columns).
 
-mod build;
+pub(crate) mod build;
 pub mod directions;
 pub mod flow;
 pub mod single_scattering;

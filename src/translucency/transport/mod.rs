@@ -454,10 +454,11 @@ impl EnergyTransport {
         let n = patches.patches.len();
         let f = form_factors::build(patches, rays, settings);
         let k = scattering::build(patches, surfaces, rays, settings);
+        // The patches the table would walk.
         let translucent = patches
             .patches
             .iter()
-            .filter(|q| matches!(surfaces.get(q.object as usize), Some(PatchSurface::Translucent { .. })))
+            .filter(|q| super::beam_table::build::tabled_medium(surfaces, q.object).is_some())
             .count();
         let too_many = settings.beam_table.filter(|t| translucent > t.max_patches as usize).map(|_| translucent);
         let beam_table = settings.beam_table.filter(|_| too_many.is_none()).map(|table| {
