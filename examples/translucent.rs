@@ -72,6 +72,14 @@ struct Cli {
     /// its default when not given)
     #[arg(long, value_enum)]
     gather_resolution: Option<Resolution>,
+    /// Keep the precomputed transport in this folder and load it from there when the scene
+    /// and settings are the same (`TranslucencySettings::cache_dir`)
+    #[arg(long)]
+    cache_dir: Option<std::path::PathBuf>,
+    /// `false`: the same room with Bevy's shading alone (no `TranslucencyPlugin`, no
+    /// `TranslucencyCamera` and so no prepass): the frame the plugin's cost is measured against
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    translucency: bool,
 }
 
 /// `--gather-resolution`: [`GatherResolution`]'s two.
@@ -124,8 +132,10 @@ fn main() {
     ];
     let windowed = args.windowed();
     let mut app = common::app(&args, "bevy_mesostructure: translucent", shots);
-    app.add_plugins(TranslucencyPlugin)
-        .insert_resource(ClearColor(Color::BLACK))
+    if cli.translucency {
+        app.add_plugins(TranslucencyPlugin);
+    }
+    app.insert_resource(ClearColor(Color::BLACK))
         .insert_resource(bevy::light::GlobalAmbientLight {
             brightness: 0.0,
             ..default()
@@ -150,28 +160,31 @@ fn main() {
                 Some(Resolution::Half) => GatherResolution::Half,
                 None => GatherResolution::default(),
             },
+            cache_dir: cli.cache_dir,
             ..default()
         })
         .insert_resource(SpotPlace {
             fixed: (!windowed && !cli.swing).then_some(0.0),
         })
         .add_systems(Update, move_spot);
-    setup(app.world_mut());
+    setup(app.world_mut(), cli.translucency);
     common::run(app);
 }
 
-fn setup(world: &mut World) {
+fn setup(world: &mut World, translucency: bool) {
     let target = world.resource::<common::Output>().target();
-    world.spawn((
+    let mut camera = world.spawn((
         Camera3d::default(),
         target,
         Hdr,
         Msaa::Off,
         // A dim room lit by one small spot: exposed for it.
         Exposure { ev100: 7.0 },
-        TranslucencyCamera,
         Transform::from_xyz(0.0, 0.12, 0.42).looking_at(Vec3::new(0.0, 0.05, 0.0), Vec3::Y),
     ));
+    if translucency {
+        camera.insert(TranslucencyCamera);
+    }
     let mut mesh = |m: Mesh| world.resource_mut::<Assets<Mesh>>().add(m);
     let bunny = mesh(meshes::obj_mesh(
         &meshes::asset_path("meshes/bunny.obj"),

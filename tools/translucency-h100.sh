@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # Issue 13's GPU figures in one go, on a lent GPU machine after tools/gpu-run.sh has unpacked
-# the examples into /tmp/bin: the precompute of the issue's 20 k budget with and without the
-# beam table (this machine's cores), and the passes' GPU time per frame at 1920×1080 with the
-# light moving every frame and with it still, without the beam table at both gather
-# resolutions, with it (its exit lobes on, the default) at the default one. As Bevy's release
-# builds run it: wgpu's indirect-call validation off. A release build of the precompute, where
-# carried as translucent_precompute_release, is timed too.
+# the examples into /tmp/bin: the passes' GPU time per frame and per part at 1920×1080 with
+# the 20 k budget (the light moving every frame, and still), the same room with the plugin off
+# (what the plugin adds to a frame: "GPU time of all timed spans" in each log), the diffusion
+# profile alone (no beam table), the gather at full resolution and a cap of 2 products.
+# As Bevy's release builds run it: wgpu's indirect-call validation off. The first run builds
+# the transport and keeps it in $CACHE; the others load it. PRECOMPUTE=1 also times
+# `translucent_precompute --budgets $PATCHES --beam-table` (and its release build where
+# carried as translucent_precompute_release) on this machine's cores.
 #
-# Here:   bash tools/gpu-pack.sh translucent translucent_precompute
+# Here:   bash tools/gpu-pack.sh translucent [translucent_precompute]
 # There:  bash tools/gpu-run.sh bash tools/translucency-h100.sh
 # Smaller (to try it on the software driver): SIZE=384x288 PATCHES=500 BIN=target/debug/examples
 set -u
@@ -16,30 +18,29 @@ SIZE=${SIZE:-1920x1080}
 PATCHES=${PATCHES:-20000}
 FRAMES=${FRAMES:-100}
 OUT=${OUT:-/tmp/translucency-h100}
+CACHE=${CACHE:-$OUT/cache}
 mkdir -p "$OUT"
 export WGPU_VALIDATION_INDIRECT_CALL=0
 echo "cores: $(nproc)"
-echo "precompute, budget $PATCHES:"
-timeout 300 "$BIN/translucent_precompute" --budgets "$PATCHES" --beam-table 2>&1 | grep -E 'beam table|^[0-9]'
-if [ -x "$BIN/translucent_precompute_release" ]; then
-  echo "precompute (release build), budget $PATCHES:"
-  timeout 300 "$BIN/translucent_precompute_release" --budgets "$PATCHES" --beam-table 2>&1 | grep -E 'beam table|^[0-9]'
-fi
-# Without the table both gather resolutions (GatherResolution; half the default), the light
-# moving twice over (A/B pairs on the same machine), with it the default alone.
-for table in "--beam-table false" "--beam-table true"; do
-  motions='--swing "" --swing'
-  resolutions="half full"
-  if [ "$table" = "--beam-table true" ]; then motions='--swing ""'; resolutions=half; fi
-  eval "set -- $motions"
-  run=0
-  for motion in "$@"; do
-    run=$((run + 1))
-    for resolution in $resolutions; do
-      name="table_${table##* }${motion:+_moving}_${resolution}_$run"
-      timeout 240 "$BIN/translucent" --headless --size "$SIZE" --patches "$PATCHES" --frames "$FRAMES" \
-        $motion $table --gather-resolution "$resolution" --out "$OUT/$name" > "$OUT/$name.log" 2>&1
-      echo "${table} ${motion:-lights still} gather $resolution: $(grep -E 'precomputed|average' "$OUT/$name.log" | tr '\n' ' ')"
-    done
+if [ "${PRECOMPUTE:-0}" = 1 ]; then
+  for build in translucent_precompute translucent_precompute_release; do
+    [ -x "$BIN/$build" ] || continue
+    echo "$build, budget $PATCHES:"
+    timeout 300 "$BIN/$build" --budgets "$PATCHES" --beam-table 2>&1 | grep -E 'beam table|^[0-9]'
   done
-done
+fi
+run() {
+  local name=$1
+  shift
+  timeout 240 "$BIN/translucent" --headless --size "$SIZE" --patches "$PATCHES" --frames "$FRAMES" \
+    --cache-dir "$CACHE" --out "$OUT/$name" "$@" > "$OUT/$name.log" 2>&1
+  echo "== $name ($*, exit $?)"
+  grep -E 'patches,|average time|GPU time' "$OUT/$name.log"
+}
+run table_moving_1 --swing
+run table_moving_2 --swing
+run table_still
+run off_moving --swing --translucency false
+run table_moving_cap2 --swing --max-iterations 2
+run profile_moving --swing --beam-table false
+run table_moving_full --swing --gather-resolution full

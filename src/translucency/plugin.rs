@@ -222,8 +222,10 @@ pub enum TranslucencyStatus {
     Ready {
         /// Patches.
         patches: usize,
-        /// What the transport kept and cost.
+        /// What the transport kept and cost (its precompute's, where it came from the cache).
         report: TransportReport,
+        /// Whether it was loaded from [`TranslucencySettings::cache_dir`] rather than built.
+        from_cache: bool,
     },
 }
 
@@ -293,7 +295,7 @@ pub(crate) struct Precompute {
     /// A changed signature waiting to stay the same for [`SETTLE_FRAMES`] before a rebuild,
     /// and for how many frames it has.
     settling: Option<(Vec<u64>, u32)>,
-    task: Option<Task<(TranslucencyScene, Vec<String>)>>,
+    task: Option<Task<(TranslucencyScene, Vec<String>, bool)>>,
     generation: u64,
     direct_signature: Vec<u64>,
     direct_generation: u64,
@@ -547,6 +549,7 @@ pub(crate) fn run_precompute(
                     None
                 }
             });
+            let from_cache = cached.is_some();
             let (patches, mut transport) = cached.unwrap_or_else(|| {
                 let caps: Vec<Option<f32>> = surfaces
                     .iter()
@@ -576,14 +579,14 @@ pub(crate) fn run_precompute(
             let albedo = super::transport::patch_albedos(&patches, &surfaces);
             let exit_laws = transport.exit_laws(&patches, &surfaces, &transport_settings);
             let source_depths = EnergyTransport::source_depths(&patches, &surfaces);
-            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, source_depths, entities }, notes)
+            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, source_depths, entities }, notes, from_cache)
         }));
         *status = TranslucencyStatus::Precomputing {
             since: Instant::now(),
         };
     }
     if let Some(task) = state.task.as_mut()
-        && let Some((scene, notes)) = block_on(poll_once(task))
+        && let Some((scene, notes, from_cache)) = block_on(poll_once(task))
     {
         for note in notes {
             warned.warn(note.clone(), || note);
@@ -594,6 +597,7 @@ pub(crate) fn run_precompute(
         *status = TranslucencyStatus::Ready {
             patches: scene.patches.patches.len(),
             report: scene.transport.report.clone(),
+            from_cache,
         };
         frame.scene = Some((state.generation, Arc::new(scene)));
     }

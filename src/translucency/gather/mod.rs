@@ -604,20 +604,25 @@ pub fn translucency_gather_pass(
         let span = diagnostics.time_span(ctx.command_encoder(), "translucency/gather");
         let encoder = ctx.command_encoder();
         encoder.push_debug_group("translucency/gather");
-        {
-            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
-                label: Some("translucency_gather_half"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(half);
-            pass.set_bind_group(0, &half_group, &[view_offset.offset]);
-            pass.dispatch_workgroups(width.div_ceil(2).div_ceil(8), height.div_ceil(2).div_ceil(8), 1);
-            pass.set_pipeline(upsample);
-            pass.set_bind_group(0, &upsample_group, &[view_offset.offset]);
-            pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
-            pass.set_pipeline(unserved);
-            pass.set_bind_group(0, &unserved_group, &[view_offset.offset]);
-            pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+        // Each stage its own compute pass and time span (`half`, `upsample`, `unserved`).
+        let half_size = (width.div_ceil(2).div_ceil(8), height.div_ceil(2).div_ceil(8));
+        let full_size = (width.div_ceil(8), height.div_ceil(8));
+        for (name, label, stage, group, (x, y)) in [
+            ("half", "translucency_gather_half", half, &half_group, half_size),
+            ("upsample", "translucency_gather_upsample", upsample, &upsample_group, full_size),
+            ("unserved", "translucency_gather_unserved", unserved, &unserved_group, full_size),
+        ] {
+            let stage_span = diagnostics.time_span(encoder, name);
+            {
+                let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
+                    label: Some(label),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(stage);
+                pass.set_bind_group(0, group, &[view_offset.offset]);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+            stage_span.end(encoder);
         }
         encoder.pop_debug_group();
         span.end(ctx.command_encoder());

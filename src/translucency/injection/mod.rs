@@ -16,7 +16,7 @@ use bevy::{
     ecs::system::ResMut,
     math::Vec3,
     render::{
-        diagnostic::RecordDiagnostics,
+        diagnostic::{DiagnosticsRecorder, RecordDiagnostics},
         render_resource::{
             BindGroup, BindGroupEntries, BindGroupLayout, Buffer, BufferDescriptor,
             BufferInitDescriptor, BufferUsages, CommandEncoder, ComputePassDescriptor,
@@ -395,26 +395,32 @@ impl GpuInjection {
     /// Records the injection: the maps cleared and splatted, then every patch's `E⁰` and `S⁰`
     /// written into the transport's vectors (record the iteration after it).
     pub fn record(&self, encoder: &mut CommandEncoder) {
+        self.record_timed(encoder, &None::<&DiagnosticsRecorder>);
+    }
+
+    /// [`record`](Self::record) with a GPU time span for each part, nested in the caller's:
+    /// `splat` (the maps cleared and splatted) and `inject` (each patch's `E⁰` and `S⁰`, and
+    /// the beam table's beams), each its own compute pass.
+    pub fn record_timed(&self, encoder: &mut CommandEncoder, spans: &impl RecordDiagnostics) {
         let injection = &self.injection;
         if injection.patches == 0 {
             return;
         }
         encoder.push_debug_group("translucency_injection");
         let lights = injection.light_count;
-        if lights > 0 {
+        if lights > 0 && injection.samples > 0 {
+            let span = spans.time_span(encoder, "splat");
             encoder.clear_buffer(
                 &self.depth_maps,
                 0,
                 Some(Self::map_bytes(injection.resolution, lights)),
             );
-        }
-        {
-            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
-                label: Some("translucency_injection"),
-                timestamp_writes: None,
-            });
-            pass.set_bind_group(0, &self.bind_group, &[]);
-            if lights > 0 && injection.samples > 0 {
+            {
+                let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
+                    label: Some("translucency_injection_splat"),
+                    timestamp_writes: None,
+                });
+                pass.set_bind_group(0, &self.bind_group, &[]);
                 pass.set_pipeline(&self.splat);
                 pass.dispatch_workgroups(
                     injection.samples.div_ceil(WORKGROUP).min(65_535),
@@ -422,9 +428,26 @@ impl GpuInjection {
                     1,
                 );
             }
+            span.end(encoder);
+        } else if lights > 0 {
+            // No samples to splat: the maps are cleared all the same (nothing shadows).
+            encoder.clear_buffer(
+                &self.depth_maps,
+                0,
+                Some(Self::map_bytes(injection.resolution, lights)),
+            );
+        }
+        let span = spans.time_span(encoder, "inject");
+        {
+            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
+                label: Some("translucency_injection_inject"),
+                timestamp_writes: None,
+            });
+            pass.set_bind_group(0, &self.bind_group, &[]);
             pass.set_pipeline(&self.inject);
             pass.dispatch_workgroups(injection.patches.div_ceil(WORKGROUP), 1, 1);
         }
+        span.end(encoder);
         encoder.pop_debug_group();
     }
 }
@@ -447,7 +470,7 @@ pub fn translucency_injection_pass(
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let span = diagnostics.time_span(ctx.command_encoder(), "translucency/injection");
-    injection.record(ctx.command_encoder());
+    injection.record_timed(ctx.command_encoder(), &diagnostics);
     span.end(ctx.command_encoder());
     gpu.injection_pending = false;
 }

@@ -76,6 +76,10 @@ struct Layout {
     table_lobes: u32,
     // `threshold` times `WARM_THRESHOLD_SHARE` (transport/solve.rs): where a warm start stops.
     warm_threshold: f32,
+    // The beam table's rows that hold entries (words in `matrices`) and how many: `table_rows`
+    // runs over those alone; the others' exitance, flow and lobes stay zero.
+    table_rows: u32,
+    table_row_count: u32,
 }
 
 struct State {
@@ -115,10 +119,10 @@ const WORKGROUP: u32 = 64u;
 // every ROW_LANES-th entry, so a row's columns and values are read in whole cache lines
 // rather than one thread walking hundreds of entries alone (a form-factor row holds ~300).
 // Powers of two up to WORKGROUP, set per pipeline (`RowLanes` in mod.rs): ROW_LANES for F
-// and the cluster means, SCATTERING_LANES for K (~45 entries a translucent row, one or none
-// an opaque one).
+// and the cluster means, SCATTERING_LANES for K (hundreds of entries a translucent row, one or
+// none an opaque one; the product waits for the longest).
 override ROW_LANES: u32 = 32u;
-override SCATTERING_LANES: u32 = 8u;
+override SCATTERING_LANES: u32 = 32u;
 // Workgroups per dispatch dimension (WebGPU's least limit): more rows spill into y.
 const MAX_GROUPS_X: u32 = 65535u;
 
@@ -222,49 +226,33 @@ fn table_late(@builtin(global_invocation_id) id: vec3<u32>) {
 // The exitance the beam table gives each patch: its early columns over the beams' light and
 // its late columns over the slots' late light (`BeamTable::apply`), and with `flow` the way
 // that light flows in and its exit lobes. Once a light change, before the iteration; a
-// workgroup a row (a translucent patch's rows hold ~900 entries: a thread a row walked them
-// alone, ~1.6 ms for the example's room on an H100), a row without entries by one thread.
-var<workgroup> table_row_entries: u32;
-
+// workgroup a row with entries (a translucent patch's rows hold ~900: a thread a row walked
+// them alone, ~1.6 ms for the example's room on an H100); the rows without entries are left
+// as the buffer started, zero (what they would give: no light, no flow, no lobes).
 @compute @workgroup_size(64)
 fn table_rows(
     @builtin(workgroup_id) group: vec3<u32>,
     @builtin(num_workgroups) count: vec3<u32>,
     @builtin(local_invocation_index) local: u32,
 ) {
-    let i = group_index(group, count);
-    if local == 0u {
-        var entries = 0u;
-        if i < packing.patches {
-            entries = matrices[packing.early_offsets + i + 1u] - matrices[packing.early_offsets + i]
-                + matrices[packing.late_offsets + i + 1u] - matrices[packing.late_offsets + i];
-        }
-        table_row_entries = entries;
-    }
-    if i >= packing.patches {
+    let k = group_index(group, count);
+    if k >= packing.table_row_count {
         return;
     }
-    let zero = vec3(0.0);
-    if workgroupUniformLoad(&table_row_entries) == 0u {
-        if local == 0u {
-            vectors[packing.table_exitance + i] = vec4(0.0);
-            if packing.flow == 1u {
-                let sums = FlowSums(zero, zero, zero, zero, zero, zero, zero, zero);
-                table_flow_out(i, sums, channel_flows(i, sums), vec3(1.0));
-            }
-        }
-        return;
+    let i = matrices[packing.table_rows + k];
+    var exitance: vec4<f32>;
+    if packing.flow == 1u {
+        // One walk of the row gives both.
+        exitance = table_flow_of(i, local);
+    } else {
+        let part = rgb_row_part(packing.early_offsets, packing.early_columns, packing.early_values,
+                                packing.beam_light, i, local, WORKGROUP)
+            + rgb_row_part(packing.late_offsets, packing.late_columns, packing.late_values,
+                           packing.beam_late, i, local, WORKGROUP);
+        exitance = row_total(local, part);
     }
-    let part = rgb_row_part(packing.early_offsets, packing.early_columns, packing.early_values,
-                            packing.beam_light, i, local, WORKGROUP)
-        + rgb_row_part(packing.late_offsets, packing.late_columns, packing.late_values,
-                       packing.beam_late, i, local, WORKGROUP);
-    let exitance = row_total(local, part);
     if local == 0u {
         vectors[packing.table_exitance + i] = exitance;
-    }
-    if packing.flow == 1u {
-        table_flow_of(i, local);
     }
 }
 
@@ -334,24 +322,30 @@ fn flow_out(sum: vec3<f32>, total: f32, law: vec4<f32>) -> vec4<f32> {
 }
 
 // Patch `i`'s flow from the table's early and late rows (`BeamTable::flow`), by the
-// workgroup's threads (`local` of WORKGROUP; all must call it).
-fn table_flow_of(i: u32, local: u32) {
+// workgroup's threads (`local` of WORKGROUP; all must call it); returns the row's exitance
+// (`BeamTable::apply`), in every thread.
+fn table_flow_of(i: u32, local: u32) -> vec4<f32> {
     let x = frame_vec4(i, 0u).xyz;
     let afar = frame_vec4(i, 2u).w;
     let zero = vec3(0.0);
     var sums = FlowSums(zero, zero, zero, zero, zero, zero, zero, zero);
+    // Everything the row gives, the patch's own beams too: its exitance.
+    var given_all = vec4(0.0);
     let early_end = matrices[packing.early_offsets + i + 1u];
     for (var k = matrices[packing.early_offsets + i] + local; k < early_end; k += WORKGROUP) {
         let column = matrices[packing.early_columns + k];
-        let given = rgb(packing.early_values + 3u * k).rgb * vectors[packing.beam_light + column].rgb;
-        add_flow(&sums, x, afar, i, matrices[packing.slot_patches + column / packing.bins], given, true);
+        let given = rgb(packing.early_values + 3u * k) * vectors[packing.beam_light + column];
+        given_all += given;
+        add_flow(&sums, x, afar, i, matrices[packing.slot_patches + column / packing.bins], given.rgb, true);
     }
     let late_end = matrices[packing.late_offsets + i + 1u];
     for (var k = matrices[packing.late_offsets + i] + local; k < late_end; k += WORKGROUP) {
         let slot = matrices[packing.late_columns + k];
-        let given = rgb(packing.late_values + 3u * k).rgb * vectors[packing.beam_late + slot].rgb;
-        add_flow(&sums, x, afar, i, matrices[packing.slot_patches + slot], given, false);
+        let given = rgb(packing.late_values + 3u * k) * vectors[packing.beam_late + slot];
+        given_all += given;
+        add_flow(&sums, x, afar, i, matrices[packing.slot_patches + slot], given.rgb, false);
     }
+    let exitance = row_total(local, given_all);
     // The row's sums, in every thread.
     let r = row_total(local, vec4(sums.r, sums.total.x));
     let g = row_total(local, vec4(sums.g, sums.total.y));
@@ -386,6 +380,7 @@ fn table_flow_of(i: u32, local: u32) {
     if local == 0u {
         table_flow_out(i, sums, flows, select(vec3(1.0), 1.0 / norm, norm > vec3(0.0)));
     }
+    return exitance;
 }
 
 // Each channel's `flow_out` from patch `i`'s row sums (its law per channel in its frame).

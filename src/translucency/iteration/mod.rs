@@ -13,11 +13,11 @@ use bevy::{
     ecs::system::{Res, ResMut},
     math::{Vec3, Vec4},
     render::{
-        diagnostic::RecordDiagnostics,
+        diagnostic::{DiagnosticsRecorder, RecordDiagnostics},
         render_resource::{
             BindGroup, BindGroupEntries, BindGroupLayout, BindGroupLayoutEntries, Buffer,
             BufferDescriptor, PipelineLayout, ShaderModule,
-            BufferInitDescriptor, BufferUsages, CommandEncoder, ComputePassDescriptor,
+            BufferInitDescriptor, BufferUsages, CommandEncoder, ComputePass, ComputePassDescriptor,
             ComputePipeline, PipelineCompilationOptions, PipelineLayoutDescriptor,
             RawComputePipelineDescriptor, ShaderModuleDescriptor, ShaderSource, ShaderStages,
             binding_types::{
@@ -97,6 +97,12 @@ struct Layout {
     table_lobes: u32,
     // Where a warm start stops: `threshold` × `WARM_THRESHOLD_SHARE`.
     warm_threshold: f32,
+    // The rows of the beam table that hold entries (words in `matrices`), and how many: the
+    // others' exitance, flow and lobes stay zero, as the vectors buffer starts.
+    table_rows: u32,
+    table_row_count: u32,
+    // To a whole number of 16-byte rows, as the uniform's WGSL struct.
+    pad: [u32; 3],
 }
 
 /// What the iteration needs of a patch to give the deep field's exit law its axis each frame
@@ -276,12 +282,15 @@ fn specialized_compute_pipeline(
 
 /// How many threads share one matrix row in the iteration's products (`ROW_LANES` and
 /// `SCATTERING_LANES` in `iterate.wgsl`): a form-factor row holds ~300 entries, read in whole
-/// cache lines by 32 lanes on a GPU, a row of `K` ~45 by 8 (docs/translucent.md has the H100's
-/// times); a CPU driver (llvmpipe) runs a workgroup's threads in turn and pays for every
-/// barrier the lanes' sum needs, so there each thread takes a row alone, as before.
+/// cache lines by 32 lanes on a GPU. A row of `K` holds ~45 in the mean, but an opaque
+/// patch's one or none and a translucent patch's hundreds, and a product waits for its
+/// longest rows: 32 lanes as well (on an H100, the example's 20 k room: the `K` product
+/// 0.063 ms with 8, 0.034 with 32, 0.036 with 64; `F`'s 0.036 with 32, 0.041 with 16, 0.038
+/// with 64; docs/translucent.md). A CPU driver (llvmpipe) runs a workgroup's threads in turn
+/// and pays for every barrier the lanes' sum needs, so there each thread takes a row alone.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RowLanes {
-    /// 32 lanes a row of `F` (one NVIDIA warp), 8 a row of `K`.
+    /// 32 lanes a row of `F` and of `K` (one NVIDIA warp).
     Gpu,
     /// One lane a row.
     Cpu,
@@ -300,7 +309,7 @@ impl RowLanes {
     /// Threads per row of `F` (and of the cluster means), and of `K`.
     pub fn lanes(self) -> (u32, u32) {
         match self {
-            RowLanes::Gpu => (32, 8),
+            RowLanes::Gpu => (32, 32),
             RowLanes::Cpu => (1, 1),
         }
     }
@@ -392,6 +401,18 @@ impl GpuTransport {
             &mut words,
             table.into_iter().flat_map(|t| t.late_share.iter().flat_map(|v| v.to_array().map(f32::to_bits))),
         );
+        // The table's rows with entries: `table_rows` runs a workgroup for each of those alone.
+        let rows_with_entries: Vec<u32> = (0..n as usize)
+            .filter(|&i| {
+                let entries = |m: &super::transport::SparseMatrix<Vec3>| {
+                    m.row_offsets.get(i + 1).zip(m.row_offsets.get(i)).map_or(0, |(b, a)| b - a)
+                };
+                entries(early) + entries(late) > 0
+            })
+            .map(|i| i as u32)
+            .collect();
+        layout.table_row_count = rows_with_entries.len() as u32;
+        layout.table_rows = push(&mut words, rows_with_entries);
         let flow = table.is_some() && frames.len() == n as usize && n > 0;
         if let Some(t) = table.filter(|_| flow) {
             layout.flow = 1;
@@ -567,32 +588,51 @@ impl GpuTransport {
     /// ([`ProductsReadback`]), since every recorded product costs its dispatches on the GPU
     /// even after the stop.
     pub fn record_at_most(&self, encoder: &mut CommandEncoder, warm: bool, products: u32) {
+        self.record_timed(encoder, warm, products, &None::<&DiagnosticsRecorder>);
+    }
+
+    /// [`record_at_most`](Self::record_at_most) with a GPU time span for each of its parts,
+    /// nested in the caller's: `table` (the beam table's exitance and flow, once a light
+    /// change), `application` (the seed and the first product: a warm start's application of
+    /// the last solution), `products` (the rest of the recorded loop and the geometric tail).
+    /// Each is its own compute pass, so that the spans' timestamps fall between passes.
+    pub fn record_timed(
+        &self,
+        encoder: &mut CommandEncoder,
+        warm: bool,
+        products: u32,
+        spans: &impl RecordDiagnostics,
+    ) {
         let n = self.layout.patches;
         if n == 0 {
             return;
         }
         encoder.push_debug_group("translucency_iteration");
-        {
-            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
-                label: Some("translucency_iteration"),
-                timestamp_writes: None,
-            });
-            pass.set_bind_group(0, &self.bind_group, &[]);
-            pass.set_bind_group(1, &self.state_bind_group, &[]);
-            // `seed` is a thread per patch; it writes the products' dispatch sizes (rows
-            // per workgroup are the shader's business).
-            let patch_args = 0;
-            let cluster_args = 12;
-            let scattering_args = 36;
-            if self.layout.slots > 0 {
+        // `seed` is a thread per patch; it writes the products' dispatch sizes (rows per
+        // workgroup are the shader's business).
+        let patch_args = 0;
+        let cluster_args = 12;
+        let scattering_args = 36;
+        if self.layout.slots > 0 {
+            let span = spans.time_span(encoder, "table");
+            {
+                let mut pass = self.begin_pass(encoder, "translucency_iteration_table");
                 // The beam table's exitance from the beams' light (`BeamTable::apply`).
                 pass.set_pipeline(&self.table_late);
                 pass.dispatch_workgroups(self.layout.slots.div_ceil(WORKGROUP), 1, 1);
-                // A workgroup a row, spilling into y past the per-dimension limit.
-                pass.set_pipeline(&self.table_rows);
-                let x = n.min(65_535);
-                pass.dispatch_workgroups(x, n.div_ceil(x), 1);
+                // A workgroup a row with entries, spilling into y past the per-dimension limit.
+                let rows = self.layout.table_row_count;
+                if rows > 0 {
+                    pass.set_pipeline(&self.table_rows);
+                    let x = rows.min(65_535);
+                    pass.dispatch_workgroups(x, rows.div_ceil(x), 1);
+                }
             }
+            span.end(encoder);
+        }
+        let span = spans.time_span(encoder, "application");
+        {
+            let mut pass = self.begin_pass(encoder, "translucency_iteration_application");
             if warm {
                 // E = E⁰ + F B', ΔE = E⁰ − E_t + F B', B = K ΔE + S⁰ + T x, ΔB = B − B'.
                 pass.set_pipeline(&self.seed_warm);
@@ -612,6 +652,11 @@ impl GpuTransport {
             pass.dispatch_workgroups_indirect(&self.state, scattering_args);
             pass.set_pipeline(&self.decide);
             pass.dispatch_workgroups(1, 1, 1);
+        }
+        span.end(encoder);
+        let span = spans.time_span(encoder, "products");
+        {
+            let mut pass = self.begin_pass(encoder, "translucency_iteration_products");
             let scatter = if warm { &self.scatter_warm } else { &self.scatter };
             // A warm start's application was its first product.
             let loops = self.recorded_products(warm, products) - u32::from(warm);
@@ -630,7 +675,19 @@ impl GpuTransport {
             pass.set_pipeline(&self.extrapolate);
             pass.dispatch_workgroups(n.div_ceil(WORKGROUP), 1, 1);
         }
+        span.end(encoder);
         encoder.pop_debug_group();
+    }
+
+    /// A compute pass of the iteration with its bind groups set.
+    fn begin_pass<'e>(&self, encoder: &'e mut CommandEncoder, label: &'static str) -> ComputePass<'e> {
+        let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_bind_group(1, &self.state_bind_group, &[]);
+        pass
     }
 
     /// The products a solve records when asked for at most `products`: a warm one
@@ -837,7 +894,7 @@ pub fn translucency_iteration_pass(
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let span = diagnostics.time_span(ctx.command_encoder(), "translucency/iteration");
-    transport.record_at_most(ctx.command_encoder(), warm, recorded);
+    transport.record_timed(ctx.command_encoder(), warm, recorded, &diagnostics);
     span.end(ctx.command_encoder());
     if let Some(products) = &mut gpu.products {
         products.copy(ctx.command_encoder(), transport, recorded);
