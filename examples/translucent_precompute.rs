@@ -281,6 +281,38 @@ fn warm_starts(
         cold.1,
         cold.2,
     );
+    // The products the GPU records each frame as the plugin asks for them (`next_products`:
+    // one more than the last solve took, read back; the whole cap after a solve that took
+    // all it was given), against growing by one after such a solve.
+    for (name, grow) in [("read back, the cap after a full solve", false), ("read back, one more after a full solve", true)] {
+        let mut last: Option<TransportSolution> = None;
+        let (mut recorded_sum, mut taken_sum, mut worst) = (0u32, 0u32, 0.0f32);
+        let mut asked = cap;
+        for frame in 0..=frames {
+            let irradiance = direct_irradiance(patches, &spot(frame as f32 * 0.013), rays);
+            let direct = DirectLight { irradiance, ..default() };
+            let exact = transport.solve_with(&direct, 1e-7, 1000);
+            let recorded = if last.is_some() { asked.clamp(1, warm_iterations(cap)) } else { cap };
+            let solved = transport.solve_from(&direct, threshold, recorded, last.as_ref());
+            if frame > 0 {
+                recorded_sum += recorded;
+                taken_sum += solved.iterations;
+                worst = worst.max(off(&solved.exitance, &exact.exitance));
+            }
+            asked = if grow && solved.iterations >= recorded {
+                (recorded + 1).min(warm_iterations(cap))
+            } else {
+                bevy_mesostructure::translucency::iteration::next_products(warm_iterations(cap), recorded, solved.iterations)
+            };
+            last = Some(solved);
+        }
+        eprintln!(
+            "budget {budget}: {name}: {:.2} products recorded a frame, {:.2} taken, at worst {:.2e} from the converged B",
+            recorded_sum as f32 / frames as f32,
+            taken_sum as f32 / frames as f32,
+            worst
+        );
+    }
     // And a jump: the spot a quarter turn on from the last frame.
     let irradiance = direct_irradiance(patches, &spot(frames as f32 * 0.013 + std::f32::consts::FRAC_PI_2), rays);
     let direct = DirectLight { irradiance, ..default() };
