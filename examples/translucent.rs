@@ -80,6 +80,10 @@ struct Cli {
     /// `TranslucencyCamera` and so no prepass): the frame the plugin's cost is measured against
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     translucency: bool,
+    /// With `--translucency false`: give the camera the depth and normal prepass that
+    /// `TranslucencyCamera` asks for all the same (what the prepass alone costs)
+    #[arg(long)]
+    prepass: bool,
 }
 
 /// `--gather-resolution`: [`GatherResolution`]'s two.
@@ -167,11 +171,11 @@ fn main() {
             fixed: (!windowed && !cli.swing).then_some(0.0),
         })
         .add_systems(Update, move_spot);
-    setup(app.world_mut(), cli.translucency);
+    setup(app.world_mut(), cli.translucency, cli.prepass);
     common::run(app);
 }
 
-fn setup(world: &mut World, translucency: bool) {
+fn setup(world: &mut World, translucency: bool, prepass: bool) {
     let target = world.resource::<common::Output>().target();
     let mut camera = world.spawn((
         Camera3d::default(),
@@ -184,6 +188,11 @@ fn setup(world: &mut World, translucency: bool) {
     ));
     if translucency {
         camera.insert(TranslucencyCamera);
+    } else if prepass {
+        camera.insert((
+            bevy::core_pipeline::prepass::DepthPrepass,
+            bevy::core_pipeline::prepass::NormalPrepass,
+        ));
     }
     let mut mesh = |m: Mesh| world.resource_mut::<Assets<Mesh>>().add(m);
     let bunny = mesh(meshes::obj_mesh(

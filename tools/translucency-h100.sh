@@ -2,7 +2,8 @@
 # Issue 13's GPU figures in one go, on a lent GPU machine after tools/gpu-run.sh has unpacked
 # the examples into /tmp/bin: the passes' GPU time per frame and per part at 1920×1080 with
 # the 20 k budget (the light moving every frame, and still), the same room with the plugin off
-# (what the plugin adds to a frame: "GPU time of all timed spans" in each log), the diffusion
+# (what the plugin adds to a frame: "GPU time of all timed spans" in each log; with and
+# without the depth and normal prepass it asks for), the diffusion
 # profile alone (no beam table), the gather at full resolution and a cap of 2 products.
 # As Bevy's release builds run it: wgpu's indirect-call validation off. The first run builds
 # the transport and keeps it in $CACHE; the others load it. PRECOMPUTE=1 also times
@@ -41,6 +42,7 @@ run table_moving_1 --swing
 run table_moving_2 --swing
 run table_still
 run off_moving --swing --translucency false
+run off_prepass_moving --swing --translucency false --prepass
 run table_moving_cap2 --swing --max-iterations 2
 run profile_moving --swing --beam-table false
 run table_moving_full --swing --gather-resolution full

@@ -217,13 +217,17 @@ fn translucency_status(status: &bevy_mesostructure::translucency::TranslucencySt
             "precomputing ({:.1} s)",
             precompute_elapsed(status).unwrap_or_default().as_secs_f32()
         ),
-        TranslucencyStatus::Ready { patches, report, from_cache } => format!(
-            "{patches} patches, {} + {} entries, {} {:.2} s",
-            report.form_factor_entries,
-            report.scattering_entries,
-            if *from_cache { "loaded from the cache (precomputed in" } else { "precomputed in" },
-            report.seconds
-        ) + if *from_cache { ")" } else { "" },
+        TranslucencyStatus::Ready { patches, report, from_cache } => {
+            let entries = format!(
+                "{patches} patches, {} + {} entries",
+                report.form_factor_entries, report.scattering_entries
+            );
+            if *from_cache {
+                format!("{entries}, loaded from the cache (precomputed in {:.2} s)", report.seconds)
+            } else {
+                format!("{entries}, precomputed in {:.2} s", report.seconds)
+            }
+        }
     }
 }
 
@@ -308,39 +312,33 @@ pub fn print_timings(world: &World) {
     if !times.is_empty() {
         println!("average time per pass: {}", times.join(", "));
     }
-    // The translucency passes' parts (their nested spans), where they ran.
-    let mut parts: Vec<String> = store
+    // Every span the GPU timed (Bevy's passes, the plugins' and their parts), averaged over
+    // the frames that ran it.
+    let spans: Vec<(String, f64)> = store
         .iter()
         .filter_map(|d| {
-            let path = d.path().as_str();
-            let span = path.strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
-            let part = span.strip_prefix("translucency/")?;
-            let ms = d.average()?;
-            part.contains('/').then(|| format!("{span} {ms:.3} ms"))
+            let span = d.path().as_str().strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
+            Some((span.to_string(), d.average()?))
         })
+        .collect();
+    let nested = |span: &str| {
+        spans
+            .iter()
+            .any(|(other, _)| span.strip_prefix(other.as_str()).is_some_and(|rest| rest.starts_with('/')))
+    };
+    // The translucency passes' parts (their nested spans).
+    let mut parts: Vec<String> = spans
+        .iter()
+        .filter(|(span, _)| span.starts_with("translucency/") && nested(span))
+        .map(|(span, ms)| format!("{span} {ms:.3} ms"))
         .collect();
     parts.sort();
     if !parts.is_empty() {
         println!("average time per part: {}", parts.join(", "));
     }
-    // Every span the GPU timed, Bevy's passes with the plugins' (nested spans counted in their
-    // parent's): what a frame costs the GPU where each ran, to compare with a plugin off.
-    let spans: Vec<(String, f64)> = store
-        .iter()
-        .filter_map(|d| {
-            let path = d.path().as_str();
-            let span = path.strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
-            Some((span.to_string(), d.average()?))
-        })
-        .collect();
-    let top: Vec<&(String, f64)> = spans
-        .iter()
-        .filter(|(span, _)| {
-            !spans
-                .iter()
-                .any(|(other, _)| span.len() > other.len() && span.starts_with(other.as_str()) && span[other.len()..].starts_with('/'))
-        })
-        .collect();
+    // The outermost spans, and their sum: what a frame costs the GPU where each ran, to
+    // compare with a plugin off.
+    let top: Vec<&(String, f64)> = spans.iter().filter(|(span, _)| !nested(span)).collect();
     if !top.is_empty() {
         let total: f64 = top.iter().map(|(_, ms)| ms).sum();
         let each: Vec<String> = top.iter().map(|(span, ms)| format!("{span} {ms:.3}")).collect();

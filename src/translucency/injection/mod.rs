@@ -408,14 +408,15 @@ impl GpuInjection {
         }
         encoder.push_debug_group("translucency_injection");
         let lights = injection.light_count;
-        if lights > 0 && injection.samples > 0 {
+        if lights > 0 {
             let span = spans.time_span(encoder, "splat");
             encoder.clear_buffer(
                 &self.depth_maps,
                 0,
                 Some(Self::map_bytes(injection.resolution, lights)),
             );
-            {
+            // No samples: the maps stay clear (nothing shadows).
+            if injection.samples > 0 {
                 let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
                     label: Some("translucency_injection_splat"),
                     timestamp_writes: None,
@@ -429,13 +430,6 @@ impl GpuInjection {
                 );
             }
             span.end(encoder);
-        } else if lights > 0 {
-            // No samples to splat: the maps are cleared all the same (nothing shadows).
-            encoder.clear_buffer(
-                &self.depth_maps,
-                0,
-                Some(Self::map_bytes(injection.resolution, lights)),
-            );
         }
         let span = spans.time_span(encoder, "inject");
         {
