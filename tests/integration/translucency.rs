@@ -1309,13 +1309,19 @@ fn a_kept_transport_is_read_back_instead_of_built_again() {
             .scene
             .clone()
             .unwrap();
+        let from_cache = match app.world().resource::<bevy_mesostructure::translucency::TranslucencyStatus>() {
+            bevy_mesostructure::translucency::TranslucencyStatus::Ready { from_cache, .. } => *from_cache,
+            other => panic!("not ready: {other:?}"),
+        };
         (
             scene.transport.report.clone(),
             scene.patches.patches.len(),
             scene.transport.incidence.clone(),
+            from_cache,
         )
     };
-    let (first, patches, incidence) = build(&dir);
+    let (first, patches, incidence, first_from_cache) = build(&dir);
+    assert!(!first_from_cache, "the first app builds the transport");
     assert!(
         matches!(incidence[..], [Some(_)]),
         "the ball's beams weighted by their incidence: {incidence:?}"
@@ -1324,7 +1330,8 @@ fn a_kept_transport_is_read_back_instead_of_built_again() {
     assert_eq!(files.len(), 1, "one kept transport");
     // A second app with the same scene reads it: the same report, its build time included
     // (a rebuild would measure its own).
-    let (second, patches_again, incidence_again) = build(&dir);
+    let (second, patches_again, incidence_again, second_from_cache) = build(&dir);
+    assert!(second_from_cache, "the second app says it loaded the kept transport");
     assert_eq!(second, first);
     assert_eq!(patches_again, patches);
     // The incidence weights are not kept in the file: set again from the scene on load.
