@@ -110,6 +110,9 @@ struct SpotPlace {
 fn main() {
     use clap::Parser;
     let cli = Cli::parse();
+    if cli.prepass && cli.translucency {
+        common::fail("--prepass is for --translucency false (the plugin's camera has its prepass already)");
+    }
     let args = common::ExampleArgs::from_cli("translucent", cli.common);
     let shots = vec![
         common::Shot {
