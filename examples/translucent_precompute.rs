@@ -252,6 +252,18 @@ fn warm_starts(
         let difference: Vec<Vec3> = b.iter().zip(exact).map(|(x, y)| *x - *y).collect();
         transport.absolute_flux(&difference) / transport.flux(exact).max(1e-30)
     };
+    /// A warm solve whose products are sized as the plugin sizes them on the GPU: read back
+    /// from the last solve (`next_products`: one more than it took, the whole cap after a
+    /// solve that took all it was given), or (`grow`) one more after such a solve instead.
+    struct ReadBack {
+        grow: bool,
+        last: Option<TransportSolution>,
+        asked: u32,
+        recorded: u32,
+        taken: u32,
+        worst: f32,
+    }
+    let mut read_back = [false, true].map(|grow| ReadBack { grow, last: None, asked: cap, recorded: 0, taken: 0, worst: 0.0 });
     let mut last = None;
     let (mut warm, mut cold) = ((0u32, 0u32, 0.0f32), (0u32, 0u32, 0.0f32));
     for frame in 0..=frames {
@@ -270,6 +282,21 @@ fn warm_starts(
             cold = tally(cold, &from_cold);
         }
         last = Some(from_last);
+        for r in &mut read_back {
+            let recorded = if r.last.is_some() { r.asked.clamp(1, warm_iterations(cap)) } else { cap };
+            let solved = transport.solve_from(&direct, threshold, recorded, r.last.as_ref());
+            if frame > 0 {
+                r.recorded += recorded;
+                r.taken += solved.iterations;
+                r.worst = r.worst.max(off(&solved.exitance, &exact.exitance));
+            }
+            r.asked = if r.grow && solved.iterations >= recorded {
+                (recorded + 1).min(warm_iterations(cap))
+            } else {
+                bevy_mesostructure::translucency::iteration::next_products(warm_iterations(cap), recorded, solved.iterations)
+            };
+            r.last = Some(solved);
+        }
     }
     eprintln!(
         "budget {budget}: {frames} frames of a spot turning 0.75° a frame: warm {:.1} products a frame \
@@ -281,36 +308,13 @@ fn warm_starts(
         cold.1,
         cold.2,
     );
-    // The products the GPU records each frame as the plugin asks for them (`next_products`:
-    // one more than the last solve took, read back; the whole cap after a solve that took
-    // all it was given), against growing by one after such a solve.
-    for (name, grow) in [("read back, the cap after a full solve", false), ("read back, one more after a full solve", true)] {
-        let mut last: Option<TransportSolution> = None;
-        let (mut recorded_sum, mut taken_sum, mut worst) = (0u32, 0u32, 0.0f32);
-        let mut asked = cap;
-        for frame in 0..=frames {
-            let irradiance = direct_irradiance(patches, &spot(frame as f32 * 0.013), rays);
-            let direct = DirectLight { irradiance, ..default() };
-            let exact = transport.solve_with(&direct, 1e-7, 1000);
-            let recorded = if last.is_some() { asked.clamp(1, warm_iterations(cap)) } else { cap };
-            let solved = transport.solve_from(&direct, threshold, recorded, last.as_ref());
-            if frame > 0 {
-                recorded_sum += recorded;
-                taken_sum += solved.iterations;
-                worst = worst.max(off(&solved.exitance, &exact.exitance));
-            }
-            asked = if grow && solved.iterations >= recorded {
-                (recorded + 1).min(warm_iterations(cap))
-            } else {
-                bevy_mesostructure::translucency::iteration::next_products(warm_iterations(cap), recorded, solved.iterations)
-            };
-            last = Some(solved);
-        }
+    for r in &read_back {
+        let name = if r.grow { "one more after a full solve" } else { "the cap after a full solve" };
         eprintln!(
-            "budget {budget}: {name}: {:.2} products recorded a frame, {:.2} taken, at worst {:.2e} from the converged B",
-            recorded_sum as f32 / frames as f32,
-            taken_sum as f32 / frames as f32,
-            worst
+            "budget {budget}: read back, {name}: {:.2} products recorded a frame, {:.2} taken, at worst {:.2e} from the converged B",
+            r.recorded as f32 / frames as f32,
+            r.taken as f32 / frames as f32,
+            r.worst
         );
     }
     // And a jump: the spot a quarter turn on from the last frame.
