@@ -386,26 +386,25 @@ impl GpuTransport {
         let (early, late) = table.map_or((&empty, &empty), |t| (&t.early, &t.late));
         layout.slots = table.map_or(0, |t| t.media.len() as u32);
         layout.bins = table.map_or(0, |t| t.bins());
-        layout.early_offsets = push(&mut words, offsets(early));
+        let (early_offsets, late_offsets) = (offsets(early), offsets(late));
+        // The table's rows with entries: `table_rows` runs a workgroup for each of those alone.
+        let rows_with_entries: Vec<u32> = (0..n as usize)
+            .filter(|&i| {
+                let entries = |o: &[u32]| o.get(i + 1).zip(o.get(i)).map_or(0, |(b, a)| b.saturating_sub(*a));
+                entries(&early_offsets) + entries(&late_offsets) > 0
+            })
+            .map(|i| i as u32)
+            .collect();
+        layout.early_offsets = push(&mut words, early_offsets);
         layout.early_columns = push(&mut words, early.columns.iter().copied());
         layout.early_values = push(&mut words, rgb(early));
-        layout.late_offsets = push(&mut words, offsets(late));
+        layout.late_offsets = push(&mut words, late_offsets);
         layout.late_columns = push(&mut words, late.columns.iter().copied());
         layout.late_values = push(&mut words, rgb(late));
         layout.late_shares = push(
             &mut words,
             table.into_iter().flat_map(|t| t.late_share.iter().flat_map(|v| v.to_array().map(f32::to_bits))),
         );
-        // The table's rows with entries: `table_rows` runs a workgroup for each of those alone.
-        let rows_with_entries: Vec<u32> = (0..n as usize)
-            .filter(|&i| {
-                let entries = |m: &super::transport::SparseMatrix<Vec3>| {
-                    m.row_offsets.get(i + 1).zip(m.row_offsets.get(i)).map_or(0, |(b, a)| b - a)
-                };
-                entries(early) + entries(late) > 0
-            })
-            .map(|i| i as u32)
-            .collect();
         layout.table_row_count = rows_with_entries.len() as u32;
         layout.table_rows = push(&mut words, rows_with_entries);
         let flow = table.is_some() && frames.len() == n as usize && n > 0;
