@@ -162,6 +162,13 @@ struct Cli {
     /// in it). Method suffix `_litfacelaw`
     #[arg(long)]
     lit_face_single_scattering_law: bool,
+    /// With `--scattering beam-table`, index-matched under the directional light: all single
+    /// scattering out of the table (`BeamTableSettings::single_scattering_to_pixels`) and
+    /// each pixel's own marched along its ray through the object against the light's path in
+    /// it, instead of the half-space law at the lit face (an oracle of a per-pixel term; the
+    /// plugin's gather has none yet). Method suffix `_ssmarched`
+    #[arg(long)]
+    marched_single_scattering: bool,
     /// Take the dipole's flux along each exit patch's normal
     /// (`Translucent::oriented_dipole`; method suffix `_oriented` when on)
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
@@ -375,6 +382,9 @@ fn main() {
     if cli.beam_table.is_some() && !matches!(cli.scattering, Scattering::BeamWalks | Scattering::BeamTable) {
         fail("--beam-table snaps the beam walks' directions: it needs --scattering beam-walks or beam-table".into());
     }
+    if cli.marched_single_scattering && (cli.scattering != Scattering::BeamTable || cli.uniform || cli.eta != 1.0) {
+        fail("--marched-single-scattering takes --scattering beam-table under the directional light, index-matched (drop --eta and --uniform)".into());
+    }
     if cli.scattering == Scattering::BeamTable && (cli.uniform || cli.single_scattering_oracle) {
         fail("--scattering beam-table carries the directional light's beams and gives single scattering its own law already (drop --uniform, --single-scattering-oracle)".into());
     }
@@ -508,6 +518,7 @@ fn main() {
                 late_walks: cli.late_walks.unwrap_or(BeamTableSettings::default().late_walks),
                 last_order: cli.beam_orders.map_or(16, |(_, last)| last),
                 exit_directions: cli.exit_axis == Axis::Lobe,
+                single_scattering_to_pixels: cli.marched_single_scattering,
                 seed: cli.table_seed,
                 ..default()
             };
@@ -518,11 +529,12 @@ fn main() {
                     // the table (`law_gives_single_scattering`; rows before it lack it);
                     // `_lateheld`: the late light held to the light still inside (rows
                     // before it lack it).
-                    "_beamtable{cosines}x{azimuths}_bilinear_pastterminator_lateheld_walks{}_late{}_orders{}{}",
+                    "_beamtable{cosines}x{azimuths}_bilinear_pastterminator_lateheld_walks{}_late{}_orders{}{}{}",
                     table.walks,
                     table.late_walks,
                     table.last_order,
-                    if table.seed == 0 { String::new() } else { format!("_seed{}", table.seed) }
+                    if table.seed == 0 { String::new() } else { format!("_seed{}", table.seed) },
+                    if table.single_scattering_to_pixels { "_ssmarched" } else { "" }
                 ),
             )
         }

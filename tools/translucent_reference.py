@@ -64,6 +64,8 @@ def main():
                         help="index of refraction of the ball (1: index-matched, no boundary)")
     parser.add_argument("--uniform", action="store_true",
                         help="a uniform environment of radiance 1 instead of the light")
+    parser.add_argument("--max-depth", type=int, default=-1,
+                        help="longest path (2: single scattering alone; -1: unbounded)")
     parser.add_argument("--seed", type=int, default=0,
                         help="the sampler's seed (two renders of different seeds give the noise)")
     args = parser.parse_args()
@@ -88,7 +90,7 @@ def main():
     albedo = [s / (a + s) for a, s in zip(args.sigma_a, args.sigma_s)]
     scene = mi.load_dict({
         "type": "scene",
-        "integrator": {"type": args.integrator, "max_depth": -1, "rr_depth": 64},
+        "integrator": {"type": args.integrator, "max_depth": args.max_depth, "rr_depth": 64},
         "sensor": {
             "type": "perspective",
             "fov": args.fov,

@@ -256,7 +256,10 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
             None => w.u32s(&[])?,
             Some(t) => {
                 let s = &t.settings;
-                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order, u32::from(s.exit_directions), s.seed])?;
+                // The two flags share one word (bit 0 the exit directions, bit 1 single
+                // scattering left to the pixels): files written before bit 1 read as before.
+                let flags = u32::from(s.exit_directions) | u32::from(s.single_scattering_to_pixels) << 1;
+                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order, flags, s.seed])?;
                 w.u32s(&t.slots)?;
                 w.f32s(t.media.iter().flat_map(|m| m.to_array()).collect::<Vec<_>>().into_iter())?;
                 w.f32s(t.late_share.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
@@ -401,7 +404,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
 /// The beam table [`save`] wrote after the transport, checked against `n` patches.
 fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<BeamTable>> {
     let settings = r.u32s()?;
-    let [cosines, azimuths, walks, late_walks, last_order, exit_directions, seed] = settings[..] else {
+    let [cosines, azimuths, walks, late_walks, last_order, flags, seed] = settings[..] else {
         return if settings.is_empty() { Ok(None) } else { Err(invalid("beam table settings")) };
     };
     let settings = BeamTableSettings {
@@ -410,7 +413,8 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
         walks,
         late_walks,
         last_order,
-        exit_directions: exit_directions != 0,
+        exit_directions: flags & 1 != 0,
+        single_scattering_to_pixels: flags & 2 != 0,
         seed,
         // Not kept: it decides whether a table is built, not what it holds.
         max_patches: BeamTableSettings::default().max_patches,

@@ -391,6 +391,17 @@ pub(crate) fn run_precompute(
         });
         table.exit_directions = false;
     }
+    if let Some(table) = settings.transport.beam_table.as_mut().filter(|t| t.single_scattering_to_pixels) {
+        // The marched single scattering is an oracle of the CPU path: the GPU gather has no
+        // such term, so the light left out of the table would be missing on screen.
+        warned.warn("translucency-single-scattering-to-pixels", || {
+            "translucency: BeamTableSettings::single_scattering_to_pixels is for the CPU oracle \
+             (translucent_accuracy --marched-single-scattering); the plugin's gather has no \
+             marched single scattering, so it is turned off"
+                .to_string()
+        });
+        table.single_scattering_to_pixels = false;
+    }
     let mut list: Vec<Participant> = participants.iter().collect();
     list.sort_by_key(|p| p.0);
     // The signature: entities, meshes, transforms, media and albedos.

@@ -232,6 +232,7 @@ impl BeamTable {
                     .collect(),
                 last_order: settings.last_order,
                 directions: settings.exit_directions,
+                single_to_pixels: settings.single_scattering_to_pixels,
                 source_depth: source_depths.get(j).copied().unwrap_or(Vec3::ZERO),
                 seed_offset: settings.seed as u64 * SEED_STRIDE,
             };
@@ -351,6 +352,8 @@ struct ColumnWalks<'a> {
     last_order: u32,
     /// Whether to take the exits' moments.
     directions: bool,
+    /// [`BeamTableSettings::single_scattering_to_pixels`].
+    single_to_pixels: bool,
     /// Where light entering patch `j` acts as a source, per channel
     /// ([`EnergyTransport::source_depths`](crate::translucency::transport::EnergyTransport::source_depths)).
     source_depth: Vec3,
@@ -364,7 +367,8 @@ impl ColumnWalks<'_> {
     /// (per channel, `Σ exitance · ω`), and the share still inside after the last order.
     /// With `law_takes_lit_face_single`, what leaves after one scattering by the lit face
     /// where the law can give it ([`law_gives_single_scattering`]) is left to
-    /// [`single_scattering_radiance`].
+    /// [`single_scattering_radiance`] — and all that leaves after one scattering with
+    /// [`BeamTableSettings::single_scattering_to_pixels`].
     fn walk(
         &self,
         launch: WalkLaunch,
@@ -387,7 +391,9 @@ impl ColumnWalks<'_> {
         let beam = matches!(launch, WalkLaunch::Beam(_));
         let to_law = |order: u32, outward: Vec3| match launch {
             WalkLaunch::Beam(d) => {
-                law_takes_lit_face_single && order == 1 && law_gives_single_scattering(pj.normal, d, outward)
+                law_takes_lit_face_single
+                    && order == 1
+                    && (self.single_to_pixels || law_gives_single_scattering(pj.normal, d, outward))
             }
             WalkLaunch::Diffuse => false,
         };

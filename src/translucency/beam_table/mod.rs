@@ -67,6 +67,15 @@ pub struct BeamTableSettings {
     /// reflected, so the example's tuning panel does not offer it).
     #[reflect(ignore)]
     pub exit_directions: bool,
+    /// Leave all the light that leaves after one scattering out of the table, not only what
+    /// leaves by the lit face: for a per-pixel single-scattering term marched through the
+    /// object against the light's own path in it (`translucent_accuracy
+    /// --marched-single-scattering`, an oracle of that term: `docs/translucent.md`, "Single
+    /// scattering marched per pixel"). Measured on the CPU path only: the GPU gather has no
+    /// marched term yet, so the plugin turns this off with a warning (the light would be
+    /// lost); not reflected.
+    #[reflect(ignore)]
+    pub single_scattering_to_pixels: bool,
     /// Offsets every walk's seed (0: the tables the docs' figures come from). Tables of
     /// different seeds differ by their walks' noise alone, which moves the accuracy figures
     /// by ~±0.005 from the front (`docs/translucent.md`): what a variant must beat.
@@ -94,6 +103,7 @@ impl Default for BeamTableSettings {
             late_walks: 3072,
             last_order: 16,
             exit_directions: false,
+            single_scattering_to_pixels: false,
             seed: 0,
             // 3.3× the `translucent` example's room at a 20 000 budget (1224 translucent
             // patches, 18 MB): by its measured rate about 12 s on 16 cores and 100 s on 2

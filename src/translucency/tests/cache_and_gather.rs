@@ -24,11 +24,13 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
     ];
     let patches = resample_into_patches(&views, 200);
     let rays = SceneRays::new(&views);
-    // With a (small) beam table, which the cache keeps too, its exit directions included.
+    // With a (small) beam table, which the cache keeps too, its exit directions and where its
+    // single scattering goes included.
     let table = crate::translucency::beam_table::BeamTableSettings {
         walks: 4,
         late_walks: 4,
         exit_directions: true,
+        single_scattering_to_pixels: true,
         ..default()
     };
     let settings = TransportSettings {
