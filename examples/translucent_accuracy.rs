@@ -12,7 +12,7 @@
 //! `numpy` and `mitsuba`, or reads one with `--reference`.
 //!
 //! ```text
-//! cargo run --example translucent_accuracy -- [--shape ball|bunny] [--medium skin1]
+//! cargo run --example translucent_accuracy -- [--shape ball|bunny|torus] [--medium skin1]
 //!     [--budgets 250,500,1000,2000]
 //!     [--kernel scaled-dipole|burley|dipole] [--gather interpolation|photons]
 //!     [--object-exit-share true|false] [--beam-incidence true|false]
@@ -20,7 +20,7 @@
 //!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks|beam-table] [--walks N]
 //!     [--beam-table COSINES,AZIMUTHS] [--single-scattering-oracle]
 //!     [--beam-orders FIRST,LAST] [--late-light profile|profile-less-early|clamped]
-//!     [--late-walks N] [--lit-face-single-scattering-law]
+//!     [--late-walks N] [--lit-face-single-scattering-law] [--marched-single-scattering]
 //!     [--exit-axis plugin|normal|normal-all|flow-all|lobe] [--exit-lobes true|false]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]

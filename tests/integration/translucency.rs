@@ -1111,8 +1111,8 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         app.add_plugins(TranslucencyPlugin);
     });
     // A budget below the least (16); a beam table asking for the CPU oracle's exit
-    // directions, for a scene of more translucent patches than it allows (one); a NaN
-    // medium, a zero scale and a good one.
+    // directions and single scattering left to the pixels, for a scene of more translucent
+    // patches than it allows (one); a NaN medium, a zero scale and a good one.
     let mut settings = TranslucencySettings {
         patch_budget: 0,
         ..default()
@@ -1121,6 +1121,7 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         walks: 4,
         late_walks: 4,
         exit_directions: true,
+        single_scattering_to_pixels: true,
         max_patches: 1,
         ..default()
     });
@@ -1194,6 +1195,7 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         "translucency-units-",
         "translucency-msaa",
         "translucency-exit-directions",
+        "translucency-single-scattering-to-pixels",
     ] {
         assert!(
             causes.iter().any(|c| c.starts_with(key)),
@@ -1205,8 +1207,8 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         16
     );
     assert_eq!(
-        app.world().resource::<TranslucencySettings>().transport.beam_table.map(|t| t.exit_directions),
-        Some(false)
+        app.world().resource::<TranslucencySettings>().transport.beam_table.map(|t| (t.exit_directions, t.single_scattering_to_pixels)),
+        Some((false, false))
     );
     // The good ball shows its copy without diffuse; the bad one keeps its own material.
     let shown = |app: &mut App, e: Entity| {
