@@ -20,7 +20,8 @@
 //!     [--deep-exit-law true|false] [--scattering profile|walks|beam-walks|beam-table] [--walks N]
 //!     [--beam-table COSINES,AZIMUTHS] [--single-scattering-oracle]
 //!     [--beam-orders FIRST,LAST] [--late-light profile|profile-less-early|clamped]
-//!     [--late-walks N] [--lit-face-single-scattering-law] [--marched-single-scattering]
+//!     [--late-walks N] [--lit-face-single-scattering-law]
+//!     [--marched-single-scattering [--translucent-shadow-map N]]
 //!     [--exit-axis plugin|normal|normal-all|flow-all|lobe] [--exit-lobes true|false]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
@@ -169,6 +170,12 @@ struct Cli {
     /// plugin's gather has none yet). Method suffix `_ssmarched`
     #[arg(long)]
     marched_single_scattering: bool,
+    /// With `--marched-single-scattering`: march against the object's translucent shadow map
+    /// of N² texels over its bounding sphere, splatted from its patches' samples
+    /// (`TranslucentShadowMap`, the CPU form of a GPU term), instead of rays. Method suffix
+    /// `_tsm<N>`
+    #[arg(long, value_name = "N")]
+    translucent_shadow_map: Option<u32>,
     /// Take the dipole's flux along each exit patch's normal
     /// (`Translucent::oriented_dipole`; method suffix `_oriented` when on)
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
@@ -382,6 +389,9 @@ fn main() {
     if cli.beam_table.is_some() && !matches!(cli.scattering, Scattering::BeamWalks | Scattering::BeamTable) {
         fail("--beam-table snaps the beam walks' directions: it needs --scattering beam-walks or beam-table".into());
     }
+    if cli.translucent_shadow_map.is_some_and(|n| !(1..=4096).contains(&n)) || (cli.translucent_shadow_map.is_some() && !cli.marched_single_scattering) {
+        fail("--translucent-shadow-map takes 1 – 4096 texels a side, with --marched-single-scattering".into());
+    }
     if cli.marched_single_scattering && (cli.scattering != Scattering::BeamTable || cli.uniform || cli.eta != 1.0) {
         fail("--marched-single-scattering takes --scattering beam-table under the directional light, index-matched (drop --eta and --uniform)".into());
     }
@@ -534,7 +544,11 @@ fn main() {
                     table.late_walks,
                     table.last_order,
                     if table.seed == 0 { String::new() } else { format!("_seed{}", table.seed) },
-                    if table.single_scattering_to_pixels { "_ssmarched" } else { "" }
+                    match (table.single_scattering_to_pixels, cli.translucent_shadow_map) {
+                        (false, _) => String::new(),
+                        (true, None) => "_ssmarched".into(),
+                        (true, Some(n)) => format!("_ssmarched_tsm{n}"),
+                    }
                 ),
             )
         }
@@ -595,6 +609,7 @@ fn main() {
         scattering: source,
         single_scattering_law: cli.single_scattering_oracle,
         exit_axis,
+        shadow_map: cli.translucent_shadow_map,
     };
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();

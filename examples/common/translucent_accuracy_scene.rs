@@ -22,6 +22,7 @@ use bevy_mesostructure::translucency::{
     patches::{Patches, world_triangles},
     random_walk::{EntryPoint, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
     resample_into_patches,
+    translucent_shadow_map::{TranslucentShadowMap, marched_single_scattering as marched_against_map},
 };
 
 /// The scenes are in metres.
@@ -336,6 +337,11 @@ pub struct Oracles {
     pub single_scattering_law: bool,
     /// The axis of the deep field's exit law (`ExitLaw::flow`).
     pub exit_axis: ExitAxis,
+    /// With single scattering marched per pixel (`BeamTableSettings::
+    /// single_scattering_to_pixels`): march against the object's `TranslucentShadowMap` of
+    /// this many texels a side, splatted from its patches' samples (the CPU form of a GPU
+    /// term), instead of rays.
+    pub shadow_map: Option<u32>,
 }
 
 impl Oracles {
@@ -344,6 +350,7 @@ impl Oracles {
         scattering: ScatteringSource::Profile,
         single_scattering_law: false,
         exit_axis: ExitAxis::Plugin,
+        shadow_map: None,
     };
 }
 
@@ -678,8 +685,25 @@ pub fn plugin_picture(
             .unwrap_or(Vec3::ZERO)
         })
         .collect();
-    let pixels: Vec<Vec3> = match marched {
-        Some(travel) => pixels
+    let shadow_map = marched.zip(oracles.shadow_map).and_then(|(travel, resolution)| {
+        let centre = patches.samples.iter().fold(Vec3::ZERO, |a, s| a + s.position) / patches.samples.len().max(1) as f32;
+        let radius = patches.samples.iter().map(|s| s.position.distance(centre)).fold(0.0, f32::max);
+        TranslucentShadowMap::splat(&patches.samples, travel, centre, radius, resolution)
+    });
+    let pixels: Vec<Vec3> = match (marched, &shadow_map) {
+        (Some(_), Some(map)) => {
+            let alpha = Vec3::from_array(medium.single_scattering_albedo().map(|a| a as f32));
+            let sigma_t = (medium.absorption + medium.reduced_scattering) / WORLD_UNITS_PER_MM;
+            pixels
+                .into_iter()
+                .zip(&view.hits)
+                .map(|(pixel, hit)| match hit {
+                    Some(hit) => pixel + marched_against_map(map, alpha, sigma_t, hit.point, hit.direction, 64),
+                    None => pixel,
+                })
+                .collect()
+        }
+        (Some(travel), None) => pixels
             .into_iter()
             .zip(&view.hits)
             .map(|(pixel, hit)| match hit {
@@ -687,7 +711,7 @@ pub fn plugin_picture(
                 None => pixel,
             })
             .collect(),
-        None => pixels,
+        (None, _) => pixels,
     };
     let pixels = match lighting {
         SceneLighting::Directional(travel)

@@ -37,6 +37,7 @@ mod rays;
 pub mod shape_diffusion;
 mod sparse;
 pub mod transport;
+pub mod translucent_shadow_map;
 
 use bevy::{
     core_pipeline::{

@@ -2,7 +2,8 @@
 //! their closed forms ([`profiles`]), the patches' areas and count ([`patches`]), the form
 //! factors' reciprocity, energy in a closed box and the iteration against a dense solve
 //! ([`energy`]), media and the random walks ([`media`]), the cache and the gather's grid
-//! ([`cache_and_gather`]), the beam table ([`beam_table`]).
+//! ([`cache_and_gather`]), the beam table ([`beam_table`]), the translucent shadow map and
+//! single scattering marched against it ([`shadow_map`]).
 
 mod beam_table;
 mod cache_and_gather;
@@ -10,6 +11,7 @@ mod energy;
 mod media;
 mod patches;
 mod profiles;
+mod shadow_map;
 
 use bevy::prelude::*;
 use std::f64::consts::PI;
