@@ -62,7 +62,7 @@ use std::{
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings, beam_table::BeamTableSettings,
-    random_walk::ScatteringOrders,
+    random_walk::ScatteringOrders, translucent_shadow_map::MAX_RESOLUTION,
 };
 use translucent_accuracy_scene::{
     ExitAxis, FOV_Y, FRONT_LIGHT, LateLight, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
@@ -389,8 +389,8 @@ fn main() {
     if cli.beam_table.is_some() && !matches!(cli.scattering, Scattering::BeamWalks | Scattering::BeamTable) {
         fail("--beam-table snaps the beam walks' directions: it needs --scattering beam-walks or beam-table".into());
     }
-    if cli.translucent_shadow_map.is_some_and(|n| !(1..=4096).contains(&n)) || (cli.translucent_shadow_map.is_some() && !cli.marched_single_scattering) {
-        fail("--translucent-shadow-map takes 1 – 4096 texels a side, with --marched-single-scattering".into());
+    if cli.translucent_shadow_map.is_some_and(|n| !(1..=MAX_RESOLUTION).contains(&n)) || (cli.translucent_shadow_map.is_some() && !cli.marched_single_scattering) {
+        fail(format!("--translucent-shadow-map takes 1 – {MAX_RESOLUTION} texels a side, with --marched-single-scattering"));
     }
     if cli.marched_single_scattering && (cli.scattering != Scattering::BeamTable || cli.uniform || cli.eta != 1.0) {
         fail("--marched-single-scattering takes --scattering beam-table under the directional light, index-matched (drop --eta and --uniform)".into());

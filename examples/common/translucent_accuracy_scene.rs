@@ -22,7 +22,9 @@ use bevy_mesostructure::translucency::{
     patches::{Patches, world_triangles},
     random_walk::{EntryPoint, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
     resample_into_patches,
-    translucent_shadow_map::{TranslucentShadowMap, marched_single_scattering as marched_against_map},
+    translucent_shadow_map::{
+        TranslucentShadowMap, marched_single_scattering as marched_against_map, optical_depth_quantile,
+    },
 };
 
 /// The scenes are in metres.
@@ -778,10 +780,10 @@ fn inside_stretches(shape: Shape, rays: &SceneRays, origin: Vec3, direction: Vec
 /// travelling along the unit `travel`, with isotropic scattering:
 /// `L = α/(4π) ∫ e^{−τ} e^{−σt ℓ(τ)} dτ` over the optical depth `τ` along the pixel's ray
 /// inside the object (every stretch of it), `ℓ` the length of the light's path inside on
-/// its way to the point; 64 depths a channel at the quantiles of `e^{−τ}`. Against Mitsuba's
+/// its way to the point; 64 depths a channel (`optical_depth_quantile`). Against Mitsuba's
 /// single scattering (`max_depth` 2) on the torus: `docs/translucent.md`.
 pub fn marched_single_scattering(shape: Shape, rays: &SceneRays, medium: TranslucentMedium, travel: Vec3, hit: &PixelHit) -> Vec3 {
-    const DEPTHS: usize = 64;
+    const DEPTHS: u32 = 64;
     let alpha = medium.single_scattering_albedo();
     let start = hit.point + hit.direction * 1e-6;
     let seen = inside_stretches(shape, rays, start, hit.direction);
@@ -790,7 +792,7 @@ pub fn marched_single_scattering(shape: Shape, rays: &SceneRays, medium: Translu
         let mut sum = 0.0f32;
         for k in 0..DEPTHS {
             // The depth's length inside, laid along the stretches the pixel's ray crosses.
-            let mut left = -(1.0 - (k as f32 + 0.5) / DEPTHS as f32).ln() / sigma_t;
+            let mut left = optical_depth_quantile(k, DEPTHS) / sigma_t;
             let Some(t) = seen.iter().find_map(|&(a, b)| {
                 if left <= b - a {
                     Some(a + left)

@@ -12,17 +12,24 @@
 //!
 //! This is the CPU form, what a GPU term will be held to: each texel where the light enters
 //! the object and where it first leaves it again, splatted from its surface samples as the
-//! injection's
-//! `splat` does (a texel takes a sample's plane where its ray meets the plane within 1.5 of the
-//! sample's disc radius, and the sample's own texel always, at its plane's depth).
+//! injection's `splat` does (a texel takes a sample's plane where its ray meets the plane
+//! within 1.5 of the sample's disc radius, and the sample's own texel always, at its plane's
+//! depth).
 
 use bevy::prelude::*;
 
 use super::patches::PatchSample;
 
-/// A sample's splat radius against its disc's (the injection's `SPLAT_COVER`: samples of
-/// ≤ h/2 sides do not tile as discs).
+/// A sample's splat radius against its disc's (the injection's `SPLAT_COVER` in
+/// `inject.wgsl`: samples of ≤ h/2 sides do not tile as discs).
 const SPLAT_COVER: f32 = 1.5;
+
+/// The widest splat in texels: a sample wider than this leaves gaps between its neighbours'
+/// splats (a map far finer than the patches; at 512² over the bunny a sample is ~8 texels).
+const MAX_SPLAT_TEXELS: f32 = 64.0;
+
+/// The finest map [`TranslucentShadowMap::splat`] makes (4096², 128 MiB).
+pub const MAX_RESOLUTION: u32 = 4096;
 
 /// Where a directional light enters one translucent object and where it first leaves it
 /// again, along its travel: an orthographic map over a sphere about the object.
@@ -46,7 +53,7 @@ pub struct TranslucentShadowMap {
 impl TranslucentShadowMap {
     /// The map of `samples` (one object's) at `resolution`² over the sphere `centre`,
     /// `radius`, for a light travelling along `travel`; `None` for a zero or non-finite
-    /// direction, radius or resolution.
+    /// direction or radius, or a resolution outside 1 – [`MAX_RESOLUTION`].
     pub fn splat<'a>(
         samples: impl IntoIterator<Item = &'a PatchSample>,
         travel: Vec3,
@@ -55,7 +62,8 @@ impl TranslucentShadowMap {
         resolution: u32,
     ) -> Option<Self> {
         let travel = travel.try_normalize()?;
-        if !(radius > 0.0 && radius.is_finite() && centre.is_finite()) || resolution == 0 {
+        let valid = radius > 0.0 && radius.is_finite() && centre.is_finite();
+        if !(valid && (1..=MAX_RESOLUTION).contains(&resolution)) {
             return None;
         }
         let (u, v) = travel.any_orthonormal_pair();
@@ -90,7 +98,7 @@ impl TranslucentShadowMap {
         let res = self.resolution as usize;
         let cover = SPLAT_COVER * (s.area.max(0.0) / std::f32::consts::PI).sqrt();
         let (x, y, depth) = self.texel_of(s.position);
-        let reach = (cover / texel_world).min(64.0);
+        let reach = (cover / texel_world).min(MAX_SPLAT_TEXELS);
         let own = (x.floor() as i64, y.floor() as i64);
         let (lo_x, hi_x) = ((x - reach).floor() as i64, (x + reach).floor() as i64);
         let (lo_y, hi_y) = ((y - reach).floor() as i64, (y + reach).floor() as i64);
@@ -162,12 +170,18 @@ impl TranslucentShadowMap {
     }
 }
 
+/// The `k`-th of `depths` optical depths at the midpoint quantiles of `e^{−τ}`: the mean of
+/// `f(τ_k)` over `k` is `∫ e^{−τ} f(τ) dτ` (within 2e-4 for `f = e^{−aτ}`, `a ≤ 3.3`, at 64).
+pub fn optical_depth_quantile(k: u32, depths: u32) -> f32 {
+    -(1.0 - (k as f32 + 0.5) / depths as f32).ln()
+}
+
 /// Single scattering leaving a translucent object at `x` along the pixel's ray (`into`, the
 /// unit direction it travels into the object, index-matched), lit by unit irradiance across
 /// the light `map` is of: `α/(4π) ∫ e^{−τ} e^{−σt ℓ(τ)} dτ` over the optical depth `τ` along
 /// the ray where it is inside the object as `map` sees it, `ℓ` the light's path inside
-/// ([`TranslucentShadowMap::path_inside`]). `depths` depths a channel at the quantiles of
-/// `e^{−τ}`; `alpha` the single-scattering albedo and `sigma_t` the extinction per world unit.
+/// ([`TranslucentShadowMap::path_inside`]). `depths` depths a channel
+/// ([`optical_depth_quantile`]); `alpha` the single-scattering albedo and `sigma_t` the extinction per world unit.
 pub fn marched_single_scattering(
     map: &TranslucentShadowMap,
     alpha: Vec3,
@@ -186,7 +200,7 @@ pub fn marched_single_scattering(
         }
         let (mut sum, mut entered) = (0.0, false);
         for k in 0..depths {
-            let t = -(1.0 - (k as f32 + 0.5) / depths as f32).ln() / sigma_t[c];
+            let t = optical_depth_quantile(k, depths) / sigma_t[c];
             // Once the ray has left the object, nothing further along it scatters: what lies
             // beyond may be air between two parts in one of the light's columns.
             match map.path_inside(x + into * t) {
