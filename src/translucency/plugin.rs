@@ -379,28 +379,33 @@ pub(crate) fn run_precompute(
         });
         settings.patch_budget = capped;
     }
-    if let Some(table) = settings.transport.beam_table.as_mut().filter(|t| t.exit_directions) {
-        // The exit lobes are an oracle of the CPU path: the GPU gather does not take them, so
-        // keeping the directions would cost each early entry 15 floats instead of 3 for nothing on
-        // screen.
-        warned.warn("translucency-exit-directions", || {
-            "translucency: BeamTableSettings::exit_directions is for the CPU oracle \
-             (translucent_accuracy --exit-axis lobe); the plugin's gather does not use it, so \
-             it is turned off"
-                .to_string()
-        });
-        table.exit_directions = false;
-    }
-    if let Some(table) = settings.transport.beam_table.as_mut().filter(|t| t.single_scattering_to_pixels) {
-        // The marched single scattering is an oracle of the CPU path: the GPU gather has no
-        // such term, so the light left out of the table would be missing on screen.
-        warned.warn("translucency-single-scattering-to-pixels", || {
-            "translucency: BeamTableSettings::single_scattering_to_pixels is for the CPU oracle \
-             (translucent_accuracy --marched-single-scattering); the plugin's gather has no \
-             marched single scattering, so it is turned off"
-                .to_string()
-        });
-        table.single_scattering_to_pixels = false;
+    if let Some(table) = settings.transport.beam_table.as_mut() {
+        // Settings of the CPU oracle the GPU passes have no use for, turned off with a warning
+        // each: the exit directions (the GPU gather does not take the lobes fitted to them, and
+        // each early entry would cost 15 floats instead of 3 for nothing on screen) and single
+        // scattering left to the pixels (the GPU gather has no marched term: the light left out
+        // of the table would be missing on screen).
+        let oracle_only = [
+            (&mut table.exit_directions, "translucency-exit-directions", "exit_directions", "--exit-axis lobe", "does not use it"),
+            (
+                &mut table.single_scattering_to_pixels,
+                "translucency-single-scattering-to-pixels",
+                "single_scattering_to_pixels",
+                "--marched-single-scattering",
+                "has no marched single scattering",
+            ),
+        ];
+        for (on, key, name, oracle, gather) in oracle_only {
+            if std::mem::take(on) {
+                warned.warn(key, || {
+                    format!(
+                        "translucency: BeamTableSettings::{name} is for the CPU oracle \
+                         (translucent_accuracy {oracle}); the plugin's gather {gather}, so it is \
+                         turned off"
+                    )
+                });
+            }
+        }
     }
     let mut list: Vec<Participant> = participants.iter().collect();
     list.sort_by_key(|p| p.0);
