@@ -424,9 +424,10 @@ struct TileBox {
     far: f32,
 }
 
-// The box of the pixels whose `member` is true (`s` their surfaces). Every thread of the
-// workgroup calls it (it holds barriers); all get the same box.
-fn tile_box_of(thread: u32, s: Surface, member: bool) -> TileBox {
+// The box of the pixels whose `member` is true (`s` their surfaces, `d` their distances from
+// the camera). Every thread of the workgroup calls it (it holds barriers); all get the same
+// box.
+fn tile_box_of(thread: u32, s: Surface, d: f32, member: bool) -> TileBox {
     if thread == 0u {
         for (var k = 0u; k < 4u; k += 1u) {
             atomicStore(&tile_box[k], 0xffffffffu);
@@ -435,7 +436,6 @@ fn tile_box_of(thread: u32, s: Surface, member: bool) -> TileBox {
     }
     workgroupBarrier();
     if member {
-        let d = distance(s.x, view.world_position);
         atomicMin(&tile_box[0], ordered_bits(s.x.x));
         atomicMin(&tile_box[1], ordered_bits(s.x.y));
         atomicMin(&tile_box[2], ordered_bits(s.x.z));
@@ -498,7 +498,9 @@ fn listed_or_walked(s: Surface, listed: bool) -> Gathered {
 // grids. Every thread of the workgroup calls it (it holds barriers).
 fn tile_walked(thread: u32, s: Surface) -> Gathered {
     var acc = no_light();
-    let whole = tile_box_of(thread, s, s.valid);
+    // Each pixel's distance from the camera, once for the tile's boxes and its side.
+    let d = distance(s.x, view.world_position);
+    let whole = tile_box_of(thread, s, d, s.valid);
     if tile_list(thread, whole) {
         if s.valid {
             acc = listed_or_walked(s, true);
@@ -508,10 +510,10 @@ fn tile_walked(thread: u32, s: Surface) -> Gathered {
     // Too large for one list: the pixels nearer than the middle of the tile's distances, then
     // the farther ones, a list each.
     let middle = 0.5 * (whole.near + whole.far);
-    let far_side = s.valid && distance(s.x, view.world_position) > middle;
+    let far_side = s.valid && d > middle;
     for (var side = 0u; side < 2u; side += 1u) {
         let member = s.valid && far_side == (side == 1u);
-        let listed = tile_list(thread, tile_box_of(thread, s, member));
+        let listed = tile_list(thread, tile_box_of(thread, s, d, member));
         if member {
             acc = listed_or_walked(s, listed);
         }
