@@ -32,7 +32,8 @@ struct InjectedLight {
     cos_outer: f32,
     // Spot: 1 / (cos inner − cos outer), as Bevy.
     cone_scale: f32,
-    pad0: f32,
+    // Spot: the outer angle, acos(cos_outer) (once on the CPU rather than per sample).
+    outer: f32,
     pad1: f32,
     pad2: f32,
 }
@@ -188,7 +189,7 @@ fn may_shadow(light: InjectedLight, p: vec3<f32>, cover: f32) -> bool {
         return true;
     }
     let margin = asin(cover / dist) + 8.0 / f32(injection.resolution);
-    let outer = acos(clamp(light.cos_outer, -1.0, 1.0));
+    let outer = light.outer;
     if outer + margin >= PI {
         return true;
     }

@@ -60,7 +60,9 @@ struct InjectedLight {
     intensity: [f32; 3],
     cos_outer: f32,
     cone_scale: f32,
-    pad: [f32; 3],
+    /// Spot: the outer angle `acos(cos_outer)`, once here rather than per splatted sample.
+    outer: f32,
+    pad: [f32; 2],
 }
 
 /// `Injection` in `inject.wgsl`.
@@ -132,6 +134,7 @@ impl InjectedLight {
                     range,
                     cos_outer,
                     cone_scale: 1.0 / (inner_angle.cos() - cos_outer).max(1e-4),
+                    outer: cos_outer.clamp(-1.0, 1.0).acos(),
                     ..default_light()
                 }
             }
