@@ -392,8 +392,11 @@ fn main() {
     if cli.translucent_shadow_map.is_some_and(|n| !(1..=MAX_RESOLUTION).contains(&n)) || (cli.translucent_shadow_map.is_some() && !cli.marched_single_scattering) {
         fail(format!("--translucent-shadow-map takes 1 – {MAX_RESOLUTION} texels a side, with --marched-single-scattering"));
     }
-    if cli.marched_single_scattering && (cli.scattering != Scattering::BeamTable || cli.uniform || cli.eta != 1.0) {
-        fail("--marched-single-scattering takes --scattering beam-table under the directional light, index-matched (drop --eta and --uniform)".into());
+    // The rays' march is index-matched; the map's is the plugin's, through the boundary.
+    if cli.marched_single_scattering
+        && (cli.scattering != Scattering::BeamTable || cli.uniform || (cli.eta != 1.0 && cli.translucent_shadow_map.is_none()))
+    {
+        fail("--marched-single-scattering takes --scattering beam-table under the directional light, index-matched unless with --translucent-shadow-map (drop --eta or add it, and drop --uniform)".into());
     }
     if cli.scattering == Scattering::BeamTable && (cli.uniform || cli.single_scattering_oracle) {
         fail("--scattering beam-table carries the directional light's beams and gives single scattering its own law already (drop --uniform, --single-scattering-oracle)".into());

@@ -23,7 +23,7 @@ use bevy_mesostructure::translucency::{
     random_walk::{EntryPoint, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
     resample_into_patches,
     translucent_shadow_map::{
-        TranslucentShadowMap, marched_single_scattering as marched_against_map, optical_depth_quantile,
+        MarchedMedium, MarchedObject, optical_depth_quantile,
     },
 };
 
@@ -545,6 +545,11 @@ pub fn plugin_picture(
         exit_laws = transport.exit_laws_along_lobes(&patches, &exit_laws, &direct, &solution.exitance);
     }
     let eye = view.shape.eye();
+    // With a map: the plugin's own march (`MarchedObject`, in the gather's twin), unshadowed
+    // (one object).
+    let marched_objects: Option<Vec<Option<MarchedObject>>> = marched.zip(oracles.shadow_map).map(|(_, resolution)| {
+        vec![Some(MarchedObject::new(&patches.samples, MarchedMedium::new(&medium, WORLD_UNITS_PER_MM), &lights, resolution, |_, _| 1.0))]
+    });
     let pixels: Vec<Vec3> = view
         .hits
         .iter()
@@ -558,6 +563,7 @@ pub fn plugin_picture(
                     &direct.irradiance,
                     &solution.exitance,
                     single.as_ref(),
+                    marched_objects.as_deref(),
                     eye,
                     hit.point,
                     hit.normal,
@@ -566,24 +572,8 @@ pub fn plugin_picture(
             .unwrap_or(Vec3::ZERO)
         })
         .collect();
-    let shadow_map = marched.zip(oracles.shadow_map).and_then(|(travel, resolution)| {
-        let centre = patches.samples.iter().fold(Vec3::ZERO, |a, s| a + s.position) / patches.samples.len().max(1) as f32;
-        let radius = patches.samples.iter().map(|s| s.position.distance(centre)).fold(0.0, f32::max);
-        TranslucentShadowMap::splat(&patches.samples, travel, centre, radius, resolution)
-    });
-    let pixels: Vec<Vec3> = match (marched, &shadow_map) {
-        (Some(_), Some(map)) => {
-            let alpha = Vec3::from_array(medium.single_scattering_albedo().map(|a| a as f32));
-            let sigma_t = (medium.absorption + medium.reduced_scattering) / WORLD_UNITS_PER_MM;
-            pixels
-                .into_iter()
-                .zip(&view.hits)
-                .map(|(pixel, hit)| match hit {
-                    Some(hit) => pixel + marched_against_map(map, alpha, sigma_t, hit.point, hit.direction, 64),
-                    None => pixel,
-                })
-                .collect()
-        }
+    let pixels: Vec<Vec3> = match (marched, &marched_objects) {
+        (Some(_), Some(_)) | (None, _) => pixels,
         (Some(travel), None) => pixels
             .into_iter()
             .zip(&view.hits)
@@ -592,7 +582,6 @@ pub fn plugin_picture(
                 None => pixel,
             })
             .collect(),
-        (None, _) => pixels,
     };
     let pixels = match lighting {
         SceneLighting::Directional(travel)

@@ -83,3 +83,20 @@ fn deep_exit_norm_sample(law: vec4<f32>, eta: f32, along: f32, across: f32, s: u
     return deep_exit_shape_about(law, eta, vec3(0.0, 0.0, 1.0), vec3(across, 0.0, along),
                                  vec3(sine * cos(phi), sine * sin(phi), mu));
 }
+
+// f32 → u32 keeping the order (negatives flipped whole, positives' sign bit set): the
+// gather's tile boxes and the translucent maps' depths take atomicMin / atomicMax on them.
+fn ordered_bits(f: f32) -> u32 {
+    let b = bitcast<u32>(f);
+    return select(b | 0x80000000u, ~b, (b & 0x80000000u) != 0u);
+}
+
+fn from_ordered_bits(u: u32) -> f32 {
+    return bitcast<f32>(select(~u, u & 0x7fffffffu, (u & 0x80000000u) != 0u));
+}
+
+// A translucent map's stored depth (`translucent_maps` in inject.wgsl): `~ordered_bits(d)`
+// under atomicMax, so that the least depth wins and a cleared (zero) texel is +∞, nothing.
+fn translucent_map_depth(stored: u32) -> f32 {
+    return select(from_ordered_bits(~stored), bitcast<f32>(0x7f800000u), stored == 0u);
+}

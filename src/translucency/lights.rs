@@ -73,6 +73,46 @@ pub enum PatchLight {
     },
 }
 
+impl PatchLight {
+    /// The way the light travels onto a small object about `centre` (a point or spot light:
+    /// from its position to the centre; `None` where it sits there, or for a zero
+    /// direction).
+    pub fn travel_towards(&self, centre: Vec3) -> Option<Vec3> {
+        match *self {
+            PatchLight::Directional { direction, .. } => direction.try_normalize(),
+            PatchLight::Point { position, .. } | PatchLight::Spot { position, .. } => {
+                (centre - position).try_normalize()
+            }
+        }
+    }
+
+    /// The light's irradiance at `x` across its travel, unshadowed: Bevy's fall-off, cone and
+    /// range window for a point or spot light (`translucent_light` in `inject.wgsl`).
+    pub fn irradiance_across(&self, x: Vec3) -> Vec3 {
+        let (position, intensity, cone, range) = match *self {
+            PatchLight::Directional { illuminance, .. } => return illuminance,
+            PatchLight::Point { position, intensity, range } => (position, intensity, None, range),
+            PatchLight::Spot { position, direction, intensity, inner_angle, outer_angle, range } => {
+                (position, intensity, Some((direction, inner_angle, outer_angle)), range)
+            }
+        };
+        let dist2 = position.distance_squared(x);
+        if !(dist2 > 1e-20) {
+            return Vec3::ZERO;
+        }
+        let spot = ReferenceSpot {
+            position: position.as_dvec3(),
+            direction: cone.map_or(DVec3::Z, |c| c.0.as_dvec3().normalize_or_zero()),
+            intensity: 1.0,
+            inner_angle: cone.map_or(0.0, |c| c.1 as f64),
+            outer_angle: cone.map_or(0.0, |c| c.2 as f64),
+            range: range as f64,
+        };
+        let falloff = if cone.is_some() { spot.falloff(x.as_dvec3()) } else { 1.0 };
+        intensity * ((falloff * spot.range_window(dist2.sqrt() as f64)) as f32 / dist2)
+    }
+}
+
 /// Each patch's direct irradiance `E⁰` from `lights`, shadowed by one ray from its centre:
 /// `LightInjection::ShadowRays`, and the CPU oracle of the GPU's light-view injection
 /// (`injection/`).

@@ -54,7 +54,8 @@ use bevy::{
 
 pub use gather::TranslucencyCamera;
 pub use plugin::{
-    GatherMethod, GatherResolution, InjectedLights, LightInjection, MAX_PATCH_BUDGET, RadiosityReceiver, TranslucencyFrame, TranslucencyScene,
+    GatherMethod, GatherResolution, InjectedLights, LightInjection, MAX_MARCHED_OBJECTS, MAX_PATCH_BUDGET, RadiosityReceiver,
+    TranslucencyFrame, TranslucencyScene,
     TranslucencySettings, TranslucencyStatus, Translucent, TranslucentMaterials,
     precompute_elapsed, translucent_patch_cap,
 };

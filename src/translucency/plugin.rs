@@ -16,6 +16,7 @@ use bevy::{
 use super::{
     medium::TranslucentMedium,
     patches::{Patches, resample_into_patches_with_caps, world_triangles},
+    translucent_shadow_map::MarchedMedium,
     transport::{
         DirectLight, EnergyTransport, PatchLight, PatchSurface, SceneRays, TransportReport,
         TransportSettings, direct_light,
@@ -260,7 +261,17 @@ pub struct TranslucencyScene {
     pub source_depths: Vec<Vec3>,
     /// The entity of each object (`Patch::object` indexes it).
     pub entities: Vec<Entity>,
+    /// Per object, the medium whose single scattering is marched per pixel (where the beam
+    /// table leaves it to the pixels, [`BeamTableSettings::single_scattering_to_pixels`]); empty
+    /// where none is.
+    ///
+    /// [`BeamTableSettings::single_scattering_to_pixels`]: super::beam_table::BeamTableSettings::single_scattering_to_pixels
+    pub marched: Vec<Option<MarchedMedium>>,
 }
+
+/// The most translucent objects whose single scattering is marched per pixel (a map a light
+/// each, 1.5 MiB; 96 MiB at 8 lights).
+pub const MAX_MARCHED_OBJECTS: usize = 8;
 
 /// What the render world takes each frame.
 #[derive(Resource, Clone, Default, ExtractResource)]
@@ -379,32 +390,29 @@ pub(crate) fn run_precompute(
         });
         settings.patch_budget = capped;
     }
+    let shadow_rays = !matches!(settings.light_injection, LightInjection::LightViewMaps { .. });
     if let Some(table) = settings.transport.beam_table.as_mut() {
-        // Settings of the CPU oracle the GPU passes have no use for, turned off with a warning
-        // each: the exit directions (the GPU gather does not take the lobes fitted to them, and
-        // each early entry would cost 15 floats instead of 3 for nothing on screen) and single
-        // scattering left to the pixels (the GPU gather has no marched term: the light left out
-        // of the table would be missing on screen).
-        let oracle_only = [
-            (&mut table.exit_directions, "translucency-exit-directions", "exit_directions", "--exit-axis lobe", "does not use it"),
-            (
-                &mut table.single_scattering_to_pixels,
-                "translucency-single-scattering-to-pixels",
-                "single_scattering_to_pixels",
-                "--marched-single-scattering",
-                "has no marched single scattering",
-            ),
-        ];
-        for (on, key, name, oracle, gather) in oracle_only {
-            if std::mem::take(on) {
-                warned.warn(key, || {
-                    format!(
-                        "translucency: BeamTableSettings::{name} is for the CPU oracle \
-                         (translucent_accuracy {oracle}); the plugin's gather {gather}, so it is \
-                         turned off"
-                    )
-                });
-            }
+        // The exit directions are the CPU oracle's (translucent_accuracy --exit-axis lobe): the
+        // GPU gather does not take the lobes fitted to them, and each early entry would cost
+        // 15 floats instead of 3 for nothing on screen.
+        if std::mem::take(&mut table.exit_directions) {
+            warned.warn("translucency-exit-directions", || {
+                "translucency: BeamTableSettings::exit_directions is for the CPU oracle \
+                 (translucent_accuracy --exit-axis lobe); the plugin's gather does not use it, so \
+                 it is turned off"
+                    .to_string()
+            });
+        }
+        // Single scattering marched per pixel needs the GPU's light-view maps: with shadow
+        // rays the light left out of the table would be missing on screen.
+        if shadow_rays && std::mem::take(&mut table.single_scattering_to_pixels)
+        {
+            warned.warn("translucency-single-scattering-to-pixels", || {
+                "translucency: BeamTableSettings::single_scattering_to_pixels marches on the GPU \
+                 light injection's maps; with LightInjection::ShadowRays it is turned off (the \
+                 beam table keeps single scattering)"
+                    .to_string()
+            });
         }
     }
     let mut list: Vec<Participant> = participants.iter().collect();
@@ -424,8 +432,9 @@ pub(crate) fn run_precompute(
             settings.transport.exit_lobes as u32 as f32,
         ]),
         // The beam table's settings (none: all zero).
-        hash_f32s(settings.transport.beam_table.map_or([0.0; 7], |t| {
-            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order, t.seed, t.max_patches].map(|v| v as f32)
+        hash_f32s(settings.transport.beam_table.map_or([0.0; 8], |t| {
+            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order, t.seed, t.max_patches, t.single_scattering_to_pixels as u32]
+                .map(|v| v as f32)
         })),
     ];
     for (entity, mesh, material, transform, translucent, _) in &list {
@@ -541,7 +550,23 @@ pub(crate) fn run_precompute(
             entities.push(*entity);
         }
         let budget = settings.patch_budget as usize;
-        let transport_settings = settings.transport;
+        let mut transport_settings = settings.transport;
+        // Each translucent object marching its single scattering takes a map a light
+        // (1.5 MiB each); beyond `MAX_MARCHED_OBJECTS` the table keeps single scattering.
+        let translucent_objects = objects.iter().filter(|o| matches!(o.2, PatchSurface::Translucent { .. })).count();
+        if let Some(table) = transport_settings.beam_table.as_mut()
+            && table.single_scattering_to_pixels
+            && translucent_objects > MAX_MARCHED_OBJECTS
+        {
+            table.single_scattering_to_pixels = false;
+            warned.warn("translucency-marched-objects", || {
+                format!(
+                    "translucency: {translucent_objects} translucent objects are more than the \
+                     {MAX_MARCHED_OBJECTS} that march their single scattering per pixel; the beam \
+                     table keeps it for all"
+                )
+            });
+        }
         let cache_dir = settings.cache_dir.clone();
         state.task = Some(AsyncComputeTaskPool::get().spawn(async move {
             let views: Vec<_> = objects
@@ -595,7 +620,11 @@ pub(crate) fn run_precompute(
             let albedo = super::transport::patch_albedos(&patches, &surfaces);
             let exit_laws = transport.exit_laws(&patches, &surfaces, &transport_settings);
             let source_depths = EnergyTransport::source_depths(&patches, &surfaces);
-            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, source_depths, entities }, notes, from_cache)
+            let marched = match transport.beam_table.as_ref() {
+                Some(table) if table.settings.single_scattering_to_pixels => surfaces.iter().map(MarchedMedium::of).collect(),
+                _ => Vec::new(),
+            };
+            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, source_depths, entities, marched }, notes, from_cache)
         }));
         *status = TranslucencyStatus::Precomputing {
             since: Instant::now(),

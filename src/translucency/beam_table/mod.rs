@@ -68,13 +68,12 @@ pub struct BeamTableSettings {
     #[reflect(ignore)]
     pub exit_directions: bool,
     /// Leave all the light that leaves after one scattering out of the table, not only what
-    /// leaves by the lit face: for a per-pixel single-scattering term marched through the
-    /// object against the light's own path in it (`translucent_accuracy
-    /// --marched-single-scattering`, an oracle of that term: `docs/translucent.md`, "Single
-    /// scattering marched per pixel"). Measured on the CPU path only: the GPU gather has no
-    /// marched term yet, so the plugin turns this off with a warning (the light would be
-    /// lost); not reflected.
-    #[reflect(ignore)]
+    /// leaves by the lit face, for the gather to march per pixel through the object against
+    /// the light's own path in it (a map per translucent object and light in the GPU light
+    /// injection: `docs/translucent.md`, "Single scattering marched per pixel on the GPU").
+    /// Off by default this round. It needs `LightInjection::LightViewMaps` (with shadow rays
+    /// the plugin turns it off with a warning) and at most
+    /// [`MAX_MARCHED_OBJECTS`](super::MAX_MARCHED_OBJECTS) translucent objects.
     pub single_scattering_to_pixels: bool,
     /// Offsets every walk's seed (0: the tables the docs' figures come from). Tables of
     /// different seeds differ by their walks' noise alone, which moves the accuracy figures

@@ -17,7 +17,8 @@
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_render::view::View
 #import bevy_mesostructure::translucency::boundary::{
-    deep_exit_shape, deep_exit_shape_about, fresnel_reflectance,
+    deep_exit_shape, deep_exit_shape_about, fresnel_reflectance, from_ordered_bits, ordered_bits,
+    translucent_map_depth,
 }
 
 struct GatherParams {
@@ -68,6 +69,10 @@ struct GatherPatch {
 @group(0) @binding(4) var<storage, read> patches: array<GatherPatch>;
 @group(0) @binding(5) var<storage, read> vectors: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read> grid: array<u32>;
+// The translucent objects' maps towards each light and their light (`translucent_maps`,
+// `translucent_depths` in inject.wgsl, where they are laid out).
+@group(0) @binding(13) var<storage, read> translucent_maps: array<vec4<f32>>;
+@group(0) @binding(14) var<storage, read> translucent_depths: array<u32>;
 
 // The grid cell's bucket: `PatchGrid::bucket` in gather/mod.rs.
 fn bucket(cell: vec3<i32>, mask: u32) -> u32 {
@@ -197,10 +202,14 @@ struct Gathered {
     // The smallest reach among the patches that reached the pixel (the half-resolution
     // gather's upsample takes a sample only within it).
     reach: f32,
+    // The pixel's translucent object (-1: none), its patch that weighs most there, and its
+    // weight.
+    object: i32,
+    object_weight: f32,
 }
 
 fn no_light() -> Gathered {
-    return Gathered(vec3(0.0), 0.0, vec4(-1.0), vec4(-1.0), vec4(-1.0), -1.0, vec3(1.0), 3.0e38);
+    return Gathered(vec3(0.0), 0.0, vec4(-1.0), vec4(-1.0), vec4(-1.0), -1.0, vec3(1.0), 3.0e38, -1, 0.0);
 }
 
 // Patch `i`'s light at the pixel `s`, if it reaches it.
@@ -263,26 +272,140 @@ fn add_patch(i: u32, s: Surface, acc: ptr<function, Gathered>) {
             (*acc).sum += w * single_scattering_radiance(record.single.rgb, record.single.w, e, mu0, s.mu);
         }
     }
+    if all(record.albedo.rgb == vec3(0.0)) && w > (*acc).object_weight {
+        (*acc).object = i32(record.albedo.w);
+        (*acc).object_weight = w;
+    }
     (*acc).weights += w;
     (*acc).reach = min((*acc).reach, record.centre.w);
 }
 
-// The light gathered, times the exposure; `w` = 0 where no patch reaches the pixel.
-fn finish(acc: Gathered) -> vec4<f32> {
+// Single scattering marched per pixel (`MarchedObject::radiance`, translucent_shadow_map.rs):
+// at `MARCHED_DEPTHS` optical depths a channel (the midpoint quantiles of e^{−τ}) along the
+// view ray refracted into the pixel's object, each against each light's map of the object —
+// the light's path inside to it (scaled for its refraction) and its column's light — out
+// through the boundary, T(μ)/η².
+const MARCHED_DEPTHS: u32 = 8u;
+
+struct TranslucentMaps {
+    objects: u32,
+    slots: u32,
+    resolution: u32,
+    lights: u32,
+}
+
+// `TranslucentShadowMap::lit_path_inside`: the light's path inside to `p` in map `m` and
+// its own texel's light (the path's scale in w); `inside` false before the entry or beyond
+// the first exit by more than a texel, or off the object.
+struct LitPath {
+    inside: bool,
+    path: f32,
+    light: vec4<f32>,
+}
+
+fn map_entry(h: TranslucentMaps, first: u32, x: i32, y: i32) -> f32 {
+    let res = i32(h.resolution);
+    let k = first + u32(clamp(y, 0, res - 1) * res + clamp(x, 0, res - 1));
+    return translucent_map_depth(translucent_depths[2u * k]);
+}
+
+fn lit_path_inside(h: TranslucentMaps, m: u32, frame_at: u32, p: vec3<f32>) -> LitPath {
+    let a = translucent_maps[frame_at];
+    let local = p - a.xyz;
+    let texel = 2.0 * a.w / f32(h.resolution);
+    let at = (vec2(dot(local, translucent_maps[frame_at + 1u].xyz), dot(local, translucent_maps[frame_at + 2u].xyz)) + a.w) / texel;
+    let depth = dot(local, translucent_maps[frame_at + 3u].xyz);
+    let first = m * h.resolution * h.resolution;
+    let res = i32(h.resolution);
+    let f = at - 0.5;
+    let c = vec2<i32>(floor(f));
+    let t = f - floor(f);
+    let corners = vec4(map_entry(h, first, c.x, c.y), map_entry(h, first, c.x + 1, c.y),
+                       map_entry(h, first, c.x, c.y + 1), map_entry(h, first, c.x + 1, c.y + 1));
+    let own = clamp(vec2<i32>(floor(at)), vec2(0), vec2(res - 1));
+    let k = first + u32(own.y * res + own.x);
+    var near = translucent_map_depth(translucent_depths[2u * k]);
+    let far = translucent_map_depth(translucent_depths[2u * k + 1u]);
+    if all(corners < vec4(3.0e38)) {
+        near = mix(mix(corners.x, corners.y, t.x), mix(corners.z, corners.w, t.x), t.y);
+    }
+    var lit: LitPath;
+    lit.inside = near < 3.0e38 && depth >= near - texel && depth <= far + texel;
+    lit.path = max(depth - near, 0.0);
+    let light_at = 1u + 2u * h.objects + 4u * MAX_INJECTED_LIGHTS * h.slots + first;
+    lit.light = translucent_maps[light_at + u32(own.y * res + own.x)];
+    return lit;
+}
+
+// The most lights one injection takes (`MAX_LIGHTS` in inject.wgsl).
+const MAX_INJECTED_LIGHTS: u32 = 8u;
+
+fn marched_single_scattering(object: i32, s: Surface) -> vec3<f32> {
+    let header = vec4<u32>(translucent_maps[0]);
+    let h = TranslucentMaps(header.x, header.y, header.z, header.w);
+    if object < 0 || u32(object) >= h.objects || s.mu <= 0.0 {
+        return vec3(0.0);
+    }
+    let medium = translucent_maps[1u + 2u * u32(object)];
+    if medium.w < 0.0 {
+        return vec3(0.0);
+    }
+    let sigma_t = medium.xyz;
+    let albedo_eta = translucent_maps[2u + 2u * u32(object)];
+    let eta = clamp(albedo_eta.w, 1.0, 3.0);
+    let inside = sqrt(max(1.0 - (1.0 - s.mu * s.mu) / (eta * eta), 0.0));
+    // Snell's law: the ray's part along the surface shrinks by η.
+    let into = (-s.towards + s.n * s.mu) / eta - s.n * inside;
+    var total = vec3(0.0);
+    for (var l = 0u; l < h.lights; l++) {
+        let m = l * h.slots + u32(medium.w);
+        let frame_at = 1u + 2u * h.objects + 4u * m;
+        if translucent_maps[frame_at + 3u].w <= 0.0 {
+            continue;
+        }
+        for (var c = 0u; c < 3u; c++) {
+            if !(sigma_t[c] > 0.0) {
+                continue;
+            }
+            var sum = 0.0;
+            var entered = false;
+            for (var k = 0u; k < MARCHED_DEPTHS; k++) {
+                // `optical_depth_quantile`.
+                let depth = -log(1.0 - (f32(k) + 0.5) / f32(MARCHED_DEPTHS)) / sigma_t[c];
+                let lit = lit_path_inside(h, m, frame_at, s.x + into * depth);
+                if lit.inside {
+                    sum += lit.light[c] * exp(-sigma_t[c] * lit.path * lit.light.w);
+                    entered = true;
+                } else if entered {
+                    // Once the ray has left the object, what lies beyond may be air.
+                    break;
+                }
+            }
+            total[c] += sum / f32(MARCHED_DEPTHS);
+        }
+    }
+    let exit = (1.0 - fresnel_reflectance(s.mu, eta)) / (eta * eta);
+    return albedo_eta.rgb / (4.0 * 3.14159265358979) * total * exit;
+}
+
+// The light gathered at the pixel `s`, with its object's single scattering marched, times
+// the exposure; `w` = 0 where no patch reaches the pixel.
+fn finish(acc: Gathered, s: Surface) -> vec4<f32> {
     if acc.weights <= 0.0 {
         return vec4(0.0);
     }
+    let marched = marched_single_scattering(acc.object, s);
 #ifdef PHOTON_DENSITY
-    return vec4(acc.sum * view.exposure, 1.0);
+    return vec4((acc.sum + marched) * view.exposure, 1.0);
 #else
-    return vec4(acc.sum / acc.weights * view.exposure, 1.0);
+    return vec4((acc.sum / acc.weights + marched) * view.exposure, 1.0);
 #endif
 }
 
 // The light the patches give the pixel `s` by its own walk of the grids: the 27 cells about
 // it in each.
 fn gathered(s: Surface) -> vec4<f32> {
-    return finish(walked(s));
+    return finish(walked(s), s);
 }
 
 // `gathered`'s sums.
@@ -344,16 +467,6 @@ var<workgroup> tile_box: array<atomic<u32>, 8>;
 var<workgroup> tile_count: atomic<u32>;
 var<workgroup> tile_patches: array<u32, TILE_PATCHES>;
 var<workgroup> tile_listed: u32;
-
-// f32 → u32 keeping the order (negatives flipped whole, positives' sign bit set).
-fn ordered_bits(f: f32) -> u32 {
-    let b = bitcast<u32>(f);
-    return select(b | 0x80000000u, ~b, (b & 0x80000000u) != 0u);
-}
-
-fn from_ordered_bits(u: u32) -> f32 {
-    return bitcast<f32>(select(~u, u & 0x7fffffffu, (u & 0x80000000u) != 0u));
-}
 
 // The cells of grid `g` about the box [lo, hi]: a grid's cells are as wide as its widest
 // reach, so a patch reaching the box has its centre in the box grown by one cell (and a
@@ -557,7 +670,7 @@ fn gather_half(
     }
     var sample = vec4(0.0);
     if acc.weights > 0.0 {
-        sample = vec4(finish(acc).rgb, acc.reach);
+        sample = vec4(finish(acc, s).rgb, acc.reach);
     } else if s.valid {
         sample = vec4(0.0, 0.0, 0.0, -1.0);
     }
@@ -666,7 +779,7 @@ fn gather_unserved(
     let acc = tile_walked(thread, own);
     if unserved {
         let colour = textureLoad(lit, p, 0);
-        textureStore(lit_out, p, vec4(colour.rgb + finish(acc).rgb, colour.a));
+        textureStore(lit_out, p, vec4(colour.rgb + finish(acc, own).rgb, colour.a));
     }
 }
 #else
@@ -678,7 +791,7 @@ fn gather_compute(
     let inside = all(id.xy < textureDimensions(lit));
     let p = vec2<i32>(id.xy);
     let s = view_surface(id.xy);
-    let added = finish(tile_walked(thread, s));
+    let added = finish(tile_walked(thread, s), s);
     if !inside {
         return;
     }

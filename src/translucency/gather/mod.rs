@@ -76,6 +76,9 @@ pub struct TranslucencyGpu {
     pub(super) products: Option<ProductsReadback>,
     pub(super) injection: Option<GpuInjection>,
     gather: Option<(Buffer, Buffer, Buffer)>,
+    /// What the gather binds for the translucent maps where the GPU injects no light: a
+    /// header of no objects, and one word.
+    no_translucent_maps: Option<(Buffer, Buffer)>,
 }
 
 impl TranslucencyGpu {
@@ -111,6 +114,18 @@ pub fn prepare_translucency(
         };
         let transport = GpuTransport::with_flow(&device, &scene.transport, limits, row_lanes, &frames);
         gpu.gather = Some(gather_buffers(&device, scene, &transport));
+        gpu.no_translucent_maps = Some((
+            device.create_buffer_with_data(&BufferInitDescriptor {
+                label: Some("translucency_no_translucent_maps"),
+                contents: bytemuck::cast_slice(&[0.0f32; 4]),
+                usage: BufferUsages::STORAGE,
+            }),
+            device.create_buffer_with_data(&BufferInitDescriptor {
+                label: Some("translucency_no_translucent_depths"),
+                contents: bytemuck::cast_slice(&[0u32; 4]),
+                usage: BufferUsages::STORAGE,
+            }),
+        ));
         gpu.transport = Some(transport);
         gpu.products = Some(ProductsReadback::new(&device));
         gpu.solved = false;
@@ -146,6 +161,7 @@ pub fn prepare_translucency(
                 &scene.albedo,
                 transport,
                 wanted,
+                &scene.marched,
             )),
         };
         injection.write_lights(&device, &queue, &lights.lights, lights.ambient);
@@ -167,13 +183,15 @@ fn gather_buffers(
         .collect();
     let centres: Vec<Vec3> = patches.patches.iter().map(|p| p.surface_point).collect();
     let grids = PatchGrid::levels(&centres, &reaches);
-    // `GatherPatch` in gather.wgsl: (surface point, reach), (normal, area), (albedo, 0),
+    // `GatherPatch` in gather.wgsl: (surface point, reach), (normal, area), (albedo, object),
     // (the exit law's local albedo, η), its law per channel, (α, η) of its medium where a
     // beam table carries its beams (single scattering's law; zero elsewhere).
+    // Where single scattering is marched per pixel, the lit face's law is not given as well.
     let media = scene
         .transport
         .beam_table
         .as_ref()
+        .filter(|t| !t.settings.single_scattering_to_pixels)
         .map(|t| t.patch_media())
         .unwrap_or_default();
     let records: Vec<[f32; 32]> = patches
@@ -197,7 +215,9 @@ fn gather_buffers(
                 a.x,
                 a.y,
                 a.z,
-                0.0,
+                // Its object (exact as a float below 2²⁴): the pixel's, for its marched single
+                // scattering.
+                p.object as f32,
             ]);
             record[12..15].copy_from_slice(&law.local_albedo.to_array());
             record[15] = law.eta;
@@ -319,6 +339,21 @@ pub fn init_gather_pipeline(
                 storage_buffer_read_only_sized(false, None),
             ),
         )
+        .iter()
+        .copied()
+        // The translucent maps (13, 14).
+        .chain(
+            BindGroupLayoutEntries::with_indices(
+                stages,
+                (
+                    (13, storage_buffer_read_only_sized(false, None)),
+                    (14, storage_buffer_read_only_sized(false, None)),
+                ),
+            )
+            .iter()
+            .copied(),
+        )
+        .collect::<Vec<_>>()
     };
     let layout = BindGroupLayoutDescriptor::new(
         "translucency_gather_layout",
@@ -533,9 +568,12 @@ pub fn translucency_gather_pass(
     mut ctx: RenderContext,
 ) {
     let (target, prepass, view_offset, gather, half_texture) = view.into_inner();
-    let (Some(transport), Some((patches, grid, params))) = (&gpu.transport, &gpu.gather) else {
+    let (Some(transport), Some((patches, grid, params)), Some(no_maps)) =
+        (&gpu.transport, &gpu.gather, &gpu.no_translucent_maps)
+    else {
         return;
     };
+    let (maps, depths) = gpu.injection.as_ref().map_or((&no_maps.0, &no_maps.1), GpuInjection::translucent_maps);
     // Nothing lit yet.
     if gpu.direct_generation == 0 && gpu.lights_generation == 0 {
         return;
@@ -563,6 +601,7 @@ pub fn translucency_gather_pass(
     let bind_group = |label, layout: &BindGroupLayoutDescriptor, own: &[(u32, &TextureView)]| {
         let entries: Vec<BindGroupEntry> = (0u32..)
             .zip(inputs.iter().cloned())
+            .chain([(13, maps.as_entire_binding()), (14, depths.as_entire_binding())])
             .chain(own.iter().map(|&(binding, view)| (binding, view.into_binding())))
             .map(|(binding, resource)| BindGroupEntry { binding, resource })
             .collect();

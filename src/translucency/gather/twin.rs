@@ -4,7 +4,7 @@
 use bevy::prelude::*;
 
 use super::GATHER_RADIUS_IN_PATCHES;
-use crate::translucency::{plugin::GatherMethod, transport::ExitLaw};
+use crate::translucency::{plugin::GatherMethod, translucent_shadow_map::MarchedObject, transport::ExitLaw};
 
 /// Some patches in a hashed grid of cells as wide as their widest reach: a pixel looks in
 /// the 27 cells about it and takes from each bucket only the members of the cell it walks —
@@ -100,8 +100,10 @@ pub const MAX_GRID_LEVELS: usize = 8;
 /// `(1 − d²/R²)²` and by `smoothstep(0.3, 0.9, n·n_i)`, each giving `(B_i − ρ_i E⁰_i) / π`
 /// times its [`ExitLaw`] at the cosine towards `eye` —
 /// interpolated, or as photons of that exitance times the patch's area under a kernel of
-/// unit integral; `None` where no patch is near. The CPU twin of `gather.wgsl` (brute force
-/// instead of the hashed grid), the oracle of its tests.
+/// unit integral; `None` where no patch is near. With `marched` (per object; `None` on those
+/// without), the single scattering marched per pixel of the translucent object whose patch
+/// weighs most at `x` ([`MarchedObject::radiance`]) is added. The CPU twin of `gather.wgsl`
+/// (brute force instead of the hashed grid), the oracle of its tests.
 #[allow(clippy::too_many_arguments)]
 pub fn gathered_radiance(
     method: GatherMethod,
@@ -111,6 +113,7 @@ pub fn gathered_radiance(
     direct: &[Vec3],
     exitance: &[Vec3],
     single: Option<&BeamSingleScattering>,
+    marched: Option<&[Option<MarchedObject>]>,
     eye: Vec3,
     x: Vec3,
     n: Vec3,
@@ -118,6 +121,8 @@ pub fn gathered_radiance(
     let towards = (eye - x).normalize_or_zero();
     let mu = n.dot(towards);
     let (mut sum, mut weights) = (Vec3::ZERO, 0.0);
+    // The translucent patch that weighs most here: the pixel's object.
+    let mut object: Option<(f32, usize)> = None;
     for (i, p) in patches.patches.iter().enumerate() {
         let d2 = p.surface_point.distance_squared(x);
         // Each patch reaches 1.5 of its own object's patch sizes.
@@ -139,12 +144,18 @@ pub fn gathered_radiance(
             if let Some(single) = single {
                 sum += w * single.radiance(i, n, mu);
             }
+            if albedo[i] == Vec3::ZERO && object.is_none_or(|(best, _)| w > best) {
+                object = Some((w, p.object as usize));
+            }
             weights += w;
         }
     }
+    let own = object
+        .and_then(|(_, o)| marched?.get(o)?.as_ref())
+        .map_or(Vec3::ZERO, |m| m.radiance(x, n, towards));
     (weights > 0.0).then(|| match method {
-        GatherMethod::Interpolation => sum / weights,
-        GatherMethod::PhotonDensity => sum,
+        GatherMethod::Interpolation => sum / weights + own,
+        GatherMethod::PhotonDensity => sum + own,
     })
 }
 

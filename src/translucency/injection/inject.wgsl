@@ -423,3 +423,237 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
     vectors[injection.beam_irradiance + i] = vec4(normal_irradiance, 0.0);
     vectors[injection.beam_direction + i] = vec4(direction, 0.0);
 }
+
+// Translucent shadow maps (`translucent_shadow_map.rs`, their CPU twin): per translucent
+// object and light, where the light enters the object and where it first leaves it again,
+// over the object's bounding sphere along the light's travel to its centre, 256² — the
+// injection's maps are centimetres wide in a room, the light's path inside needs a fraction
+// of a mean free path — and each texel's light inside (`entry_light`), for the gather's single
+// scattering marched per pixel (`marched_single_scattering` in gather.wgsl).
+//
+// `translucent_maps`, in vec4s: a header (objects, object slots with maps, resolution,
+// lights); per object (σt per world unit, slot or −1), (α, η); per map (light × slots + slot)
+// its frame (centre, half width), (u, object), (v, 0), (travel, 1 where there is a map); then
+// per map and texel its light. `translucent_depths`: per map and texel its entry and exit
+// depths along the travel from the centre's plane (`translucent_map_depth`).
+@group(1) @binding(0) var<storage, read_write> translucent_maps: array<vec4<f32>>;
+@group(1) @binding(1) var<storage, read_write> translucent_depths: array<atomic<u32>>;
+
+// The widest splat in texels (`MAX_SPLAT_TEXELS` in translucent_shadow_map.rs).
+const TRANSLUCENT_SPLAT_TEXELS: f32 = 64.0;
+
+struct TranslucentMaps {
+    objects: u32,
+    slots: u32,
+    resolution: u32,
+    lights: u32,
+}
+
+fn translucent_maps_header() -> TranslucentMaps {
+    let h = vec4<u32>(translucent_maps[0]);
+    return TranslucentMaps(h.x, h.y, h.z, h.w);
+}
+
+struct TranslucentFrame {
+    centre: vec3<f32>,
+    half_width: f32,
+    u: vec3<f32>,
+    v: vec3<f32>,
+    travel: vec3<f32>,
+    present: bool,
+}
+
+fn translucent_frame(h: TranslucentMaps, m: u32) -> TranslucentFrame {
+    let at = 1u + 2u * h.objects + 4u * m;
+    let a = translucent_maps[at];
+    let t = translucent_maps[at + 3u];
+    return TranslucentFrame(a.xyz, a.w, translucent_maps[at + 1u].xyz, translucent_maps[at + 2u].xyz, t.xyz, t.w > 0.0);
+}
+
+// Where map m's texels' light starts (after every light's frames).
+fn translucent_light_at(h: TranslucentMaps, m: u32) -> u32 {
+    return 1u + 2u * h.objects + 4u * MAX_LIGHTS * h.slots + m * h.resolution * h.resolution;
+}
+
+@compute @workgroup_size(64)
+fn splat_translucent_entries(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    for (var s = id.x; s < injection.samples; s += groups.x * 64u) {
+        splat_translucent(id.y, s, true);
+    }
+}
+
+@compute @workgroup_size(64)
+fn splat_translucent_exits(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    for (var s = id.x; s < injection.samples; s += groups.x * 64u) {
+        splat_translucent(id.y, s, false);
+    }
+}
+
+// `TranslucentShadowMap::splat_one`: a sample of a translucent object into its map for light
+// `l`, facing the light (`entering`: the entry depths) or away from it (the exit depths,
+// only deeper than the entry: the object's first stretch along each of the light's rays).
+fn splat_translucent(l: u32, s: u32, entering: bool) {
+    let h = translucent_maps_header();
+    if l >= h.lights || h.slots == 0u {
+        return;
+    }
+    let a = scene[injection.samples_at + 2u * s];
+    let b = scene[injection.samples_at + 2u * s + 1u];
+    let object = u32(b.w);
+    if object >= h.objects {
+        return;
+    }
+    let slot = translucent_maps[1u + 2u * object].w;
+    if slot < 0.0 {
+        return;
+    }
+    let m = l * h.slots + u32(slot);
+    let f = translucent_frame(h, m);
+    let n = b.xyz;
+    let facing = dot(n, f.travel);
+    if !f.present || (facing < 0.0) != entering {
+        return;
+    }
+    let res = i32(h.resolution);
+    let texel_world = 2.0 * f.half_width / f32(h.resolution);
+    let cover = SPLAT_COVER * a.w;
+    let local = a.xyz - f.centre;
+    let at = (vec2(dot(local, f.u), dot(local, f.v)) + f.half_width) / texel_world;
+    let depth = dot(local, f.travel);
+    let reach = min(cover / texel_world, TRANSLUCENT_SPLAT_TEXELS);
+    let own = vec2<i32>(floor(at));
+    let lo = vec2<i32>(floor(at - reach));
+    let hi = vec2<i32>(floor(at + reach));
+    let first = m * h.resolution * h.resolution;
+    for (var y = max(lo.y, 0); y <= min(hi.y, res - 1); y++) {
+        for (var x = max(lo.x, 0); x <= min(hi.x, res - 1); x++) {
+            // Where this texel's ray meets the sample's plane.
+            let offset = (vec2(f32(x), f32(y)) + 0.5 - at) * texel_world;
+            let across = f.u * offset.x + f.v * offset.y;
+            let along = select(-dot(n, across) / facing, 0.0, abs(facing) < 1e-4);
+            if any(vec2(x, y) != own) && length(across + f.travel * along) > cover {
+                continue;
+            }
+            let k = first + u32(y * res + x);
+            let d = depth + along;
+            if entering {
+                atomicMax(&translucent_depths[2u * k], ~ordered_bits(d));
+            } else if d > translucent_map_depth(atomicLoad(&translucent_depths[2u * k])) {
+                atomicMax(&translucent_depths[2u * k + 1u], ~ordered_bits(d));
+            }
+        }
+    }
+}
+
+// Map m's entry depth at texel (x, y), +∞ outside the map or where the light does not enter.
+fn translucent_entry_depth(h: TranslucentMaps, m: u32, x: i32, y: i32) -> f32 {
+    let res = i32(h.resolution);
+    if x < 0 || y < 0 || x >= res || y >= res {
+        return bitcast<f32>(0x7f800000u);
+    }
+    let k = m * h.resolution * h.resolution + u32(y * res + x);
+    return translucent_map_depth(atomicLoad(&translucent_depths[2u * k]));
+}
+
+fn is_finite(d: f32) -> bool {
+    return d < 3.0e38 && d > -3.0e38;
+}
+
+// The entry depths' slope along one axis at a texel (`TranslucentShadowMap::entry`):
+// central differences, one-sided beside an uncovered texel, none between two.
+fn translucent_slope(h: TranslucentMaps, m: u32, x: i32, y: i32, step: vec2<i32>, near: f32, texel: f32) -> f32 {
+    let before = translucent_entry_depth(h, m, x - step.x, y - step.y);
+    let after = translucent_entry_depth(h, m, x + step.x, y + step.y);
+    if is_finite(before) && is_finite(after) {
+        return (after - before) / (2.0 * texel);
+    }
+    if is_finite(after) {
+        return (after - near) / texel;
+    }
+    if is_finite(before) {
+        return (near - before) / texel;
+    }
+    return 0.0;
+}
+
+// Each texel's light inside the object (`TranslucentShadowMap::light_texels` with
+// `PatchLight::irradiance_across` and `entry_light`): the light's irradiance across its
+// travel where it enters, Bevy's fall-off and range window for a point or spot, shadowed by
+// the scene as the injection's map sees the entry point (lifted a texel towards the light,
+// biased by the entry's slope as `inject`), times what gets through the boundary, and the
+// path's scale for its refraction in w.
+@compute @workgroup_size(64)
+fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
+    let h = translucent_maps_header();
+    let m = id.y;
+    let texels = h.resolution * h.resolution;
+    if id.x >= texels || m >= h.lights * h.slots {
+        return;
+    }
+    let at = translucent_light_at(h, m) + id.x;
+    let f = translucent_frame(h, m);
+    let res = i32(h.resolution);
+    let x = i32(id.x % h.resolution);
+    let y = i32(id.x / h.resolution);
+    let near = translucent_entry_depth(h, m, x, y);
+    if !f.present || !is_finite(near) {
+        translucent_maps[at] = vec4(0.0);
+        return;
+    }
+    let texel = 2.0 * f.half_width / f32(h.resolution);
+    let gx = translucent_slope(h, m, x, y, vec2(1, 0), near, texel);
+    let gy = translucent_slope(h, m, x, y, vec2(0, 1), near, texel);
+    let cos_entry = inverseSqrt(1.0 + gx * gx + gy * gy);
+    let across = (vec2(f32(x), f32(y)) + 0.5) * texel - f.half_width;
+    let entry = f.centre + f.u * across.x + f.v * across.y + f.travel * near;
+    let light = injection.lights[m / h.slots];
+    var e = light.intensity;
+    var ray = f.travel;
+    var face = 0u;
+    if light.kind != DIRECTIONAL {
+        let d = entry - light.position;
+        let dist2 = dot(d, d);
+        if !(dist2 > 1e-20) {
+            translucent_maps[at] = vec4(0.0);
+            return;
+        }
+        ray = d * inverseSqrt(dist2);
+        var falloff = 1.0;
+        if light.kind == SPOT {
+            let t = clamp((dot(ray, normalize(light.direction)) - light.cos_outer) * light.cone_scale, 0.0, 1.0);
+            falloff = t * t;
+        }
+        let r = dist2 / (light.range * light.range);
+        let window = clamp(1.0 - r * r, 0.0, 1.0);
+        e *= falloff * window * window / dist2;
+        face = cube_face(d);
+    }
+    // Shadowed by what else the light meets on its way (the object itself lies at the entry).
+    let here = map_point(light, face, entry);
+    let lifted = map_point(light, face, entry - ray * here.texel_world);
+    let slope = min(sqrt(max(1.0 - cos_entry * cos_entry, 0.0)) / max(cos_entry, 1e-3), 8.0);
+    e *= seen_share(m / h.slots, lifted, lifted.texel_world * (1.5 + slope));
+    let eta = clamp(translucent_maps[2u + 2u * u32(translucent_frame_object(h, m))].w, 1.0, 3.0);
+    translucent_maps[at] = entry_light(e, cos_entry, eta);
+}
+
+fn translucent_frame_object(h: TranslucentMaps, m: u32) -> f32 {
+    return translucent_maps[1u + 2u * h.objects + 4u * m + 1u].w;
+}
+
+// `entry_light` (translucent_shadow_map.rs): E T(μ₀) μ₀/μ₀′, and the path's scale μ₀/μ₀′ at
+// least `PATH_SCALE_FLOOR`.
+const PATH_SCALE_FLOOR: f32 = 0.7;
+
+fn entry_light(e: vec3<f32>, cos_entry: f32, eta: f32) -> vec4<f32> {
+    let mu0 = clamp(cos_entry, 1e-3, 1.0);
+    let inside = sqrt(max(1.0 - (1.0 - mu0 * mu0) / (eta * eta), 0.0));
+    let scale = mu0 / max(inside, 1e-3);
+    return vec4(e * (1.0 - fresnel_reflectance(mu0, eta)) * scale, max(scale, PATH_SCALE_FLOOR));
+}

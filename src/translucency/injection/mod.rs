@@ -29,6 +29,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{
     diffusion::{IncidenceWeight, diffuse_single_scattering_shape, single_scattering_shape},
+    translucent_shadow_map::{MarchedMedium, PLUGIN_RESOLUTION, object_bounds},
     gather::{TranslucencyCamera, TranslucencyGpu},
     iteration::{GpuTransport, compute_pipeline, packed_buffers_layout},
     patches::Patches,
@@ -165,6 +166,125 @@ pub fn incidence_table(weight: Option<&IncidenceWeight>) -> Vec<[f32; 4]> {
         .collect()
 }
 
+/// The translucent objects' maps towards each light (`translucent_maps`,
+/// `translucent_depths` in `inject.wgsl`, where their layout is), for single scattering
+/// marched per pixel in the gather.
+struct TranslucentMaps {
+    /// The header and per object its medium (σt, slot or −1), (α, η).
+    head: Vec<[f32; 4]>,
+    /// Per slot (object with maps), its object and the sphere its maps see.
+    slots: Vec<(u32, Vec3, f32)>,
+    /// Maps for this many lights.
+    capacity: u32,
+    maps: Buffer,
+    depths: Buffer,
+    bind_group: BindGroup,
+    layout: BindGroupLayout,
+}
+
+impl TranslucentMaps {
+    fn new(device: &RenderDevice, patches: &Patches, marched: &[Option<MarchedMedium>]) -> Self {
+        let objects = marched.len();
+        let mut head = vec![[0.0f32; 4]; 1 + 2 * objects];
+        let mut slots = Vec::new();
+        for (object, medium) in marched.iter().enumerate() {
+            let samples: Vec<_> = (0..patches.patches.len())
+                .filter(|&i| patches.patches[i].object as usize == object)
+                .flat_map(|i| patches.samples_of(i).iter().copied())
+                .collect();
+            let (medium, bounds) = match (medium, object_bounds(&samples)) {
+                (Some(m), Some(b)) => (m, b),
+                _ => {
+                    head[1 + 2 * object] = [0.0, 0.0, 0.0, -1.0];
+                    continue;
+                }
+            };
+            head[1 + 2 * object] = medium.sigma_t.extend(slots.len() as f32).to_array();
+            head[2 + 2 * object] = medium.alpha.extend(medium.eta).to_array();
+            slots.push((object as u32, bounds.0, bounds.1));
+        }
+        head[0] = [objects as f32, slots.len() as f32, PLUGIN_RESOLUTION as f32, 0.0];
+        let layout = device.create_bind_group_layout(
+            Some("translucency_translucent_maps_layout"),
+            &bevy::render::render_resource::BindGroupLayoutEntries::sequential(
+                bevy::render::render_resource::ShaderStages::COMPUTE,
+                (
+                    bevy::render::render_resource::binding_types::storage_buffer_sized(false, None),
+                    bevy::render::render_resource::binding_types::storage_buffer_sized(false, None),
+                ),
+            ),
+        );
+        let (maps, depths) = Self::buffers(device, head.len(), slots.len() as u32, 0);
+        let bind_group = Self::bind_group(device, &layout, &maps, &depths);
+        Self { head, slots, capacity: 0, maps, depths, bind_group, layout }
+    }
+
+    /// The maps' buffers for `lights` lights: the head, every light's frames and the texels'
+    /// light (vec4s), and the texels' two depths.
+    fn buffers(device: &RenderDevice, head: usize, slots: u32, lights: u32) -> (Buffer, Buffer) {
+        let texels = lights as u64 * slots as u64 * (PLUGIN_RESOLUTION as u64).pow(2);
+        let vec4s = head as u64 + 4 * (MAX_INJECTED_LIGHTS as u64) * slots as u64 + texels;
+        let buffer = |label, size: u64| {
+            device.create_buffer(&BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        (buffer("translucency_translucent_maps", vec4s * 16), buffer("translucency_translucent_depths", texels * 8))
+    }
+
+    fn bind_group(device: &RenderDevice, layout: &BindGroupLayout, maps: &Buffer, depths: &Buffer) -> BindGroup {
+        device.create_bind_group(
+            Some("translucency_translucent_maps"),
+            layout,
+            &BindGroupEntries::sequential((maps.as_entire_binding(), depths.as_entire_binding())),
+        )
+    }
+
+    /// The header, the media and each light's frames for `lights`, the buffers grown to hold
+    /// their texels.
+    fn write_lights(&mut self, device: &RenderDevice, queue: &RenderQueue, lights: &[PatchLight]) {
+        let slots = self.slots.len() as u32;
+        if slots == 0 {
+            return;
+        }
+        let taken = lights.len().min(MAX_INJECTED_LIGHTS) as u32;
+        if taken > self.capacity {
+            self.capacity = taken;
+            (self.maps, self.depths) = Self::buffers(device, self.head.len(), slots, taken);
+            self.bind_group = Self::bind_group(device, &self.layout, &self.maps, &self.depths);
+        }
+        let mut words = self.head.clone();
+        words[0][3] = taken as f32;
+        for light in &lights[..taken as usize] {
+            for &(object, centre, radius) in &self.slots {
+                // `TranslucentShadowMap::splat`'s frame: its axes and width.
+                let frame = match light.travel_towards(centre) {
+                    Some(travel) => {
+                        let (u, v) = travel.any_orthonormal_pair();
+                        [
+                            centre.extend(radius * 1.02).to_array(),
+                            u.extend(object as f32).to_array(),
+                            v.extend(0.0).to_array(),
+                            travel.extend(1.0).to_array(),
+                        ]
+                    }
+                    None => [[0.0; 4]; 4],
+                };
+                words.extend(frame);
+            }
+        }
+        queue.write_buffer(&self.maps, 0, bytemuck::cast_slice(&words));
+    }
+
+    /// Bytes of the depths of `lights` lights' maps.
+    fn depth_bytes(&self, lights: u32) -> u64 {
+        lights as u64 * self.slots.len() as u64 * (PLUGIN_RESOLUTION as u64).pow(2) * 8
+    }
+}
+
 /// One static scene's light injection on the GPU, writing into a [`GpuTransport`]'s `E⁰`
 /// and `S⁰`.
 pub struct GpuInjection {
@@ -179,13 +299,19 @@ pub struct GpuInjection {
     vectors: Buffer,
     splat: ComputePipeline,
     inject: ComputePipeline,
+    translucent_maps: TranslucentMaps,
+    splat_entries: ComputePipeline,
+    splat_exits: ComputePipeline,
+    translucent_light: ComputePipeline,
 }
 
 impl GpuInjection {
     /// Uploads the patches (their samples, centres, normals), each patch's single-scattering
     /// factor and each object's incidence table, and builds the pipelines. `albedo` is zero on
     /// translucent patches (these take Bevy's ambient light); `resolution` is each map face's
-    /// (clamped to [`LIGHT_VIEW_RESOLUTIONS`]).
+    /// (clamped to [`LIGHT_VIEW_RESOLUTIONS`]). The objects with a medium in `marched` (by
+    /// object; empty: none) get a map a light for their single scattering marched per pixel
+    /// ([`PLUGIN_RESOLUTION`]², 1.5 MiB a light and object).
     pub fn new(
         device: &RenderDevice,
         patches: &Patches,
@@ -193,6 +319,7 @@ impl GpuInjection {
         albedo: &[Vec3],
         target: &GpuTransport,
         resolution: u32,
+        marched: &[Option<MarchedMedium>],
     ) -> Self {
         let resolution = resolution.clamp(
             *LIGHT_VIEW_RESOLUTIONS.start(),
@@ -200,10 +327,13 @@ impl GpuInjection {
         );
         let mut scene: Vec<[f32; 4]> = Vec::new();
         let samples_at = scene.len() as u32;
-        for s in &patches.samples {
-            let radius = (s.area.max(0.0) / std::f32::consts::PI).sqrt();
-            scene.push([s.position.x, s.position.y, s.position.z, radius]);
-            scene.push([s.normal.x, s.normal.y, s.normal.z, 0.0]);
+        for (i, p) in patches.patches.iter().enumerate() {
+            for s in patches.samples_of(i) {
+                let radius = (s.area.max(0.0) / std::f32::consts::PI).sqrt();
+                scene.push([s.position.x, s.position.y, s.position.z, radius]);
+                // Its object (exact as a float below 2²⁴): its translucent maps.
+                scene.push([s.normal.x, s.normal.y, s.normal.z, p.object as f32]);
+            }
         }
         let patches_at = scene.len() as u32;
         let mut objects = 0;
@@ -303,9 +433,10 @@ impl GpuInjection {
             label: Some("translucency_inject"),
             source: ShaderSource::Wgsl(super::with_boundary(include_str!("inject.wgsl")).into()),
         });
+        let translucent_maps = TranslucentMaps::new(device, patches, marched);
         let pipeline_layout = device.create_pipeline_layout(&PipelineLayoutDescriptor {
             label: Some("translucency_injection"),
-            bind_group_layouts: &[Some(&layout)],
+            bind_group_layouts: &[Some(&layout), Some(&translucent_maps.layout)],
             immediate_size: 0,
         });
         let pipeline = |entry| compute_pipeline(device, &pipeline_layout, &module, entry);
@@ -320,7 +451,18 @@ impl GpuInjection {
             vectors,
             splat: pipeline("splat"),
             inject: pipeline("inject"),
+            translucent_maps,
+            splat_entries: pipeline("splat_translucent_entries"),
+            splat_exits: pipeline("splat_translucent_exits"),
+            translucent_light: pipeline("translucent_light"),
         }
+    }
+
+    /// The translucent objects' maps and their light, and their depths (`translucent_maps`,
+    /// `translucent_depths` in `inject.wgsl`), for the gather's single scattering marched per
+    /// pixel.
+    pub fn translucent_maps(&self) -> (&Buffer, &Buffer) {
+        (&self.translucent_maps.maps, &self.translucent_maps.depths)
     }
 
     fn create_maps(device: &RenderDevice, resolution: u32, lights: u32) -> Buffer {
@@ -392,6 +534,7 @@ impl GpuInjection {
         self.injection.light_count = taken as u32;
         self.injection.ambient = ambient.to_array();
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&self.injection));
+        self.translucent_maps.write_lights(device, queue, lights);
         taken
     }
 
@@ -403,7 +546,9 @@ impl GpuInjection {
 
     /// [`record`](Self::record) with a GPU time span for each part, nested in the caller's:
     /// `splat` (the maps cleared and splatted) and `inject` (each patch's `E⁰` and `S⁰`, and
-    /// the beam table's beams), each its own compute pass.
+    /// the beam table's beams), each its own compute pass; between them, where translucent
+    /// objects march their single scattering per pixel, `translucent_maps` (their maps
+    /// cleared, splatted, and their light).
     pub fn record_timed(&self, encoder: &mut CommandEncoder, spans: &impl RecordDiagnostics) {
         let injection = &self.injection;
         if injection.patches == 0 {
@@ -425,6 +570,7 @@ impl GpuInjection {
                     timestamp_writes: None,
                 });
                 pass.set_bind_group(0, &self.bind_group, &[]);
+                pass.set_bind_group(1, &self.translucent_maps.bind_group, &[]);
                 pass.set_pipeline(&self.splat);
                 pass.dispatch_workgroups(
                     injection.samples.div_ceil(WORKGROUP).min(65_535),
@@ -433,6 +579,7 @@ impl GpuInjection {
                 );
             }
             span.end(encoder);
+            self.record_translucent_maps(encoder, spans, lights);
         }
         let span = spans.time_span(encoder, "inject");
         {
@@ -441,11 +588,40 @@ impl GpuInjection {
                 timestamp_writes: None,
             });
             pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.set_bind_group(1, &self.translucent_maps.bind_group, &[]);
             pass.set_pipeline(&self.inject);
             pass.dispatch_workgroups(injection.patches.div_ceil(WORKGROUP), 1, 1);
         }
         span.end(encoder);
         encoder.pop_debug_group();
+    }
+}
+
+impl GpuInjection {
+    /// The translucent objects' maps for `lights` lights: cleared, their entries and then
+    /// their exits splatted (each its own pass: the exits are those deeper than the entries),
+    /// then each texel's light, shadowed by the scene's maps splatted before.
+    fn record_translucent_maps(&self, encoder: &mut CommandEncoder, spans: &impl RecordDiagnostics, lights: u32) {
+        let maps = &self.translucent_maps;
+        let slots = maps.slots.len() as u32;
+        if slots == 0 || self.injection.samples == 0 {
+            return;
+        }
+        let span = spans.time_span(encoder, "translucent_maps");
+        encoder.clear_buffer(&maps.depths, 0, Some(maps.depth_bytes(lights)));
+        let texels = PLUGIN_RESOLUTION * PLUGIN_RESOLUTION;
+        for (label, pipeline, (x, y)) in [
+            ("translucency_translucent_entries", &self.splat_entries, (self.injection.samples.div_ceil(WORKGROUP).min(65_535), lights)),
+            ("translucency_translucent_exits", &self.splat_exits, (self.injection.samples.div_ceil(WORKGROUP).min(65_535), lights)),
+            ("translucency_translucent_light", &self.translucent_light, (texels.div_ceil(WORKGROUP), lights * slots)),
+        ] {
+            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some(label), timestamp_writes: None });
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.set_bind_group(1, &maps.bind_group, &[]);
+            pass.set_pipeline(pipeline);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        span.end(encoder);
     }
 }
 

@@ -60,3 +60,36 @@ fn marched_single_scattering_on_a_thick_slab_is_the_half_space_law() {
         }
     }
 }
+
+/// Through a boundary of η = 1.3, the plugin's march (`MarchedObject::radiance`: the view ray
+/// refracted in, each texel's light `E T(μ₀) μ₀/μ₀′` and path scale, out by `T(μ)/η²`, at its
+/// 8 depths a channel) on the thick slab is the half-space law with the boundary,
+/// `α E T(μ₀) T(μ) / (4π η² (μ₀′ + μ′))`, wherever the light enters within 58° of the normal
+/// (above `PATH_SCALE_FLOOR`): measured within 0.17 % (the 8 quantiles' own error), held
+/// within 0.5 %.
+#[test]
+fn the_plugins_march_through_a_boundary_is_the_half_space_law() {
+    use crate::translucency::{
+        PatchLight,
+        beam_table::single_scattering_radiance,
+        translucent_shadow_map::{MarchedMedium, MarchedObject, PLUGIN_RESOLUTION},
+    };
+    let medium = MarchedMedium { sigma_t: Vec3::new(200.0, 400.0, 800.0), alpha: Vec3::new(0.9, 0.5, 0.2), eta: 1.3 };
+    let object = mesh_object(Cuboid::new(2.0, 1.0, 2.0).mesh().build(), Transform::IDENTITY);
+    let patches = resample_into_patches(&views_of(std::slice::from_ref(&object)), 400);
+    let mut worst = 0.0f32;
+    for mu0 in [1.0f32, 0.8, 0.6] {
+        let travel = Vec3::new((1.0 - mu0 * mu0).sqrt(), -mu0, 0.0);
+        let light = PatchLight::Directional { direction: travel, illuminance: Vec3::new(2.0, 1.0, 0.5) };
+        let marched = MarchedObject::new(&patches.samples, medium, &[light], PLUGIN_RESOLUTION, |_, _| 1.0);
+        for mu in [1.0f32, 0.5] {
+            let towards = Vec3::new(0.0, mu, -(1.0 - mu * mu).sqrt());
+            let got = marched.radiance(Vec3::new(0.1, 0.5, -0.1), Vec3::Y, towards);
+            let law = single_scattering_radiance(medium.alpha, medium.eta, Vec3::new(2.0, 1.0, 0.5) * mu0, mu0, mu);
+            let off = (got / law - Vec3::ONE).abs().max_element();
+            eprintln!("μ₀ {mu0}, μ {mu}: {off:.4} off the law");
+            worst = worst.max(off);
+        }
+    }
+    assert!(worst < 0.005, "{worst} off the law");
+}
