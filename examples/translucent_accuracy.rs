@@ -21,7 +21,7 @@
 //!     [--beam-table COSINES,AZIMUTHS] [--single-scattering-oracle]
 //!     [--beam-orders FIRST,LAST] [--late-light profile|profile-less-early|clamped]
 //!     [--late-walks N] [--lit-face-single-scattering-law]
-//!     [--marched-single-scattering [--translucent-shadow-map N]]
+//!     [--marched-single-scattering | --translucent-shadow-map N | --single-scattering-in-table]
 //!     [--exit-axis plugin|normal|normal-all|flow-all|lobe] [--exit-lobes true|false]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
@@ -62,7 +62,7 @@ use std::{
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     DiffusionKernel, GatherMethod, TranslucentPreset, TransportSettings, beam_table::BeamTableSettings,
-    random_walk::ScatteringOrders, translucent_shadow_map::MAX_RESOLUTION,
+    random_walk::ScatteringOrders, translucent_shadow_map::{MAX_RESOLUTION, PLUGIN_DEPTHS, PLUGIN_RESOLUTION},
 };
 use translucent_accuracy_scene::{
     ExitAxis, FOV_Y, FRONT_LIGHT, LateLight, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
@@ -163,19 +163,23 @@ struct Cli {
     /// in it). Method suffix `_litfacelaw`
     #[arg(long)]
     lit_face_single_scattering_law: bool,
-    /// With `--scattering beam-table`, index-matched under the directional light: all single
-    /// scattering out of the table (`BeamTableSettings::single_scattering_to_pixels`) and
-    /// each pixel's own marched along its ray through the object against the light's path in
-    /// it, instead of the half-space law at the lit face (an oracle of a per-pixel term; the
-    /// plugin's gather has none yet). Method suffix `_ssmarched`
+    /// With `--scattering beam-table`, index-matched under the directional light: each
+    /// pixel's single scattering (all of it out of the table,
+    /// `BeamTableSettings::single_scattering_to_pixels`, the default) marched by rays through
+    /// the object against the light's path in it, 64 depths a channel — the oracle of the
+    /// plugin's march against its maps. Method suffix `_ssmarched`
     #[arg(long)]
     marched_single_scattering: bool,
-    /// With `--marched-single-scattering`: march against the object's translucent shadow map
-    /// of N² texels over its bounding sphere, splatted from its patches' samples
-    /// (`TranslucentShadowMap`, the CPU form of a GPU term), instead of rays. Method suffix
-    /// `_tsm<N>`
+    /// The plugin's march (the default with `--scattering beam-table`) against each object's
+    /// translucent shadow map of N² texels (default the plugin's, 256). Method suffix
+    /// `_ssmarched_tsm<N>_d<depths>`
     #[arg(long, value_name = "N")]
     translucent_shadow_map: Option<u32>,
+    /// With `--scattering beam-table`: single scattering in the table and the lit face's
+    /// half-space law in the gather (`single_scattering_to_pixels` off: the defaults before
+    /// the march). No suffix
+    #[arg(long)]
+    single_scattering_in_table: bool,
     /// Take the dipole's flux along each exit patch's normal
     /// (`Translucent::oriented_dipole`; method suffix `_oriented` when on)
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
@@ -389,14 +393,20 @@ fn main() {
     if cli.beam_table.is_some() && !matches!(cli.scattering, Scattering::BeamWalks | Scattering::BeamTable) {
         fail("--beam-table snaps the beam walks' directions: it needs --scattering beam-walks or beam-table".into());
     }
-    if cli.translucent_shadow_map.is_some_and(|n| !(1..=MAX_RESOLUTION).contains(&n)) || (cli.translucent_shadow_map.is_some() && !cli.marched_single_scattering) {
-        fail(format!("--translucent-shadow-map takes 1 – {MAX_RESOLUTION} texels a side, with --marched-single-scattering"));
+    if cli.translucent_shadow_map.is_some_and(|n| !(1..=MAX_RESOLUTION).contains(&n)) {
+        fail(format!("--translucent-shadow-map takes 1 – {MAX_RESOLUTION} texels a side"));
+    }
+    if [cli.marched_single_scattering, cli.translucent_shadow_map.is_some(), cli.single_scattering_in_table]
+        .iter()
+        .filter(|&&on| on)
+        .count()
+        > 1
+    {
+        fail("--marched-single-scattering (rays), --translucent-shadow-map (the plugin's maps) and --single-scattering-in-table are one choice each".into());
     }
     // The rays' march is index-matched; the map's is the plugin's, through the boundary.
-    if cli.marched_single_scattering
-        && (cli.scattering != Scattering::BeamTable || cli.uniform || (cli.eta != 1.0 && cli.translucent_shadow_map.is_none()))
-    {
-        fail("--marched-single-scattering takes --scattering beam-table under the directional light, index-matched unless with --translucent-shadow-map (drop --eta or add it, and drop --uniform)".into());
+    if cli.marched_single_scattering && (cli.scattering != Scattering::BeamTable || cli.uniform || cli.eta != 1.0) {
+        fail("--marched-single-scattering takes --scattering beam-table under the directional light, index-matched (drop --eta and --uniform)".into());
     }
     if cli.scattering == Scattering::BeamTable && (cli.uniform || cli.single_scattering_oracle) {
         fail("--scattering beam-table carries the directional light's beams and gives single scattering its own law already (drop --uniform, --single-scattering-oracle)".into());
@@ -531,7 +541,7 @@ fn main() {
                 late_walks: cli.late_walks.unwrap_or(BeamTableSettings::default().late_walks),
                 last_order: cli.beam_orders.map_or(16, |(_, last)| last),
                 exit_directions: cli.exit_axis == Axis::Lobe,
-                single_scattering_to_pixels: cli.marched_single_scattering,
+                single_scattering_to_pixels: !cli.single_scattering_in_table,
                 seed: cli.table_seed,
                 ..default()
             };
@@ -547,10 +557,14 @@ fn main() {
                     table.late_walks,
                     table.last_order,
                     if table.seed == 0 { String::new() } else { format!("_seed{}", table.seed) },
-                    match (table.single_scattering_to_pixels, cli.translucent_shadow_map) {
+                    match (table.single_scattering_to_pixels, cli.marched_single_scattering) {
                         (false, _) => String::new(),
-                        (true, None) => "_ssmarched".into(),
-                        (true, Some(n)) => format!("_ssmarched_tsm{n}"),
+                        (true, true) => "_ssmarched".into(),
+                        // `_d<depths>`: the plugin's depths a channel (rows without it: 64).
+                        (true, false) => format!(
+                            "_ssmarched_tsm{}_d{PLUGIN_DEPTHS}",
+                            cli.translucent_shadow_map.unwrap_or(PLUGIN_RESOLUTION)
+                        ),
                     }
                 ),
             )
@@ -612,7 +626,7 @@ fn main() {
         scattering: source,
         single_scattering_law: cli.single_scattering_oracle,
         exit_axis,
-        shadow_map: cli.translucent_shadow_map,
+        shadow_map: if cli.marched_single_scattering { None } else { Some(cli.translucent_shadow_map.unwrap_or(PLUGIN_RESOLUTION)) },
     };
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();

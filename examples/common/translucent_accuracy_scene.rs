@@ -23,7 +23,7 @@ use bevy_mesostructure::translucency::{
     random_walk::{EntryPoint, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
     resample_into_patches,
     translucent_shadow_map::{
-        MarchedMedium, MarchedObject, optical_depth_quantile,
+        MarchedMedium, MarchedObject, PLUGIN_RESOLUTION, optical_depth_quantile,
     },
 };
 
@@ -345,9 +345,9 @@ pub struct Oracles {
     /// The axis of the deep field's exit law (`ExitLaw::flow`).
     pub exit_axis: ExitAxis,
     /// With single scattering marched per pixel (`BeamTableSettings::
-    /// single_scattering_to_pixels`): march against the object's `TranslucentShadowMap` of
-    /// this many texels a side, splatted from its patches' samples (the CPU form of a GPU
-    /// term), instead of rays.
+    /// single_scattering_to_pixels`, the default): the plugin's march against each object's
+    /// map of this many texels a side (`MarchedObject`, the twin of the GPU's); `None`: by
+    /// rays, the oracle.
     pub shadow_map: Option<u32>,
 }
 
@@ -357,7 +357,7 @@ impl Oracles {
         scattering: ScatteringSource::Profile,
         single_scattering_law: false,
         exit_axis: ExitAxis::Plugin,
-        shadow_map: None,
+        shadow_map: Some(PLUGIN_RESOLUTION),
     };
 }
 

@@ -100,6 +100,7 @@ impl PatchLight {
         if !(dist2 > 1e-20) {
             return Vec3::ZERO;
         }
+        // Bevy's fall-off and range window, one copy (the volumetric reference's).
         let spot = ReferenceSpot {
             position: position.as_dvec3(),
             direction: cone.map_or(DVec3::Z, |c| c.0.as_dvec3().normalize_or_zero()),
@@ -162,31 +163,8 @@ pub fn direct_light(
                     };
                     (e, to_light)
                 }
-                PatchLight::Point {
-                    position,
-                    intensity,
-                    range,
-                } => (
-                    point_irradiance(p.normal, x, position, intensity, None, range, rays),
-                    (position - x).normalize_or_zero(),
-                ),
-                PatchLight::Spot {
-                    position,
-                    direction,
-                    intensity,
-                    inner_angle,
-                    outer_angle,
-                    range,
-                } => (
-                    point_irradiance(
-                        p.normal,
-                        x,
-                        position,
-                        intensity,
-                        Some((direction, inner_angle, outer_angle)),
-                        range,
-                        rays,
-                    ),
+                PatchLight::Point { position, .. } | PatchLight::Spot { position, .. } => (
+                    point_irradiance(light, p.normal, x, position, rays),
                     (position - x).normalize_or_zero(),
                 ),
             };
@@ -247,40 +225,14 @@ pub fn direct_light(
     direct
 }
 
-fn point_irradiance(
-    normal: Vec3,
-    x: Vec3,
-    position: Vec3,
-    intensity: Vec3,
-    cone: Option<(Vec3, f32, f32)>,
-    range: f32,
-    rays: &SceneRays,
-) -> Vec3 {
+/// A point or spot light's irradiance on a surface of unit `normal` at `x`
+/// ([`PatchLight::irradiance_across`] times the incidence cosine), shadowed by one ray.
+fn point_irradiance(light: &PatchLight, normal: Vec3, x: Vec3, position: Vec3, rays: &SceneRays) -> Vec3 {
     let d = position - x;
-    let dist2 = d.length_squared();
-    let cos = normal.dot(d) / dist2.sqrt();
+    let cos = normal.dot(d) / d.length();
     if !(cos > 0.0) {
         return Vec3::ZERO;
     }
-    // Bevy's fall-off and range window, one copy (the volumetric reference's).
-    let spot = ReferenceSpot {
-        position: position.as_dvec3(),
-        direction: cone.map_or(DVec3::Z, |c| c.0.as_dvec3().normalize_or_zero()),
-        intensity: 1.0,
-        inner_angle: cone.map_or(0.0, |c| c.1 as f64),
-        outer_angle: cone.map_or(0.0, |c| c.2 as f64),
-        range: range as f64,
-    };
-    let falloff = if cone.is_some() {
-        spot.falloff(x.as_dvec3())
-    } else {
-        1.0
-    };
-    let window = spot.range_window(dist2.sqrt() as f64);
-    let weight = (falloff * window) as f32 * cos / dist2;
-    if weight > 0.0 && rays.visible(x, position) {
-        intensity * weight
-    } else {
-        Vec3::ZERO
-    }
+    let e = light.irradiance_across(x) * cos;
+    if e.max_element() > 0.0 && rays.visible(x, position) { e } else { Vec3::ZERO }
 }

@@ -116,7 +116,9 @@ pub struct TranslucencySettings {
 pub enum LightInjection {
     /// One shadow ray per patch and light from its centre through the precompute's BVH, on
     /// the CPU (main world, every core): exact visibility at the patch centre, whatever the
-    /// lights, at main-thread time on every frame a light moves.
+    /// lights, at main-thread time on every frame a light moves. No maps for single
+    /// scattering to be marched on: the beam table keeps it (switching to or from this
+    /// rebuilds the table).
     ShadowRays,
     /// The seed's way, on the GPU (`injection/`): each light's depth map splatted from the
     /// patches' samples in compute (`resolution` texels a side per face: one face for a
@@ -269,6 +271,13 @@ pub struct TranslucencyScene {
     pub marched: Vec<Option<MarchedMedium>>,
 }
 
+/// Whether the table leaves single scattering to the pixels' march: where it asks to and the
+/// GPU injects the lights (the march reads the injection's maps; with shadow rays the table
+/// keeps single scattering).
+fn marches(settings: &TranslucencySettings, table: &super::beam_table::BeamTableSettings) -> bool {
+    table.single_scattering_to_pixels && matches!(settings.light_injection, LightInjection::LightViewMaps { .. })
+}
+
 /// The most translucent objects whose single scattering is marched per pixel (a map a light
 /// each, 1.5 MiB; 96 MiB at 8 lights).
 pub const MAX_MARCHED_OBJECTS: usize = 8;
@@ -390,7 +399,6 @@ pub(crate) fn run_precompute(
         });
         settings.patch_budget = capped;
     }
-    let shadow_rays = !matches!(settings.light_injection, LightInjection::LightViewMaps { .. });
     if let Some(table) = settings.transport.beam_table.as_mut() {
         // The exit directions are the CPU oracle's (translucent_accuracy --exit-axis lobe): the
         // GPU gather does not take the lobes fitted to them, and each early entry would cost
@@ -400,17 +408,6 @@ pub(crate) fn run_precompute(
                 "translucency: BeamTableSettings::exit_directions is for the CPU oracle \
                  (translucent_accuracy --exit-axis lobe); the plugin's gather does not use it, so \
                  it is turned off"
-                    .to_string()
-            });
-        }
-        // Single scattering marched per pixel needs the GPU's light-view maps: with shadow
-        // rays the light left out of the table would be missing on screen.
-        if shadow_rays && std::mem::take(&mut table.single_scattering_to_pixels)
-        {
-            warned.warn("translucency-single-scattering-to-pixels", || {
-                "translucency: BeamTableSettings::single_scattering_to_pixels marches on the GPU \
-                 light injection's maps; with LightInjection::ShadowRays it is turned off (the \
-                 beam table keeps single scattering)"
                     .to_string()
             });
         }
@@ -433,7 +430,7 @@ pub(crate) fn run_precompute(
         ]),
         // The beam table's settings (none: all zero).
         hash_f32s(settings.transport.beam_table.map_or([0.0; 8], |t| {
-            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order, t.seed, t.max_patches, t.single_scattering_to_pixels as u32]
+            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order, t.seed, t.max_patches, marches(&settings, &t) as u32]
                 .map(|v| v as f32)
         })),
     ];
@@ -551,6 +548,9 @@ pub(crate) fn run_precompute(
         }
         let budget = settings.patch_budget as usize;
         let mut transport_settings = settings.transport;
+        if let Some(table) = transport_settings.beam_table.as_mut() {
+            table.single_scattering_to_pixels = marches(&settings, table);
+        }
         // Each translucent object marching its single scattering takes a map a light
         // (1.5 MiB each); beyond `MAX_MARCHED_OBJECTS` the table keeps single scattering.
         let translucent_objects = objects.iter().filter(|o| matches!(o.2, PatchSurface::Translucent { .. })).count();
@@ -736,7 +736,9 @@ pub(crate) fn inject_direct_light(
         LightInjection::LightViewMaps { .. } => {
             warned.warn("translucency-injection-lights", || {
                 format!(
-                    "translucency: {} lights are more than the GPU injection's {}; they are injected on the CPU",
+                    "translucency: {} lights are more than the GPU injection's {}; they are injected on the CPU, \
+                     and single scattering is not marched per pixel (the beam table leaves it to \
+                     the GPU injection's maps)",
                     lights.len(),
                     super::injection::MAX_INJECTED_LIGHTS
                 )

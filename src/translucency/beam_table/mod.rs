@@ -71,9 +71,9 @@ pub struct BeamTableSettings {
     /// leaves by the lit face, for the gather to march per pixel through the object against
     /// the light's own path in it (a map per translucent object and light in the GPU light
     /// injection: `docs/translucent.md`, "Single scattering marched per pixel on the GPU").
-    /// Off by default this round. It needs `LightInjection::LightViewMaps` (with shadow rays
-    /// the plugin turns it off with a warning) and at most
-    /// [`MAX_MARCHED_OBJECTS`](super::MAX_MARCHED_OBJECTS) translucent objects.
+    /// On by default. Where lights are injected by `LightInjection::ShadowRays` (no maps) or
+    /// more than [`MAX_MARCHED_OBJECTS`](super::MAX_MARCHED_OBJECTS) objects are
+    /// translucent, the table keeps single scattering (the latter with a warning).
     pub single_scattering_to_pixels: bool,
     /// Offsets every walk's seed (0: the tables the docs' figures come from). Tables of
     /// different seeds differ by their walks' noise alone, which moves the accuracy figures
@@ -102,7 +102,7 @@ impl Default for BeamTableSettings {
             late_walks: 3072,
             last_order: 16,
             exit_directions: false,
-            single_scattering_to_pixels: false,
+            single_scattering_to_pixels: true,
             seed: 0,
             // 3.3× the `translucent` example's room at a 20 000 budget (1224 translucent
             // patches, 18 MB): by its measured rate about 12 s on 16 cores and 100 s on 2

@@ -285,7 +285,7 @@ fn add_patch(i: u32, s: Surface, acc: ptr<function, Gathered>) {
 // view ray refracted into the pixel's object, each against each light's map of the object —
 // the light's path inside to it (scaled for its refraction) and its column's light — out
 // through the boundary, T(μ)/η².
-const MARCHED_DEPTHS: u32 = 8u;
+const MARCHED_DEPTHS: u32 = 16u;
 
 struct TranslucentMaps {
     objects: u32,
@@ -332,13 +332,10 @@ fn lit_path_inside(h: TranslucentMaps, m: u32, frame_at: u32, p: vec3<f32>) -> L
     var lit: LitPath;
     lit.inside = near < 3.0e38 && depth >= near - texel && depth <= far + texel;
     lit.path = max(depth - near, 0.0);
-    let light_at = 1u + 2u * h.objects + 4u * MAX_INJECTED_LIGHTS * h.slots + first;
+    let light_at = 1u + 2u * h.objects + first;
     lit.light = translucent_maps[light_at + u32(own.y * res + own.x)];
     return lit;
 }
-
-// The most lights one injection takes (`MAX_LIGHTS` in inject.wgsl).
-const MAX_INJECTED_LIGHTS: u32 = 8u;
 
 fn marched_single_scattering(object: i32, s: Surface) -> vec3<f32> {
     let header = vec4<u32>(translucent_maps[0]);
@@ -359,7 +356,8 @@ fn marched_single_scattering(object: i32, s: Surface) -> vec3<f32> {
     var total = vec3(0.0);
     for (var l = 0u; l < h.lights; l++) {
         let m = l * h.slots + u32(medium.w);
-        let frame_at = 1u + 2u * h.objects + 4u * m;
+        // `translucent_frame_at` in inject.wgsl: after every map's texels.
+        let frame_at = 1u + 2u * h.objects + h.lights * h.slots * h.resolution * h.resolution + 4u * m;
         if translucent_maps[frame_at + 3u].w <= 0.0 {
             continue;
         }

@@ -79,6 +79,9 @@ pub struct TranslucencyGpu {
     /// What the gather binds for the translucent maps where the GPU injects no light: a
     /// header of no objects, and one word.
     no_translucent_maps: Option<(Buffer, Buffer)>,
+    /// The injection's translucent maps are this frame's lights' (the CPU injected the last
+    /// change: none).
+    maps_current: bool,
 }
 
 impl TranslucencyGpu {
@@ -144,6 +147,7 @@ pub fn prepare_translucency(
     {
         transport.write_direct(&queue, direct);
         gpu.direct_generation = *direct_generation;
+        gpu.maps_current = false;
         gpu.iteration_pending = true;
         gpu.injection_pending = false;
     }
@@ -166,6 +170,7 @@ pub fn prepare_translucency(
         };
         injection.write_lights(&device, &queue, &lights.lights, lights.ambient);
         gpu.lights_generation = *lights_generation;
+        gpu.maps_current = true;
         gpu.injection_pending = true;
         gpu.iteration_pending = true;
     }
@@ -573,7 +578,11 @@ pub fn translucency_gather_pass(
     else {
         return;
     };
-    let (maps, depths) = gpu.injection.as_ref().map_or((&no_maps.0, &no_maps.1), GpuInjection::translucent_maps);
+    let (maps, depths) = gpu
+        .injection
+        .as_ref()
+        .filter(|_| gpu.maps_current)
+        .map_or((&no_maps.0, &no_maps.1), GpuInjection::translucent_maps);
     // Nothing lit yet.
     if gpu.direct_generation == 0 && gpu.lights_generation == 0 {
         return;

@@ -256,13 +256,16 @@ fn splat_sample(l: u32, s: u32) {
     }
 }
 
-// The share of 3×3 texels about `p` where nothing lies nearer the light than `p` less `bias`.
-fn seen_share(l: u32, m: MapPoint, bias: f32) -> f32 {
+// The share of the (2 reach + 1)² texels about `p` where nothing lies nearer the light than
+// `p` less `bias`: 3×3 about a patch (its neighbourhood's share of the light), 1 about a
+// translucent map's entry point (on a curved object its neighbours at a grazing entry are
+// the object itself, nearer the light).
+fn seen_share(l: u32, m: MapPoint, bias: f32, reach: i32) -> f32 {
     let res = i32(injection.resolution);
     let centre = vec2<i32>(floor(m.texel));
     var seen = 0.0;
-    for (var y = -1; y <= 1; y++) {
-        for (var x = -1; x <= 1; x++) {
+    for (var y = -reach; y <= reach; y++) {
+        for (var x = -reach; x <= reach; x++) {
             let texel = clamp(centre + vec2(x, y), vec2(0), vec2(res - 1));
             let stored = atomicLoad(&depth_maps[map_index(l, m.face, texel)]);
             if stored == 0u || m.depth <= bitcast<f32>(~stored) + bias {
@@ -270,7 +273,8 @@ fn seen_share(l: u32, m: MapPoint, bias: f32) -> f32 {
             }
         }
     }
-    return seen / 9.0;
+    let side = f32(2 * reach + 1);
+    return seen / (side * side);
 }
 
 fn cube_face(local: vec3<f32>) -> u32 {
@@ -393,7 +397,7 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
         let here = map_point(light, face, a.xyz);
         let m = map_point(light, face, a.xyz + n * max(0.05 * a.w, here.texel_world));
         let slope = min(sqrt(max(1.0 - cos_i * cos_i, 0.0)) / max(cos_i, 1e-3), 8.0);
-        e *= seen_share(l, m, m.texel_world * (1.5 + slope));
+        e *= seen_share(l, m, m.texel_world * (1.5 + slope), 1);
         if tabled_patch && cos_i > 0.0 && any(e != vec3(0.0)) {
             // The table's column holds the beam's incidence and its scattering.
             let got_in = e * (1.0 - fresnel_reflectance(min(cos_i, 1.0), max(table.y, 1.0)));
@@ -433,8 +437,8 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
 //
 // `translucent_maps`, in vec4s: a header (objects, object slots with maps, resolution,
 // lights); per object (σt per world unit, slot or −1), (α, η); per map (light × slots + slot)
-// its frame (centre, half width), (u, object), (v, 0), (travel, 1 where there is a map); then
-// per map and texel its light. `translucent_depths`: per map and texel its entry and exit
+// and texel its light; then per map its frame (centre, half width), (u, object), (v, 0),
+// (travel, 1 where there is a map). `translucent_depths`: per map and texel its entry and exit
 // depths along the travel from the centre's plane (`translucent_map_depth`).
 @group(1) @binding(0) var<storage, read_write> translucent_maps: array<vec4<f32>>;
 @group(1) @binding(1) var<storage, read_write> translucent_depths: array<atomic<u32>>;
@@ -463,35 +467,33 @@ struct TranslucentFrame {
     present: bool,
 }
 
+// Where map m's frame starts (after every map's texels).
+fn translucent_frame_at(h: TranslucentMaps, m: u32) -> u32 {
+    return 1u + 2u * h.objects + h.lights * h.slots * h.resolution * h.resolution + 4u * m;
+}
+
 fn translucent_frame(h: TranslucentMaps, m: u32) -> TranslucentFrame {
-    let at = 1u + 2u * h.objects + 4u * m;
+    let at = translucent_frame_at(h, m);
     let a = translucent_maps[at];
     let t = translucent_maps[at + 3u];
     return TranslucentFrame(a.xyz, a.w, translucent_maps[at + 1u].xyz, translucent_maps[at + 2u].xyz, t.xyz, t.w > 0.0);
 }
 
-// Where map m's texels' light starts (after every light's frames).
+// Where map m's texels' light starts.
 fn translucent_light_at(h: TranslucentMaps, m: u32) -> u32 {
-    return 1u + 2u * h.objects + 4u * MAX_LIGHTS * h.slots + m * h.resolution * h.resolution;
+    return 1u + 2u * h.objects + m * h.resolution * h.resolution;
 }
 
+// The pass: the entries (true) or the exits, which need every entry splatted before.
+override ENTERING: bool = true;
+
 @compute @workgroup_size(64)
-fn splat_translucent_entries(
+fn splat_translucent_maps(
     @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(num_workgroups) groups: vec3<u32>,
 ) {
     for (var s = id.x; s < injection.samples; s += groups.x * 64u) {
-        splat_translucent(id.y, s, true);
-    }
-}
-
-@compute @workgroup_size(64)
-fn splat_translucent_exits(
-    @builtin(global_invocation_id) id: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-) {
-    for (var s = id.x; s < injection.samples; s += groups.x * 64u) {
-        splat_translucent(id.y, s, false);
+        splat_translucent(id.y, s, ENTERING);
     }
 }
 
@@ -634,17 +636,20 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
         e *= falloff * window * window / dist2;
         face = cube_face(d);
     }
-    // Shadowed by what else the light meets on its way (the object itself lies at the entry).
+    // Shadowed by what else the light meets on its way, as `inject` sees a patch: the entry
+    // lifted off the surface by a texel along its normal (from the entry depths' slope),
+    // with the slope-scaled bias.
+    let normal = normalize(gx * f.u + gy * f.v - f.travel);
     let here = map_point(light, face, entry);
-    let lifted = map_point(light, face, entry - ray * here.texel_world);
+    let lifted = map_point(light, face, entry + normal * here.texel_world);
     let slope = min(sqrt(max(1.0 - cos_entry * cos_entry, 0.0)) / max(cos_entry, 1e-3), 8.0);
-    e *= seen_share(m / h.slots, lifted, lifted.texel_world * (1.5 + slope));
+    e *= seen_share(m / h.slots, lifted, lifted.texel_world * (1.5 + slope), 1);
     let eta = clamp(translucent_maps[2u + 2u * u32(translucent_frame_object(h, m))].w, 1.0, 3.0);
     translucent_maps[at] = entry_light(e, cos_entry, eta);
 }
 
 fn translucent_frame_object(h: TranslucentMaps, m: u32) -> f32 {
-    return translucent_maps[1u + 2u * h.objects + 4u * m + 1u].w;
+    return translucent_maps[translucent_frame_at(h, m) + 1u].w;
 }
 
 // `entry_light` (translucent_shadow_map.rs): E T(μ₀) μ₀/μ₀′, and the path's scale μ₀/μ₀′ at

@@ -31,7 +31,7 @@ use super::{
     diffusion::{IncidenceWeight, diffuse_single_scattering_shape, single_scattering_shape},
     translucent_shadow_map::{MarchedMedium, PLUGIN_RESOLUTION, object_bounds},
     gather::{TranslucencyCamera, TranslucencyGpu},
-    iteration::{GpuTransport, compute_pipeline, packed_buffers_layout},
+    iteration::{GpuTransport, compute_pipeline, packed_buffers_layout, specialized_compute_pipeline},
     patches::Patches,
     transport::{EnergyTransport, PatchLight},
 };
@@ -219,11 +219,11 @@ impl TranslucentMaps {
         Self { head, slots, capacity: 0, maps, depths, bind_group, layout }
     }
 
-    /// The maps' buffers for `lights` lights: the head, every light's frames and the texels'
-    /// light (vec4s), and the texels' two depths.
+    /// The maps' buffers for `lights` lights: the head, the texels' light and every map's
+    /// frame (vec4s), and the texels' two depths.
     fn buffers(device: &RenderDevice, head: usize, slots: u32, lights: u32) -> (Buffer, Buffer) {
         let texels = lights as u64 * slots as u64 * (PLUGIN_RESOLUTION as u64).pow(2);
-        let vec4s = head as u64 + 4 * (MAX_INJECTED_LIGHTS as u64) * slots as u64 + texels;
+        let vec4s = head as u64 + texels + 4 * lights as u64 * slots as u64;
         let buffer = |label, size: u64| {
             device.create_buffer(&BufferDescriptor {
                 label: Some(label),
@@ -256,8 +256,11 @@ impl TranslucentMaps {
             (self.maps, self.depths) = Self::buffers(device, self.head.len(), slots, taken);
             self.bind_group = Self::bind_group(device, &self.layout, &self.maps, &self.depths);
         }
-        let mut words = self.head.clone();
-        words[0][3] = taken as f32;
+        let mut head = self.head.clone();
+        head[0][3] = taken as f32;
+        queue.write_buffer(&self.maps, 0, bytemuck::cast_slice(&head));
+        // The frames after every map's texels (`translucent_frame_at`).
+        let mut frames: Vec<[f32; 4]> = Vec::new();
         for light in &lights[..taken as usize] {
             for &(object, centre, radius) in &self.slots {
                 // `TranslucentShadowMap::splat`'s frame: its axes and width.
@@ -273,10 +276,11 @@ impl TranslucentMaps {
                     }
                     None => [[0.0; 4]; 4],
                 };
-                words.extend(frame);
+                frames.extend(frame);
             }
         }
-        queue.write_buffer(&self.maps, 0, bytemuck::cast_slice(&words));
+        let texels = taken as u64 * slots as u64 * (PLUGIN_RESOLUTION as u64).pow(2);
+        queue.write_buffer(&self.maps, (head.len() as u64 + texels) * 16, bytemuck::cast_slice(&frames));
     }
 
     /// Bytes of the depths of `lights` lights' maps.
@@ -452,8 +456,8 @@ impl GpuInjection {
             splat: pipeline("splat"),
             inject: pipeline("inject"),
             translucent_maps,
-            splat_entries: pipeline("splat_translucent_entries"),
-            splat_exits: pipeline("splat_translucent_exits"),
+            splat_entries: specialized_compute_pipeline(device, &pipeline_layout, &module, "splat_translucent_maps", &[("ENTERING", 1.0)]),
+            splat_exits: specialized_compute_pipeline(device, &pipeline_layout, &module, "splat_translucent_maps", &[("ENTERING", 0.0)]),
             translucent_light: pipeline("translucent_light"),
         }
     }

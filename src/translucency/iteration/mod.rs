@@ -255,7 +255,7 @@ pub(super) fn compute_pipeline(
 }
 
 /// The same with values for the module's `override` constants.
-fn specialized_compute_pipeline(
+pub(super) fn specialized_compute_pipeline(
     device: &RenderDevice,
     layout: &PipelineLayout,
     module: &ShaderModule,
