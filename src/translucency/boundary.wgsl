@@ -100,3 +100,29 @@ fn from_ordered_bits(u: u32) -> f32 {
 fn translucent_map_depth(stored: u32) -> f32 {
     return select(from_ordered_bits(~stored), bitcast<f32>(0x7f800000u), stored == 0u);
 }
+
+// The translucent maps' header and layout (`translucent_maps` in inject.wgsl, which writes
+// them; the gather reads them): objects, object slots with maps, each map's resolution and
+// the lights, in the first vec4; then per object two vec4s, per map and texel its light, per
+// map its frame.
+struct TranslucentMaps {
+    objects: u32,
+    slots: u32,
+    resolution: u32,
+    lights: u32,
+}
+
+fn translucent_maps_of(header: vec4<f32>) -> TranslucentMaps {
+    let h = vec4<u32>(header);
+    return TranslucentMaps(h.x, h.y, h.z, h.w);
+}
+
+// Where map m's texels' light starts.
+fn translucent_light_at(h: TranslucentMaps, m: u32) -> u32 {
+    return 1u + 2u * h.objects + m * h.resolution * h.resolution;
+}
+
+// Where map m's frame starts (after every map's texels).
+fn translucent_frame_at(h: TranslucentMaps, m: u32) -> u32 {
+    return 1u + 2u * h.objects + h.lights * h.slots * h.resolution * h.resolution + 4u * m;
+}

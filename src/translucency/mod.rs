@@ -32,6 +32,7 @@ mod lights;
 pub mod medium;
 pub mod patches;
 mod plugin;
+mod precompute;
 pub mod random_walk;
 mod rays;
 pub mod shape_diffusion;
@@ -54,11 +55,12 @@ use bevy::{
 
 pub use gather::TranslucencyCamera;
 pub use plugin::{
-    GatherMethod, GatherResolution, InjectedLights, LightInjection, MAX_MARCHED_OBJECTS, MAX_PATCH_BUDGET, RadiosityReceiver,
+    GatherMethod, GatherResolution, InjectedLights, LightInjection, MAX_PATCH_BUDGET, RadiosityReceiver,
     TranslucencyFrame, TranslucencyScene,
     TranslucencySettings, TranslucencyStatus, Translucent, TranslucentMaterials,
-    precompute_elapsed, translucent_patch_cap,
+    precompute_elapsed,
 };
+pub use precompute::{MAX_MARCHED_OBJECTS, translucent_patch_cap};
 
 /// Translucent objects lit globally (seed 001): [`Translucent`] on static meshes,
 /// [`RadiosityReceiver`] on the opaque ones that bounce light, [`TranslucencyCamera`] on the
@@ -78,7 +80,7 @@ impl Plugin for TranslucencyPlugin {
             .init_resource::<TranslucencySettings>()
             .init_resource::<TranslucencyStatus>()
             .init_resource::<TranslucencyFrame>()
-            .init_resource::<plugin::Precompute>()
+            .init_resource::<precompute::Precompute>()
             .add_plugins((
                 ExtractComponentPlugin::<TranslucencyCamera>::default(),
                 ExtractResourcePlugin::<TranslucencyFrame>::default(),
@@ -87,7 +89,7 @@ impl Plugin for TranslucencyPlugin {
                 PostUpdate,
                 (
                     plugin::prepare_translucent_materials,
-                    plugin::run_precompute,
+                    precompute::run_precompute,
                     plugin::inject_direct_light,
                     plugin::swap_translucent_materials,
                 )

@@ -1,6 +1,7 @@
-//! The main-world side of [`TranslucencyPlugin`](super::TranslucencyPlugin): what takes part,
-//! the precompute on a background task, the lights' direct irradiance per patch when they
-//! change, and the translucent objects' materials.
+//! The main-world side of [`TranslucencyPlugin`](super::TranslucencyPlugin): its components,
+//! settings, status and the scene the render world takes; the lights' direct irradiance per
+//! patch when they change, and the translucent objects' materials. The precompute is in
+//! `precompute.rs`.
 
 use std::{
     sync::Arc,
@@ -10,15 +11,15 @@ use std::{
 use bevy::{
     prelude::*,
     render::extract_resource::ExtractResource,
-    tasks::{AsyncComputeTaskPool, Task, block_on, poll_once},
 };
 
 use super::{
     medium::TranslucentMedium,
-    patches::{Patches, resample_into_patches_with_caps, world_triangles},
+    precompute::{Precompute, hash_f32s},
+    patches::Patches,
     translucent_shadow_map::MarchedMedium,
     transport::{
-        DirectLight, EnergyTransport, PatchLight, PatchSurface, SceneRays, TransportReport,
+        DirectLight, EnergyTransport, PatchLight, SceneRays, TransportReport,
         TransportSettings, direct_light,
     },
 };
@@ -271,17 +272,6 @@ pub struct TranslucencyScene {
     pub marched: Vec<Option<MarchedMedium>>,
 }
 
-/// Whether the table leaves single scattering to the pixels' march: where it asks to and the
-/// GPU injects the lights (the march reads the injection's maps; with shadow rays the table
-/// keeps single scattering).
-fn marches(settings: &TranslucencySettings, table: &super::beam_table::BeamTableSettings) -> bool {
-    table.single_scattering_to_pixels && matches!(settings.light_injection, LightInjection::LightViewMaps { .. })
-}
-
-/// The most translucent objects whose single scattering is marched per pixel (a map a light
-/// each, 1.5 MiB; 96 MiB at 8 lights).
-pub const MAX_MARCHED_OBJECTS: usize = 8;
-
 /// What the render world takes each frame.
 #[derive(Resource, Clone, Default, ExtractResource)]
 pub struct TranslucencyFrame {
@@ -308,28 +298,6 @@ pub struct InjectedLights {
     pub resolution: u32,
 }
 
-/// The signature of what takes part: when it changes, the precompute runs again.
-#[derive(Resource, Default)]
-pub(crate) struct Precompute {
-    signature: Vec<u64>,
-    /// A changed signature waiting to stay the same for [`SETTLE_FRAMES`] before a rebuild,
-    /// and for how many frames it has.
-    settling: Option<(Vec<u64>, u32)>,
-    task: Option<Task<(TranslucencyScene, Vec<String>, bool)>>,
-    generation: u64,
-    direct_signature: Vec<u64>,
-    direct_generation: u64,
-}
-
-type Participant<'a> = (
-    Entity,
-    &'a Mesh3d,
-    &'a MeshMaterial3d<StandardMaterial>,
-    &'a GlobalTransform,
-    Option<&'a Translucent>,
-    Option<&'a TranslucentMaterials>,
-);
-
 /// The original material of a translucent mesh and the copy without diffuse shown while its
 /// transport is ready.
 #[derive(Component, Clone, Debug)]
@@ -338,17 +306,6 @@ pub struct TranslucentMaterials {
     pub original: Handle<StandardMaterial>,
     /// Its copy with a black base colour (the diffuse comes from the patches).
     pub without_diffuse: Handle<StandardMaterial>,
-}
-
-fn hash_of(value: impl std::hash::Hash) -> u64 {
-    use std::hash::Hasher;
-    let mut hasher = std::collections::hash_map::DefaultHasher::new();
-    value.hash(&mut hasher);
-    hasher.finish()
-}
-
-fn hash_f32s(values: impl IntoIterator<Item = f32>) -> u64 {
-    super::cache::Hash::new().f32s(values).0
 }
 
 /// Gives each new translucent mesh its material without diffuse.
@@ -374,296 +331,6 @@ pub(crate) fn prepare_translucent_materials(
             original: material.0.clone(),
             without_diffuse,
         });
-    }
-}
-
-/// Starts the precompute when what takes part changes; collects it when done.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn run_precompute(
-    participants: Query<Participant, Or<(With<Translucent>, With<RadiosityReceiver>)>>,
-    meshes: Res<Assets<Mesh>>,
-    materials: Res<Assets<StandardMaterial>>,
-    mut settings: ResMut<TranslucencySettings>,
-    mut state: ResMut<Precompute>,
-    mut status: ResMut<TranslucencyStatus>,
-    mut frame: ResMut<TranslucencyFrame>,
-    mut warned: ResMut<WarnedOnce>,
-) {
-    if settings.patch_budget > MAX_PATCH_BUDGET || settings.patch_budget < 16 {
-        let capped = settings.patch_budget.clamp(16, MAX_PATCH_BUDGET);
-        warned.warn("translucency-budget", || {
-            format!(
-                "translucency: a patch budget of {} is outside 16 – {MAX_PATCH_BUDGET}; using {capped}",
-                settings.patch_budget
-            )
-        });
-        settings.patch_budget = capped;
-    }
-    if let Some(table) = settings.transport.beam_table.as_mut() {
-        // The exit directions are the CPU oracle's (translucent_accuracy --exit-axis lobe): the
-        // GPU gather does not take the lobes fitted to them, and each early entry would cost
-        // 15 floats instead of 3 for nothing on screen.
-        if std::mem::take(&mut table.exit_directions) {
-            warned.warn("translucency-exit-directions", || {
-                "translucency: BeamTableSettings::exit_directions is for the CPU oracle \
-                 (translucent_accuracy --exit-axis lobe); the plugin's gather does not use it, so \
-                 it is turned off"
-                    .to_string()
-            });
-        }
-    }
-    let mut list: Vec<Participant> = participants.iter().collect();
-    list.sort_by_key(|p| p.0);
-    // The signature: entities, meshes, transforms, media and albedos.
-    let mut signature = vec![
-        settings.patch_budget as u64,
-        hash_f32s([
-            settings.transport.diffusion_energy_kept,
-            settings.transport.form_factor_cutoff,
-            settings.transport.far_field_ratio,
-            settings.transport.cluster_size as f32,
-            settings.transport.kernel as u32 as f32,
-            settings.transport.object_exit_share as u32 as f32,
-            settings.transport.shape_diffusion as u32 as f32,
-            settings.transport.deep_exit_law as u32 as f32,
-            settings.transport.exit_lobes as u32 as f32,
-        ]),
-        // The beam table's settings (none: all zero).
-        hash_f32s(settings.transport.beam_table.map_or([0.0; 8], |t| {
-            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order, t.seed, t.max_patches, marches(&settings, &t) as u32]
-                .map(|v| v as f32)
-        })),
-    ];
-    for (entity, mesh, material, transform, translucent, _) in &list {
-        signature.push(entity.to_bits());
-        signature.push(hash_of(mesh.0.id()));
-        signature.push(hash_f32s(transform.to_matrix().to_cols_array()));
-        if translucent.is_none() {
-            let albedo = materials
-                .get(&material.0)
-                .map(|m| m.base_color.to_linear().to_f32_array());
-            signature.push(hash_f32s(albedo.unwrap_or([-1.0; 4])));
-        }
-        if let Some(t) = translucent {
-            signature.push(hash_f32s(
-                t.medium
-                    .absorption
-                    .to_array()
-                    .into_iter()
-                    .chain(t.medium.reduced_scattering.to_array())
-                    .chain([
-                        t.medium.index_of_refraction,
-                        t.world_units_per_mm,
-                        t.oriented_dipole as u32 as f32,
-                    ]),
-            ));
-        }
-    }
-    if signature != state.signature {
-        // After a first transport: static only. Back to Bevy's shading until the scene has
-        // stayed the same for a few frames, then rebuilt.
-        if state.generation > 0 {
-            let frames = match &state.settling {
-                Some((pending, frames)) if *pending == signature => frames + 1,
-                _ => 0,
-            };
-            if frames == 0 {
-                if frame.scene.is_some() || state.task.is_some() {
-                    warned.warn("translucency-moved", || {
-                        "translucency: a translucent or radiosity mesh moved, deformed or changed; \
-                         the transport is for static scenes: Bevy shades them until they stay \
-                         still, then the transport is rebuilt"
-                            .to_string()
-                    });
-                }
-                state.task = None;
-                frame.scene = None;
-                frame.direct = None;
-                frame.lights = None;
-                *status = TranslucencyStatus::Loading;
-            }
-            if frames < SETTLE_FRAMES {
-                state.settling = Some((signature, frames));
-                frame.settings = settings.clone();
-                return;
-            }
-        }
-        state.settling = None;
-        state.signature = signature;
-        state.task = None;
-        frame.scene = None;
-        frame.direct = None;
-        frame.lights = None;
-        if list.iter().all(|p| p.4.is_none()) {
-            *status = TranslucencyStatus::Idle;
-            return;
-        }
-        // Every mesh loaded and a triangle list; translucent media valid.
-        let mut objects = Vec::new();
-        let mut entities = Vec::new();
-        for (entity, mesh, material, transform, translucent, swapped) in &list {
-            // Translucent meshes may show their copy without diffuse: read the original.
-            let material = swapped.map_or(&material.0, |m| &m.original);
-            let (Some(mesh), Some(material)) = (meshes.get(&mesh.0), materials.get(material))
-            else {
-                *status = TranslucencyStatus::Loading;
-                state.signature.clear();
-                return;
-            };
-            let Some((positions, indices)) = world_triangles(mesh, transform) else {
-                warned.warn(format!("translucency-mesh-{entity}"), || {
-                    format!("translucency: the mesh of {entity} is not a triangle list with positions; it takes no part")
-                });
-                continue;
-            };
-            let surface = match translucent {
-                Some(t) => {
-                    if let Some(reason) = t.medium.invalid_reason() {
-                        warned.warn(format!("translucency-medium-{entity}"), || {
-                            format!("translucency: {entity}'s medium is unusable ({reason}); it is shaded by Bevy")
-                        });
-                        continue;
-                    }
-                    if !(t.world_units_per_mm.is_finite() && t.world_units_per_mm > 0.0) {
-                        warned.warn(format!("translucency-units-{entity}"), || {
-                            format!("translucency: {entity}'s world_units_per_mm {} must be positive; it is shaded by Bevy", t.world_units_per_mm)
-                        });
-                        continue;
-                    }
-                    PatchSurface::Translucent {
-                        medium: t.medium,
-                        world_units_per_mm: t.world_units_per_mm,
-                        oriented_dipole: t.oriented_dipole,
-                    }
-                }
-                None => {
-                    let c = material.base_color.to_linear();
-                    PatchSurface::Opaque {
-                        albedo: Vec3::new(c.red, c.green, c.blue),
-                    }
-                }
-            };
-            objects.push((positions, indices, surface));
-            entities.push(*entity);
-        }
-        let budget = settings.patch_budget as usize;
-        let mut transport_settings = settings.transport;
-        if let Some(table) = transport_settings.beam_table.as_mut() {
-            table.single_scattering_to_pixels = marches(&settings, table);
-        }
-        // Each translucent object marching its single scattering takes a map a light
-        // (1.5 MiB each); beyond `MAX_MARCHED_OBJECTS` the table keeps single scattering.
-        let translucent_objects = objects.iter().filter(|o| matches!(o.2, PatchSurface::Translucent { .. })).count();
-        if let Some(table) = transport_settings.beam_table.as_mut()
-            && table.single_scattering_to_pixels
-            && translucent_objects > MAX_MARCHED_OBJECTS
-        {
-            table.single_scattering_to_pixels = false;
-            warned.warn("translucency-marched-objects", || {
-                format!(
-                    "translucency: {translucent_objects} translucent objects are more than the \
-                     {MAX_MARCHED_OBJECTS} that march their single scattering per pixel; the beam \
-                     table keeps it for all"
-                )
-            });
-        }
-        let cache_dir = settings.cache_dir.clone();
-        state.task = Some(AsyncComputeTaskPool::get().spawn(async move {
-            let views: Vec<_> = objects
-                .iter()
-                .map(|(p, i, _)| super::patches::PatchObject { positions: p, indices: i })
-                .collect();
-            let surfaces: Vec<PatchSurface> = objects.iter().map(|o| o.2).collect();
-            let rays = SceneRays::new(&views);
-            let mut notes = Vec::new();
-            // From the cache where it holds this very scene; else built (and kept).
-            let file = cache_dir.as_ref().map(|dir| {
-                let keyed: Vec<_> = objects.iter().map(|(p, i, s)| (p.as_slice(), i.as_slice(), *s)).collect();
-                let key = super::cache::scene_key(&keyed, budget, &transport_settings);
-                dir.join(format!("{key:016x}.translucency"))
-            });
-            let cached = file.as_ref().and_then(|path| match super::cache::load(path) {
-                Ok(loaded) => Some(loaded),
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-                Err(e) => {
-                    notes.push(format!("translucency: the cached transport {} is unreadable ({e}); built again", path.display()));
-                    None
-                }
-            });
-            let from_cache = cached.is_some();
-            let (patches, mut transport) = cached.unwrap_or_else(|| {
-                let caps: Vec<Option<f32>> = surfaces
-                    .iter()
-                    .map(|s| translucent_patch_cap(s, &transport_settings))
-                    .collect();
-                let patches = resample_into_patches_with_caps(&views, &caps, budget);
-                let transport = EnergyTransport::build(&patches, &surfaces, &rays, &transport_settings);
-                if let Some(path) = &file {
-                    let kept = path
-                        .parent()
-                        .map_or(Ok(()), std::fs::create_dir_all)
-                        .and_then(|_| super::cache::save(path, &patches, &transport));
-                    if let Err(e) = kept {
-                        notes.push(format!("translucency: cannot keep the transport in {} ({e})", path.display()));
-                    }
-                }
-                (patches, transport)
-            });
-            if let (Some(table), skipped @ 1..) = (transport_settings.beam_table, transport.report.beam_table_skipped) {
-                notes.push(format!(
-                    "translucency: {skipped} translucent patches are more than the beam table's max_patches ({}); \
-                     their beams enter by the diffusion profile (raise BeamTableSettings::max_patches, or lower the patch budget)",
-                    table.max_patches
-                ));
-            }
-            transport.incidence = EnergyTransport::incidence_weights(&surfaces, &transport_settings);
-            let albedo = super::transport::patch_albedos(&patches, &surfaces);
-            let exit_laws = transport.exit_laws(&patches, &surfaces, &transport_settings);
-            let source_depths = EnergyTransport::source_depths(&patches, &surfaces);
-            let marched = match transport.beam_table.as_ref() {
-                Some(table) if table.settings.single_scattering_to_pixels => surfaces.iter().map(MarchedMedium::of).collect(),
-                _ => Vec::new(),
-            };
-            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, source_depths, entities, marched }, notes, from_cache)
-        }));
-        *status = TranslucencyStatus::Precomputing {
-            since: Instant::now(),
-        };
-    }
-    if let Some(task) = state.task.as_mut()
-        && let Some((scene, notes, from_cache)) = block_on(poll_once(task))
-    {
-        for note in notes {
-            warned.warn(note.clone(), || note);
-        }
-        state.task = None;
-        state.generation += 1;
-        state.direct_signature.clear();
-        *status = TranslucencyStatus::Ready {
-            patches: scene.patches.patches.len(),
-            report: scene.transport.report.clone(),
-            from_cache,
-        };
-        frame.scene = Some((state.generation, Arc::new(scene)));
-    }
-    frame.settings = settings.clone();
-}
-
-/// The widest patch a translucent object may have: a third of the radius within which its
-/// profile gives off 99 % of its light, so that each patch has neighbours to pass light to
-/// (with the room's uniform share, a 10 cm marble bunny got 68 patches of 21 mm and the
-/// Burley profile, 99 % within ~9 mm, reached none of them).
-pub fn translucent_patch_cap(surface: &PatchSurface, settings: &TransportSettings) -> Option<f32> {
-    match *surface {
-        PatchSurface::Translucent {
-            medium,
-            world_units_per_mm,
-            ..
-        } => {
-            let profile = super::diffusion::DiffusionProfile::new(&medium, settings.kernel);
-            Some((profile.radius_holding(0.99) / 3.0) as f32 * world_units_per_mm)
-        }
-        PatchSurface::Opaque { .. } => None,
     }
 }
 

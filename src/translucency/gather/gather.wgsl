@@ -18,7 +18,8 @@
 #import bevy_render::view::View
 #import bevy_mesostructure::translucency::boundary::{
     deep_exit_shape, deep_exit_shape_about, fresnel_reflectance, from_ordered_bits, ordered_bits,
-    translucent_map_depth,
+    translucent_map_depth, TranslucentMaps, translucent_maps_of, translucent_light_at,
+    translucent_frame_at,
 }
 
 struct GatherParams {
@@ -287,13 +288,6 @@ fn add_patch(i: u32, s: Surface, acc: ptr<function, Gathered>) {
 // through the boundary, T(μ)/η².
 const MARCHED_DEPTHS: u32 = 16u;
 
-struct TranslucentMaps {
-    objects: u32,
-    slots: u32,
-    resolution: u32,
-    lights: u32,
-}
-
 // `TranslucentShadowMap::lit_path_inside`: the light's path inside to `p` in map `m` and
 // its own texel's light (the path's scale in w); `inside` false before the entry or beyond
 // the first exit by more than a texel, or off the object.
@@ -332,14 +326,12 @@ fn lit_path_inside(h: TranslucentMaps, m: u32, frame_at: u32, p: vec3<f32>) -> L
     var lit: LitPath;
     lit.inside = near < 3.0e38 && depth >= near - texel && depth <= far + texel;
     lit.path = max(depth - near, 0.0);
-    let light_at = 1u + 2u * h.objects + first;
-    lit.light = translucent_maps[light_at + u32(own.y * res + own.x)];
+    lit.light = translucent_maps[translucent_light_at(h, m) + u32(own.y * res + own.x)];
     return lit;
 }
 
 fn marched_single_scattering(object: i32, s: Surface) -> vec3<f32> {
-    let header = vec4<u32>(translucent_maps[0]);
-    let h = TranslucentMaps(header.x, header.y, header.z, header.w);
+    let h = translucent_maps_of(translucent_maps[0]);
     if object < 0 || u32(object) >= h.objects || s.mu <= 0.0 {
         return vec3(0.0);
     }
@@ -356,8 +348,7 @@ fn marched_single_scattering(object: i32, s: Surface) -> vec3<f32> {
     var total = vec3(0.0);
     for (var l = 0u; l < h.lights; l++) {
         let m = l * h.slots + u32(medium.w);
-        // `translucent_frame_at` in inject.wgsl: after every map's texels.
-        let frame_at = 1u + 2u * h.objects + h.lights * h.slots * h.resolution * h.resolution + 4u * m;
+        let frame_at = translucent_frame_at(h, m);
         if translucent_maps[frame_at + 3u].w <= 0.0 {
             continue;
         }

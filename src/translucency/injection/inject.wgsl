@@ -446,16 +446,8 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
 // The widest splat in texels (`MAX_SPLAT_TEXELS` in translucent_shadow_map.rs).
 const TRANSLUCENT_SPLAT_TEXELS: f32 = 64.0;
 
-struct TranslucentMaps {
-    objects: u32,
-    slots: u32,
-    resolution: u32,
-    lights: u32,
-}
-
 fn translucent_maps_header() -> TranslucentMaps {
-    let h = vec4<u32>(translucent_maps[0]);
-    return TranslucentMaps(h.x, h.y, h.z, h.w);
+    return translucent_maps_of(translucent_maps[0]);
 }
 
 struct TranslucentFrame {
@@ -467,11 +459,6 @@ struct TranslucentFrame {
     present: bool,
 }
 
-// Where map m's frame starts (after every map's texels).
-fn translucent_frame_at(h: TranslucentMaps, m: u32) -> u32 {
-    return 1u + 2u * h.objects + h.lights * h.slots * h.resolution * h.resolution + 4u * m;
-}
-
 fn translucent_frame(h: TranslucentMaps, m: u32) -> TranslucentFrame {
     let at = translucent_frame_at(h, m);
     let a = translucent_maps[at];
@@ -479,10 +466,6 @@ fn translucent_frame(h: TranslucentMaps, m: u32) -> TranslucentFrame {
     return TranslucentFrame(a.xyz, a.w, translucent_maps[at + 1u].xyz, translucent_maps[at + 2u].xyz, t.xyz, t.w > 0.0);
 }
 
-// Where map m's texels' light starts.
-fn translucent_light_at(h: TranslucentMaps, m: u32) -> u32 {
-    return 1u + 2u * h.objects + m * h.resolution * h.resolution;
-}
 
 // The pass: the entries (true) or the exits, which need every entry splatted before.
 override ENTERING: bool = true;
