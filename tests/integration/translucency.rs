@@ -1198,7 +1198,7 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
 #[test]
 fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     use bevy_mesostructure::translucency::{
-        LightInjection, TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin,
+        LightInjection, MAX_MARCHED_OBJECTS, TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin,
         TranslucencySettings, Translucent, TranslucentMaterials, TranslucentMedium,
     };
     if !gpu_or_skip() {
@@ -1340,13 +1340,25 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
 
     // A light-view resolution out of range: a warning, clamped (the table built again: it
-    // leaves single scattering to the pixels' march now that there are maps).
+    // would leave single scattering to the pixels' march now that there are maps, but there
+    // are more translucent objects than march — eight more balls, nine good ones —: a
+    // warning, and the table keeps it).
+    let more = mesh(&mut app, Sphere::new(0.05).mesh().ico(2).unwrap());
+    for i in 0..MAX_MARCHED_OBJECTS {
+        app.world_mut().spawn((
+            more.clone(),
+            MeshMaterial3d(material.clone()),
+            Translucent::default(),
+            Transform::from_xyz(-0.4 + 0.12 * i as f32, 0.3, -0.3),
+        ));
+    }
     app.world_mut()
         .resource_mut::<TranslucencySettings>()
         .light_injection = LightInjection::LightViewMaps { resolution: 0 };
     run(&mut app, 2);
     run_until_ready(&mut app);
     run(&mut app, 2);
+    assert!(warnings(&app).iter().any(|c| c == "translucency-marched-objects"), "{:?}", warnings(&app));
     assert!(warnings(&app).iter().any(|c| c == "translucency-injection-resolution"));
     let frame = app.world().resource::<TranslucencyFrame>();
     assert_eq!(frame.lights.as_ref().map(|l| l.1.resolution), Some(32));
