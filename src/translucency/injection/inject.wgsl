@@ -256,16 +256,13 @@ fn splat_sample(l: u32, s: u32) {
     }
 }
 
-// The share of the (2 reach + 1)² texels about `p` where nothing lies nearer the light than
-// `p` less `bias`: 3×3 about a patch (its neighbourhood's share of the light), 1 about a
-// translucent map's entry point (on a curved object its neighbours at a grazing entry are
-// the object itself, nearer the light).
-fn seen_share(l: u32, m: MapPoint, bias: f32, reach: i32) -> f32 {
+// The share of 3×3 texels about `p` where nothing lies nearer the light than `p` less `bias`.
+fn seen_share(l: u32, m: MapPoint, bias: f32) -> f32 {
     let res = i32(injection.resolution);
     let centre = vec2<i32>(floor(m.texel));
     var seen = 0.0;
-    for (var y = -reach; y <= reach; y++) {
-        for (var x = -reach; x <= reach; x++) {
+    for (var y = -1; y <= 1; y++) {
+        for (var x = -1; x <= 1; x++) {
             let texel = clamp(centre + vec2(x, y), vec2(0), vec2(res - 1));
             let stored = atomicLoad(&depth_maps[map_index(l, m.face, texel)]);
             if stored == 0u || m.depth <= bitcast<f32>(~stored) + bias {
@@ -273,8 +270,7 @@ fn seen_share(l: u32, m: MapPoint, bias: f32, reach: i32) -> f32 {
             }
         }
     }
-    let side = f32(2 * reach + 1);
-    return seen / (side * side);
+    return seen / 9.0;
 }
 
 fn cube_face(local: vec3<f32>) -> u32 {
@@ -328,6 +324,21 @@ fn direction_weights(travel: vec3<f32>, n: vec3<f32>, mu: f32) -> DirectionWeigh
     );
 }
 
+// A point or spot light's irradiance across its ray per unit intensity at squared distance
+// `dist2`, the ray leaving it along the unit `from_light`: Bevy's cone (spot) and range
+// window over the distance squared (`PatchLight::irradiance_across`).
+fn falloff_over_distance2(light: InjectedLight, from_light: vec3<f32>, dist2: f32) -> f32 {
+    var falloff = 1.0;
+    if light.kind == SPOT {
+        let t = clamp((dot(from_light, normalize(light.direction)) - light.cos_outer) * light.cone_scale, 0.0, 1.0);
+        falloff = t * t;
+    }
+    // Bevy's range window.
+    let f = dist2 / (light.range * light.range);
+    let s = clamp(1.0 - f * f, 0.0, 1.0);
+    return falloff * s * s / dist2;
+}
+
 @compute @workgroup_size(64)
 fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -373,16 +384,7 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
             }
             to_light = d * inverseSqrt(dist2);
             let cos_i = dot(n, to_light);
-            var falloff = 1.0;
-            if light.kind == SPOT {
-                let cos_psi = dot(-to_light, normalize(light.direction));
-                let t = clamp((cos_psi - light.cos_outer) * light.cone_scale, 0.0, 1.0);
-                falloff = t * t;
-            }
-            // Bevy's range window.
-            let f = dist2 / (light.range * light.range);
-            let s = clamp(1.0 - f * f, 0.0, 1.0);
-            e = light.intensity * max(falloff * s * s * cos_i / dist2, 0.0);
+            e = light.intensity * max(falloff_over_distance2(light, -to_light, dist2) * cos_i, 0.0);
         }
         if all(e == vec3(0.0)) {
             continue;
@@ -397,7 +399,7 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
         let here = map_point(light, face, a.xyz);
         let m = map_point(light, face, a.xyz + n * max(0.05 * a.w, here.texel_world));
         let slope = min(sqrt(max(1.0 - cos_i * cos_i, 0.0)) / max(cos_i, 1e-3), 8.0);
-        e *= seen_share(l, m, m.texel_world * (1.5 + slope), 1);
+        e *= seen_share(l, m, m.texel_world * (1.5 + slope));
         if tabled_patch && cos_i > 0.0 && any(e != vec3(0.0)) {
             // The table's column holds the beam's incidence and its scattering.
             let got_in = e * (1.0 - fresnel_reflectance(min(cos_i, 1.0), max(table.y, 1.0)));
@@ -570,9 +572,9 @@ fn translucent_slope(h: TranslucentMaps, m: u32, x: i32, y: i32, step: vec2<i32>
 // Each texel's light inside the object (`TranslucentShadowMap::light_texels` with
 // `PatchLight::irradiance_across` and `entry_light`): the light's irradiance across its
 // travel where it enters, Bevy's fall-off and range window for a point or spot, shadowed by
-// the scene as the injection's map sees the entry point (lifted a texel towards the light,
-// biased by the entry's slope as `inject`), times what gets through the boundary, and the
-// path's scale for its refraction in w.
+// the scene as the injection's map sees the entry point (lifted a texel along its normal,
+// biased by the entry's slope, as `inject` a patch), times what gets through the boundary,
+// and the path's scale for its refraction in w.
 @compute @workgroup_size(64)
 fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
     let h = translucent_maps_header();
@@ -609,14 +611,7 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
             return;
         }
         ray = d * inverseSqrt(dist2);
-        var falloff = 1.0;
-        if light.kind == SPOT {
-            let t = clamp((dot(ray, normalize(light.direction)) - light.cos_outer) * light.cone_scale, 0.0, 1.0);
-            falloff = t * t;
-        }
-        let r = dist2 / (light.range * light.range);
-        let window = clamp(1.0 - r * r, 0.0, 1.0);
-        e *= falloff * window * window / dist2;
+        e *= falloff_over_distance2(light, ray, dist2);
         face = cube_face(d);
     }
     // Shadowed by what else the light meets on its way, as `inject` sees a patch: the entry
@@ -626,7 +621,7 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
     let here = map_point(light, face, entry);
     let lifted = map_point(light, face, entry + normal * here.texel_world);
     let slope = min(sqrt(max(1.0 - cos_entry * cos_entry, 0.0)) / max(cos_entry, 1e-3), 8.0);
-    e *= seen_share(m / h.slots, lifted, lifted.texel_world * (1.5 + slope), 1);
+    e *= seen_share(m / h.slots, lifted, lifted.texel_world * (1.5 + slope));
     let eta = clamp(translucent_maps[2u + 2u * u32(translucent_frame_object(h, m))].w, 1.0, 3.0);
     translucent_maps[at] = entry_light(e, cos_entry, eta);
 }
