@@ -23,6 +23,7 @@
 //!     [--late-walks N] [--lit-face-single-scattering-law]
 //!     [--marched-single-scattering | --translucent-shadow-map N | --single-scattering-in-table]
 //!     [--exit-axis plugin|normal|normal-all|flow-all|lobe] [--exit-lobes true|false]
+//!     [--point-light DISTANCE] [--pixels-on-mesh]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
@@ -180,6 +181,18 @@ struct Cli {
     /// the march). No suffix
     #[arg(long)]
     single_scattering_in_table: bool,
+    /// A point light this far (metres) from the object's centre, back along the light's
+    /// direction, of irradiance 1 across its rays at the centre, instead of the directional
+    /// light: each patch's beam from it, each object's map in perspective from it.
+    /// Index-matched, `--scattering beam-table` or `profile`; the reference is Mitsuba's.
+    /// Lighting suffix `_point<distance>`
+    #[arg(long, value_name = "DISTANCE")]
+    point_light: Option<f32>,
+    /// The ball's pixels on its triangles (as the GPU's depth prepass puts them), not on the
+    /// sphere its references are of: the march's maps are of the triangles too. Method suffix
+    /// `_onmesh`
+    #[arg(long)]
+    pixels_on_mesh: bool,
     /// Take the dipole's flux along each exit patch's normal
     /// (`Translucent::oriented_dipole`; method suffix `_oriented` when on)
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
@@ -417,6 +430,17 @@ fn main() {
     if cli.uniform && cli.bevy {
         fail("--bevy fits Bevy's material under the directional light only (drop --uniform)".into());
     }
+    if let Some(distance) = cli.point_light {
+        if !(distance > 0.0 && distance.is_finite()) {
+            fail(format!("--point-light takes a positive distance in metres, not {distance}"));
+        }
+        if cli.uniform || cli.eta != 1.0 || cli.bevy || cli.marched_single_scattering || cli.single_scattering_oracle {
+            fail("--point-light takes an index-matched object (drop --uniform, --eta, --bevy, --marched-single-scattering, --single-scattering-oracle)".into());
+        }
+        if !matches!(cli.scattering, Scattering::BeamTable | Scattering::Profile) {
+            fail("--point-light takes --scattering beam-table or profile (the walk oracles launch one beam for all patches)".into());
+        }
+    }
     let light = cli.light.unwrap_or(FRONT_LIGHT.normalize());
     let eta_suffix = if cli.eta != 1.0 { format!("_eta{}", cli.eta) } else { String::new() };
     let lighting = if cli.uniform {
@@ -425,16 +449,17 @@ fn main() {
         format!("back{eta_suffix}")
     } else {
         format!("front{eta_suffix}")
-    };
+    } + &cli.point_light.map_or(String::new(), |d| format!("_point{d}"));
     let name = format!("{:?}", cli.medium).to_lowercase();
     let size = cli.size;
-    let view = ShapeView::new(shape, size);
+    let view = if cli.pixels_on_mesh { ShapeView::on_mesh(shape, size) } else { ShapeView::new(shape, size) };
     let reference_path = cli.reference.clone().unwrap_or_else(|| {
         let dir = PathBuf::from("out/translucent_accuracy");
         std::fs::create_dir_all(&dir).unwrap_or_else(|e| fail(format!("cannot create {}: {e}", dir.display())));
         // The light tracer takes a directional light only: a uniform environment is Mitsuba's.
-        // The light tracer traces the ball only.
-        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && shape == Shape::Ball;
+        // The light tracer traces the ball (the sphere) only.
+        let on_sphere = shape == Shape::Ball && !cli.pixels_on_mesh;
+        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && on_sphere && cli.point_light.is_none();
         // Named by renderer and version: the first Mitsuba references (in metres, `volpath`)
         // were dark by Mitsuba's ray offsets (tools/translucent_reference.py says why).
         let (tool, renderer, samples) = if light_traced {
@@ -444,17 +469,21 @@ fn main() {
         };
         let path = dir.join(format!(
             "reference_{renderer}_{}{name}_{size}_{}{}{}.exr",
-            if shape == Shape::Ball { String::new() } else { format!("{}_", shape.scene_name()) },
+            match shape {
+                Shape::Ball if on_sphere => String::new(),
+                Shape::Ball => "ballmesh_".into(),
+                _ => format!("{}_", shape.scene_name()),
+            },
             samples.trim_start_matches("--spp=").trim_start_matches("--photons="),
             if cli.light.is_some() && !cli.uniform { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() },
-            if cli.uniform || cli.eta != 1.0 { format!("_{lighting}") } else { String::new() },
+            if cli.uniform || cli.eta != 1.0 || cli.point_light.is_some() { format!("_{lighting}") } else { String::new() },
         ));
         if !path.exists() {
             let list = |v: Vec3| format!("{},{},{}", v.x, v.y, v.z);
-            // The ball is Mitsuba's own sphere; another shape, the very triangles the
-            // plugin's patches come from.
+            // The ball is Mitsuba's own sphere; another shape (or the ball with its pixels on
+            // its triangles), the very triangles the plugin's patches come from.
             let object = match shape {
-                Shape::Ball => format!("--radius={RADIUS}"),
+                Shape::Ball if on_sphere => format!("--radius={RADIUS}"),
                 _ => {
                     let obj = dir.join(format!("{}_{}.obj", shape.scene_name(), shape.size_name()));
                     write_obj(&obj, &view).unwrap_or_else(|e| fail(format!("cannot write {}: {e}", obj.display())));
@@ -477,6 +506,9 @@ fn main() {
             ]);
             if cli.uniform {
                 command.arg("--uniform");
+            }
+            if let Some(distance) = cli.point_light {
+                command.arg(format!("--point-light={distance}"));
             }
             eprintln!("rendering the reference: {command:?}");
             let start = Instant::now();
@@ -618,8 +650,9 @@ fn main() {
         Axis::Lobe => (ExitAxis::Lobe, "_exitlobe"),
     };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}",
-        cli.kernel
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{}",
+        cli.kernel,
+        if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" }
     )
     .to_lowercase();
     let oracles = Oracles {
@@ -638,7 +671,11 @@ fn main() {
             &settings,
             gather,
             budget,
-            if cli.uniform { SceneLighting::Uniform } else { SceneLighting::Directional(light) },
+            match cli.point_light {
+                _ if cli.uniform => SceneLighting::Uniform,
+                Some(distance) => SceneLighting::Point(-light.normalize() * distance),
+                None => SceneLighting::Directional(light),
+            },
             oracles,
         );
         let picture = &result.pixels;

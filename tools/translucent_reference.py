@@ -33,6 +33,10 @@ Arguments in metres and per millimetre, as the example's scene; radiance per uni
 of the light (irradiance 1 on a plane facing it), which does not depend on the unit of
 length. Not needed by the crate or its tests.
 
+`--point-light DISTANCE` (metres) puts a point light that far back along `--light` from the
+origin instead of the directional light, of irradiance 1 across its rays at the origin (the
+accuracy example's `--point-light`).
+
 `--mesh FILE.obj` (metres, closed) renders that mesh's medium instead of the ball: the
 accuracy example writes the very triangles its patches come from (`--shape bunny`);
 index-matched under the directional light only. `--seed` picks the sampler's seed: two
@@ -66,6 +70,10 @@ def main():
                         help="a uniform environment of radiance 1 instead of the light")
     parser.add_argument("--max-depth", type=int, default=-1,
                         help="longest path (2: single scattering alone; -1: unbounded)")
+    parser.add_argument("--point-light", type=float, default=None, metavar="DISTANCE",
+                        help="a point light this far (metres) from the origin, back along --light, "
+                             "of irradiance 1 across its rays at the origin, instead of the "
+                             "directional light")
     parser.add_argument("--seed", type=int, default=0,
                         help="the sampler's seed (two renders of different seeds give the noise)")
     args = parser.parse_args()
@@ -79,6 +87,8 @@ def main():
                      "cannot reach the camera through a smooth boundary")
     if (args.radius is not None and args.radius <= 0) or args.size <= 0 or args.spp <= 0:
         parser.error("--radius, --size and --spp must be positive")
+    if args.point_light is not None and (not args.point_light > 0 or args.uniform):
+        parser.error("--point-light takes a positive distance, and not with --uniform")
 
     import mitsuba as mi
 
@@ -119,7 +129,11 @@ def main():
         **({"environment": {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}
            if args.uniform else
            {"sun": {"type": "directional", "direction": args.light,
-                    "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}),
+                    "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}
+           if args.point_light is None else
+           {"lamp": {"type": "point", "position": point_light_position(args, mm),
+                     # Irradiance 1 across its rays at the origin, in millimetres.
+                     "intensity": {"type": "rgb", "value": [(mm * args.point_light) ** 2] * 3}}}),
     })
     image = mi.render(scene)
     if args.uniform:
@@ -129,6 +143,12 @@ def main():
         image = mi.Bitmap(image.astype(np.float32))
     mi.Bitmap(image).write(args.out)
     print(f"wrote {args.out}")
+
+
+def point_light_position(args, mm):
+    """`--point-light`'s position in millimetres: back along `--light` from the origin."""
+    length = sum(v * v for v in args.light) ** 0.5
+    return [-mm * args.point_light * v / length for v in args.light]
 
 
 def fresnel(cos_i, eta):

@@ -170,10 +170,21 @@ pub struct ShapeView {
 impl ShapeView {
     /// The view of `shape`: the ball's hits in closed form, the others' by rays.
     pub fn new(shape: Shape, size: u32) -> Self {
+        Self::with_hits(shape, size, false)
+    }
+
+    /// The view of `shape` with every hit on its triangles, as the GPU's depth prepass puts
+    /// its pixels (the ball's normals still the sphere's, as its interpolated normals are).
+    /// The ball's references are of the sphere, so its silhouette and rim differ from them.
+    pub fn on_mesh(shape: Shape, size: u32) -> Self {
+        Self::with_hits(shape, size, true)
+    }
+
+    fn with_hits(shape: Shape, size: u32, on_mesh: bool) -> Self {
         let eye = shape.eye();
         let (positions, indices) = shape.triangles();
         let hits: Vec<Option<PixelHit>> = match shape {
-            Shape::Ball => (0..size * size)
+            Shape::Ball if !on_mesh => (0..size * size)
                 .map(|i| {
                     let d = camera_ray(eye, i % size, i / size, size);
                     let b = eye.dot(d);
@@ -190,7 +201,7 @@ impl ShapeView {
                     })
                 })
                 .collect(),
-            Shape::Bunny | Shape::Torus => {
+            Shape::Ball | Shape::Bunny | Shape::Torus => {
                 let rays = SceneRays::new(&[PatchObject {
                     positions: &positions,
                     indices: &indices,
@@ -201,7 +212,11 @@ impl ShapeView {
                         rays.first_hit(eye, d).map(|(distance, n)| PixelHit {
                             direction: d,
                             point: eye + d * distance,
-                            normal: if n.dot(d) > 0.0 { -n } else { n },
+                            normal: match shape {
+                                Shape::Ball => (eye + d * distance).normalize(),
+                                _ if n.dot(d) > 0.0 => -n,
+                                _ => n,
+                            },
                             distance,
                         })
                     })
@@ -253,10 +268,13 @@ pub struct ShapePicture {
 }
 
 /// How the object is lit.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SceneLighting {
     /// A directional light of irradiance 1 travelling along this (unit) direction.
     Directional(Vec3),
+    /// A point light at this position, of irradiance 1 across its rays at the origin (the
+    /// object's centre).
+    Point(Vec3),
     /// A uniform environment of radiance 1: Bevy's ambient light, irradiance π on every
     /// translucent patch, as the plugin injects it.
     Uniform,
@@ -410,6 +428,14 @@ pub fn plugin_picture(
             }],
             Vec3::ZERO,
         ),
+        SceneLighting::Point(position) => (
+            vec![PatchLight::Point {
+                position,
+                intensity: Vec3::splat(position.length_squared()),
+                range: 1e3,
+            }],
+            Vec3::ZERO,
+        ),
         SceneLighting::Uniform => (Vec::new(), Vec3::splat(std::f32::consts::PI)),
     };
     let start = Instant::now();
@@ -420,9 +446,16 @@ pub fn plugin_picture(
     let settings = &TransportSettings { beam_table: None, ..*settings };
     let mut transport = EnergyTransport::build(&patches, &surfaces, &rays, settings);
     // Each patch's launch: diffuse, the light's beam, or its beam snapped to a table's.
+    // The walk oracles' one beam for every patch (a point light's beams differ by patch: the
+    // table's alone take them, `beam_of`).
     let beam = match lighting {
         SceneLighting::Directional(beam) => Some(beam.normalize()),
         // Light from everywhere has no one beam: diffuse walks.
+        SceneLighting::Uniform | SceneLighting::Point(_) => None,
+    };
+    let beam_of = |q: &bevy_mesostructure::translucency::Patch| match lighting {
+        SceneLighting::Directional(beam) => Some(beam.normalize()),
+        SceneLighting::Point(position) => (q.centre - position).try_normalize(),
         SceneLighting::Uniform => None,
     };
     let walked = match (oracles.scattering, beam) {
@@ -485,14 +518,15 @@ pub fn plugin_picture(
             transport.single_scattering.iter_mut().for_each(|s| *s = Vec3::ZERO);
         }
     }
-    let table = match (oracles.scattering, beam) {
-        (ScatteringSource::BeamTable(table_settings), Some(travel)) => {
+    let table = match oracles.scattering {
+        ScatteringSource::BeamTable(table_settings) if lighting != SceneLighting::Uniform => {
             // The walks hold the beam's incidence: no incidence weight on the object.
             transport.incidence.iter_mut().for_each(|w| *w = None);
             let only: Vec<Vec<u32>> = patches
                 .patches
                 .iter()
                 .map(|q| {
+                    let Some(travel) = beam_of(q) else { return Vec::new() };
                     let weights = direction_weights(travel, q.normal, table_settings.cosines, table_settings.azimuths);
                     let mut bins: Vec<u32> = weights.into_iter().flatten().filter(|&(_, w)| w > 0.0).map(|(b, _)| b).collect();
                     bins.sort_unstable();
@@ -517,6 +551,10 @@ pub fn plugin_picture(
     let marched = match (oracles.scattering, lighting) {
         (ScatteringSource::BeamTable(t), SceneLighting::Directional(travel)) if table && t.single_scattering_to_pixels => {
             Some(travel.normalize())
+        }
+        // The map's march only (`--marched-single-scattering`'s rays take a directional light).
+        (ScatteringSource::BeamTable(t), SceneLighting::Point(position)) if table && t.single_scattering_to_pixels => {
+            Some(-position.normalize_or_zero())
         }
         _ => None,
     };

@@ -126,3 +126,70 @@ fn translucent_light_at(h: TranslucentMaps, m: u32) -> u32 {
 fn translucent_frame_at(h: TranslucentMaps, m: u32) -> u32 {
     return 1u + 2u * h.objects + h.lights * h.slots * h.resolution * h.resolution + 4u * m;
 }
+
+// `MapFrame` (translucent_shadow_map.rs): a map's frame from its four vec4s (origin, width),
+// (u, object), (v, 1 if perspective), (travel, 1 where there is a map). Orthographic for a
+// directional light (origin the object's centre, width in world units), perspective for a
+// point or spot (origin the light, width the tangent of the half-angle).
+struct TranslucentFrame {
+    origin: vec3<f32>,
+    width: f32,
+    u: vec3<f32>,
+    v: vec3<f32>,
+    travel: vec3<f32>,
+    perspective: bool,
+    present: bool,
+}
+
+fn translucent_frame_of(a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, d: vec4<f32>) -> TranslucentFrame {
+    return TranslucentFrame(a.xyz, a.w, b.xyz, c.xyz, d.xyz, c.w > 0.0, d.w > 0.0);
+}
+
+// `MapFrame::place`: a point's texel coordinates (centres at k + ½) and depth in a map of
+// `res` texels a side; `on` false behind a perspective map's light.
+struct MapPlace {
+    at: vec2<f32>,
+    depth: f32,
+    on: bool,
+}
+
+fn translucent_place(f: TranslucentFrame, p: vec3<f32>, res: u32) -> MapPlace {
+    let r = p - f.origin;
+    let texel = 2.0 * f.width / f32(res);
+    let across = vec2(dot(r, f.u), dot(r, f.v));
+    if !f.perspective {
+        return MapPlace((across + f.width) / texel, dot(r, f.travel), true);
+    }
+    let z = dot(r, f.travel);
+    return MapPlace((across / max(z, 1e-30) + f.width) / texel, length(r), z > 0.0);
+}
+
+// `MapFrame::ray`: the ray at texel coordinates `at`, where depth 0 lies and the unit way
+// depth grows.
+struct MapRay {
+    origin: vec3<f32>,
+    towards: vec3<f32>,
+}
+
+fn translucent_ray(f: TranslucentFrame, at: vec2<f32>, res: u32) -> MapRay {
+    let across = at * (2.0 * f.width / f32(res)) - f.width;
+    if f.perspective {
+        return MapRay(f.origin, normalize(f.travel + f.u * across.x + f.v * across.y));
+    }
+    return MapRay(f.origin + f.u * across.x + f.v * across.y, f.travel);
+}
+
+// A texel's width (world units) at `depth` (`TranslucentShadowMap::texel_width_at`).
+fn translucent_texel_width(f: TranslucentFrame, depth: f32, res: u32) -> f32 {
+    return 2.0 * f.width / f32(res) * select(1.0, depth, f.perspective);
+}
+
+// Texel (x, y) of map m in `translucent_depths` (two words a texel from 2 × this): clamped to
+// the map's edge (`clamped`), or -1 outside it.
+fn translucent_texel(h: TranslucentMaps, m: u32, x: i32, y: i32, clamped: bool) -> i32 {
+    let res = i32(h.resolution);
+    if !clamped && (x < 0 || y < 0 || x >= res || y >= res) {
+        return -1;
+    }
+    return i32(m * h.resolution * h.resolution) + clamp(y, 0, res - 1) * res + clamp(x, 0, res - 1);
+}

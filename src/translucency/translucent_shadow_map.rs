@@ -41,21 +41,109 @@ pub const PLUGIN_RESOLUTION: u32 = 256;
 /// on the ball's skin lit from the front they are not: 0.061 at 8, 0.052 at 16, 0.048 at 64.
 pub const PLUGIN_DEPTHS: u32 = 16;
 
-/// Where a directional light enters one translucent object and where it first leaves it
-/// again, along its travel: an orthographic map over a sphere about the object.
+/// How a translucent object's map looks along its light's rays: across the light's travel for
+/// a directional light (orthographic), from the light for a point or spot light (a
+/// perspective map about the line from the light to the object's centre), so that each
+/// texel's column is one of the light's own rays. With an orthographic map, a skin ball's
+/// single scattering under a point light 10 radii away was 1.3 off rays lit from behind and
+/// 0.078 from the front (relative L1): the parallel columns light the whole hemisphere, where
+/// the light's own rays light a smaller cap; now 0.063 and 0.007, as under a directional light
+/// (`orthographic_maps_miss_a_near_lights_own_rays`). `TranslucentFrame` in boundary.wgsl is
+/// its twin, laid out by [`to_vec4s`](Self::to_vec4s).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapFrame {
+    /// Orthographic: the object's centre, where depth 0 lies; perspective: the light.
+    pub origin: Vec3,
+    /// Half the map's width: world units (orthographic) or the tangent of its half-angle
+    /// (perspective).
+    pub width: f32,
+    /// The map's first axis across.
+    pub u: Vec3,
+    /// Its second axis across.
+    pub v: Vec3,
+    /// The light's way to the object's centre.
+    pub travel: Vec3,
+    /// From a point (the light at `origin`), depth the distance from it.
+    pub perspective: bool,
+}
+
+/// The nearest a point or spot light may be, in bounding radii, for a perspective map: nearer,
+/// its half-angle passes 56°, and the map keeps the orthographic frame (the light nearly
+/// among the object's own surface, where neither frame sees it well).
+pub const PERSPECTIVE_NEAREST: f32 = 1.2;
+
+impl MapFrame {
+    /// The frame of a map of the object in the sphere `centre`, `radius` (with 2 % to spare)
+    /// for `light` (`None` for a light on the centre, or a non-finite or zero sphere).
+    pub fn towards(light: &PatchLight, centre: Vec3, radius: f32) -> Option<Self> {
+        let travel = light.travel_towards(centre)?;
+        let from = match *light {
+            PatchLight::Directional { .. } => None,
+            PatchLight::Point { position, .. } | PatchLight::Spot { position, .. } => Some(position),
+        };
+        match from.map(|p| p.distance(centre)).filter(|&d| d > PERSPECTIVE_NEAREST * radius) {
+            Some(distance) => {
+                let sine = radius * 1.02 / distance;
+                Self::new(from?, sine / (1.0 - sine * sine).max(1e-6).sqrt(), travel, true)
+            }
+            None => Self::new(centre, radius * 1.02, travel, false),
+        }
+    }
+
+    fn new(origin: Vec3, width: f32, travel: Vec3, perspective: bool) -> Option<Self> {
+        let travel = travel.try_normalize()?;
+        (width > 0.0 && width.is_finite() && origin.is_finite()).then(|| {
+            let (u, v) = travel.any_orthonormal_pair();
+            Self { origin, width, u, v, travel, perspective }
+        })
+    }
+
+    /// `x`'s place in a map of `resolution` texels a side: texel coordinates (continuous,
+    /// centres at `k + ½`) and depth (along the travel from the centre's plane, or from the
+    /// light); off the map for a point behind a perspective map's light.
+    pub fn place(&self, x: Vec3, resolution: u32) -> (Vec2, f32) {
+        let r = x - self.origin;
+        let texel = 2.0 * self.width / resolution as f32;
+        if !self.perspective {
+            return ((Vec2::new(r.dot(self.u), r.dot(self.v)) + self.width) / texel, r.dot(self.travel));
+        }
+        let z = r.dot(self.travel);
+        if !(z > 0.0) {
+            return (Vec2::splat(-1e9), f32::INFINITY);
+        }
+        ((Vec2::new(r.dot(self.u), r.dot(self.v)) / z + self.width) / texel, r.length())
+    }
+
+    /// The ray at texel coordinates `at`: where depth 0 lies and the unit way depth grows.
+    pub fn ray(&self, at: Vec2, resolution: u32) -> (Vec3, Vec3) {
+        let across = at * (2.0 * self.width / resolution as f32) - self.width;
+        if self.perspective {
+            (self.origin, (self.travel + self.u * across.x + self.v * across.y).normalize())
+        } else {
+            (self.origin + self.u * across.x + self.v * across.y, self.travel)
+        }
+    }
+
+    /// The frame as the GPU takes it (`translucent_frame` in boundary.wgsl): (origin, width),
+    /// (u, `object`), (v, 1 if perspective), (travel, 1: a map).
+    pub fn to_vec4s(&self, object: u32) -> [[f32; 4]; 4] {
+        [
+            self.origin.extend(self.width).to_array(),
+            self.u.extend(object as f32).to_array(),
+            self.v.extend(if self.perspective { 1.0 } else { 0.0 }).to_array(),
+            self.travel.extend(1.0).to_array(),
+        ]
+    }
+}
+
+/// Where a light enters one translucent object and where it first leaves it again, along its
+/// rays: a map over a sphere about the object ([`MapFrame`]).
 #[derive(Clone, Debug)]
 pub struct TranslucentShadowMap {
     resolution: u32,
-    centre: Vec3,
-    /// Half the map's width (world units).
-    half_width: f32,
-    /// The map's axes: `u`, `v` across, `travel` the light's way.
-    u: Vec3,
-    v: Vec3,
-    travel: Vec3,
-    /// Per texel the depth along `travel` (from `centre`'s plane) where the light first
-    /// enters the object, and where it first leaves it after that (`+∞` where no sample
-    /// covers it).
+    frame: MapFrame,
+    /// Per texel the depth along its ray ([`MapFrame::place`]) where the light first enters
+    /// the object, and where it first leaves it after that (`+∞` where no sample covers it).
     near: Vec<f32>,
     far: Vec<f32>,
     /// Per texel the light inside the object along its column ([`entry_light`]): the light's
@@ -66,9 +154,9 @@ pub struct TranslucentShadowMap {
 }
 
 impl TranslucentShadowMap {
-    /// The map of `samples` (one object's) at `resolution`² over the sphere `centre`,
-    /// `radius`, for a light travelling along `travel`; `None` for a zero or non-finite
-    /// direction or radius, or a resolution outside 1 – [`MAX_RESOLUTION`].
+    /// The orthographic map of `samples` (one object's) at `resolution`² over the sphere
+    /// `centre`, `radius`, for a light travelling along `travel`; `None` for a zero or
+    /// non-finite direction or radius, or a resolution outside 1 – [`MAX_RESOLUTION`].
     pub fn splat<'a>(
         samples: impl IntoIterator<Item = &'a PatchSample>,
         travel: Vec3,
@@ -76,63 +164,63 @@ impl TranslucentShadowMap {
         radius: f32,
         resolution: u32,
     ) -> Option<Self> {
-        let travel = travel.try_normalize()?;
-        let valid = radius > 0.0 && radius.is_finite() && centre.is_finite();
-        if !(valid && (1..=MAX_RESOLUTION).contains(&resolution)) {
+        Self::splat_in(samples, MapFrame::new(centre, radius * 1.02, travel, false)?, resolution)
+    }
+
+    /// The map of `samples` in `frame` at `resolution`² (`None` for a resolution outside 1 –
+    /// [`MAX_RESOLUTION`]).
+    pub fn splat_in<'a>(samples: impl IntoIterator<Item = &'a PatchSample>, frame: MapFrame, resolution: u32) -> Option<Self> {
+        if !(1..=MAX_RESOLUTION).contains(&resolution) {
             return None;
         }
-        let (u, v) = travel.any_orthonormal_pair();
         let res = resolution as usize;
         let mut map = Self {
             resolution,
-            centre,
-            half_width: radius * 1.02,
-            u,
-            v,
-            travel,
+            frame,
             near: vec![f32::INFINITY; res * res],
             far: vec![f32::INFINITY; res * res],
             light: vec![Vec4::ONE; res * res],
         };
-        let texel_world = 2.0 * map.half_width / resolution as f32;
         let samples: Vec<&PatchSample> = samples.into_iter().collect();
         // Two passes: the nearest surface the light enters by (samples facing it), then the
         // first it leaves by behind that (samples facing away, deeper than the entry): the
         // object's first stretch along each of the light's rays, so that air between two
         // parts (an ear before the head) is not taken for the inside.
         for entering in [true, false] {
-            for s in samples.iter().filter(|s| (s.normal.dot(travel) < 0.0) == entering) {
-                map.splat_one(s, entering, texel_world);
+            for s in samples.iter() {
+                let (_, towards) = map.frame.ray(map.frame.place(s.position, resolution).0, resolution);
+                if (s.normal.dot(towards) < 0.0) == entering {
+                    map.splat_one(s, entering);
+                }
             }
         }
         Some(map)
     }
 
     /// One sample's splat: into `near` (`entering`) or into `far` where deeper than `near`.
-    fn splat_one(&mut self, s: &PatchSample, entering: bool, texel_world: f32) {
-        let (u, v, travel) = (self.u, self.v, self.travel);
+    fn splat_one(&mut self, s: &PatchSample, entering: bool) {
         let res = self.resolution as usize;
         let cover = SPLAT_COVER * (s.area.max(0.0) / std::f32::consts::PI).sqrt();
-        let (x, y, depth) = self.texel_of(s.position);
-        let reach = (cover / texel_world).min(MAX_SPLAT_TEXELS);
-        let own = (x.floor() as i64, y.floor() as i64);
-        let (lo_x, hi_x) = ((x - reach).floor() as i64, (x + reach).floor() as i64);
-        let (lo_y, hi_y) = ((y - reach).floor() as i64, (y + reach).floor() as i64);
-        let facing = s.normal.dot(travel);
-        for ty in lo_y.max(0)..=hi_y.min(res as i64 - 1) {
-            for tx in lo_x.max(0)..=hi_x.min(res as i64 - 1) {
+        let (at, depth) = self.frame.place(s.position, self.resolution);
+        if !depth.is_finite() {
+            return;
+        }
+        let reach = (cover / self.texel_width_at(depth)).min(MAX_SPLAT_TEXELS);
+        let own = (at.x.floor() as i64, at.y.floor() as i64);
+        let (lo, hi) = ((at - reach).floor(), (at + reach).floor());
+        for ty in (lo.y as i64).max(0)..=(hi.y as i64).min(res as i64 - 1) {
+            for tx in (lo.x as i64).max(0)..=(hi.x as i64).min(res as i64 - 1) {
                 // Where this texel's ray meets the sample's plane.
-                let offset = Vec2::new(tx as f32 + 0.5 - x, ty as f32 + 0.5 - y) * texel_world;
-                let across = u * offset.x + v * offset.y;
-                let along = if facing.abs() < 1e-4 { 0.0 } else { -s.normal.dot(across) / facing };
+                let (origin, towards) = self.frame.ray(Vec2::new(tx as f32 + 0.5, ty as f32 + 0.5), self.resolution);
+                let facing = s.normal.dot(towards);
+                let d = if facing.abs() < 1e-4 { depth } else { s.normal.dot(s.position - origin) / facing };
                 let is_own = (tx, ty) == own;
-                if !is_own && (across + travel * along).length() > cover {
+                if !is_own && (origin + towards * d).distance(s.position) > cover {
                     continue;
                 }
                 // Its own texel always (no sample falls through the map), at its plane's depth
                 // there too (the injection takes the sample's own depth, half a texel's slope
                 // off).
-                let d = depth + along;
                 let k = ty as usize * res + tx as usize;
                 if entering {
                     self.near[k] = self.near[k].min(d);
@@ -143,16 +231,10 @@ impl TranslucentShadowMap {
         }
     }
 
-    /// `x`'s place in the map: texel coordinates (continuous, texel centres at `k + ½`) and
-    /// depth along the light's travel.
-    fn texel_of(&self, x: Vec3) -> (f32, f32, f32) {
-        let d = x - self.centre;
-        let scale = self.resolution as f32 / (2.0 * self.half_width);
-        (
-            (d.dot(self.u) + self.half_width) * scale,
-            (d.dot(self.v) + self.half_width) * scale,
-            d.dot(self.travel),
-        )
+    /// A texel's width (world units) at `depth`.
+    fn texel_width_at(&self, depth: f32) -> f32 {
+        let texel = 2.0 * self.frame.width / self.resolution as f32;
+        if self.frame.perspective { texel * depth } else { texel }
     }
 
     /// The texel `(x, y)`'s entry and exit depths (clamped to the map's edge).
@@ -173,12 +255,15 @@ impl TranslucentShadowMap {
 
     /// [`path_inside`](Self::path_inside) and the light of `x`'s own texel.
     pub fn lit_path_inside(&self, x: Vec3) -> Option<(f32, Vec4)> {
-        let (tx, ty, depth) = self.texel_of(x);
-        let (fx, fy) = (tx - 0.5, ty - 0.5);
-        let (x0, y0) = (fx.floor() as i64, fy.floor() as i64);
-        let (s, t) = (fx - x0 as f32, fy - y0 as f32);
+        let (at, depth) = self.frame.place(x, self.resolution);
+        if !depth.is_finite() {
+            return None;
+        }
+        let f = at - 0.5;
+        let (x0, y0) = (f.x.floor() as i64, f.y.floor() as i64);
+        let (s, t) = (f.x - x0 as f32, f.y - y0 as f32);
         let corners = [self.depths(x0, y0).0, self.depths(x0 + 1, y0).0, self.depths(x0, y0 + 1).0, self.depths(x0 + 1, y0 + 1).0];
-        let own = self.index(tx.floor() as i64, ty.floor() as i64);
+        let own = self.index(at.x.floor() as i64, at.y.floor() as i64);
         let (own_near, far) = (self.near[own], self.far[own]);
         let near = if corners.iter().all(|c| c.is_finite()) {
             (corners[0] * (1.0 - s) + corners[1] * s) * (1.0 - t) + (corners[2] * (1.0 - s) + corners[3] * s) * t
@@ -187,8 +272,14 @@ impl TranslucentShadowMap {
         };
         // A texel's width of slack either side: the pixels marched from lie on the surface the
         // map's texels and planes only approach.
-        let texel = 2.0 * self.half_width / self.resolution as f32;
-        (near.is_finite() && depth >= near - texel && depth <= far + texel).then(|| ((depth - near).max(0.0), self.light[own]))
+        let texel = self.texel_width_at(depth);
+        (near.is_finite() && depth >= near - texel && depth <= far + texel).then(|| {
+            // From a point, the light spreads on inside as outside (index-matched): its
+            // irradiance at the entry times (entry distance / distance)².
+            let spread = if self.frame.perspective && depth > near { (near / depth).powi(2) } else { 1.0 };
+            let light = self.light[own];
+            ((depth - near).max(0.0), (light.truncate() * spread).extend(light.w))
+        })
     }
 
     /// The texel `(x, y)`'s index (clamped to the map's edge).
@@ -198,9 +289,10 @@ impl TranslucentShadowMap {
     }
 
     /// Where the light enters the object in texel `k`'s column, and the cosine it enters at
-    /// there: the entry depths' slope across the map by central differences (one-sided beside
-    /// an uncovered texel, none between two), `1/√(1 + |∇d|²)`. `None` where it does not
-    /// enter. `translucent_light` in `inject.wgsl` is its twin.
+    /// there: the surface's normal from the entry points of the texels either side, in both
+    /// directions (one-sided beside an uncovered texel; across the map between two), against
+    /// the texel's ray. `None` where it does not enter. `translucent_light` in `inject.wgsl`
+    /// is its twin.
     pub fn entry(&self, k: usize) -> Option<(Vec3, f32)> {
         let near = *self.near.get(k)?;
         if !near.is_finite() {
@@ -208,25 +300,29 @@ impl TranslucentShadowMap {
         }
         let res = self.resolution as i64;
         let (x, y) = ((k as i64) % res, (k as i64) / res);
-        let texel = 2.0 * self.half_width / self.resolution as f32;
-        let slope = |dx: i64, dy: i64| {
-            let at = |step: i64| {
-                let (sx, sy) = (x + dx * step, y + dy * step);
-                ((0..res).contains(&sx) && (0..res).contains(&sy))
-                    .then(|| self.near[(sy * res + sx) as usize])
-                    .filter(|d| d.is_finite())
-            };
-            match (at(-1), at(1)) {
-                (Some(a), Some(b)) => (b - a) / (2.0 * texel),
-                (None, Some(b)) => (b - near) / texel,
-                (Some(a), None) => (near - a) / texel,
-                (None, None) => 0.0,
-            }
+        let point = |sx: i64, sy: i64, depth: f32| {
+            let (origin, towards) = self.frame.ray(Vec2::new(sx as f32 + 0.5, sy as f32 + 0.5), self.resolution);
+            origin + towards * depth
         };
-        let (gx, gy) = (slope(1, 0), slope(0, 1));
-        let across = (Vec2::new(x as f32 + 0.5, y as f32 + 0.5) * texel) - Vec2::splat(self.half_width);
-        let point = self.centre + self.u * across.x + self.v * across.y + self.travel * near;
-        Some((point, 1.0 / (1.0 + gx * gx + gy * gy).sqrt()))
+        let entry_at = |sx: i64, sy: i64| {
+            ((0..res).contains(&sx) && (0..res).contains(&sy))
+                .then(|| self.near[(sy * res + sx) as usize])
+                .filter(|d| d.is_finite())
+                .map(|d| point(sx, sy, d))
+        };
+        let here = point(x, y, near);
+        let tangent = |dx: i64, dy: i64, across: Vec3| match (entry_at(x - dx, y - dy), entry_at(x + dx, y + dy)) {
+            (Some(a), Some(b)) => b - a,
+            (None, Some(b)) => b - here,
+            (Some(a), None) => here - a,
+            (None, None) => across,
+        };
+        let (_, towards) = self.frame.ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), self.resolution);
+        let cos = tangent(1, 0, self.frame.u)
+            .cross(tangent(0, 1, self.frame.v))
+            .try_normalize()
+            .map_or(1.0, |n| n.dot(towards).abs());
+        Some((here, cos))
     }
 
     /// Sets each covered texel's light from where the light enters the object in its column
@@ -380,8 +476,8 @@ impl MarchedObject {
                 lights
                     .iter()
                     .filter_map(|light| {
-                        let travel = light.travel_towards(centre)?;
-                        let mut map = TranslucentShadowMap::splat(samples, travel, centre, radius, resolution)?;
+                        let frame = MapFrame::towards(light, centre, radius)?;
+                        let mut map = TranslucentShadowMap::splat_in(samples, frame, resolution)?;
                         map.light_texels(|entry, cos| entry_light(light.irradiance_across(entry) * visible(entry, light), cos, eta));
                         Some(map)
                     })

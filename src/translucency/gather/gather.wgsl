@@ -19,7 +19,8 @@
 #import bevy_mesostructure::translucency::boundary::{
     deep_exit_shape, deep_exit_shape_about, fresnel_reflectance, from_ordered_bits, ordered_bits,
     translucent_map_depth, TranslucentMaps, translucent_maps_of, translucent_light_at,
-    translucent_frame_at,
+    translucent_frame_at, TranslucentFrame, translucent_frame_of, translucent_place,
+    translucent_texel_width, translucent_texel,
 }
 
 struct GatherParams {
@@ -297,36 +298,37 @@ struct LitPath {
     light: vec4<f32>,
 }
 
-fn map_entry(h: TranslucentMaps, first: u32, x: i32, y: i32) -> f32 {
-    let res = i32(h.resolution);
-    let k = first + u32(clamp(y, 0, res - 1) * res + clamp(x, 0, res - 1));
-    return translucent_map_depth(translucent_depths[2u * k]);
+fn map_entry(h: TranslucentMaps, m: u32, x: i32, y: i32) -> f32 {
+    return translucent_map_depth(translucent_depths[2u * u32(translucent_texel(h, m, x, y, true))]);
 }
 
-fn lit_path_inside(h: TranslucentMaps, m: u32, frame_at: u32, p: vec3<f32>) -> LitPath {
-    let a = translucent_maps[frame_at];
-    let local = p - a.xyz;
-    let texel = 2.0 * a.w / f32(h.resolution);
-    let at = (vec2(dot(local, translucent_maps[frame_at + 1u].xyz), dot(local, translucent_maps[frame_at + 2u].xyz)) + a.w) / texel;
-    let depth = dot(local, translucent_maps[frame_at + 3u].xyz);
-    let first = m * h.resolution * h.resolution;
-    let res = i32(h.resolution);
-    let f = at - 0.5;
-    let c = vec2<i32>(floor(f));
-    let t = f - floor(f);
-    let corners = vec4(map_entry(h, first, c.x, c.y), map_entry(h, first, c.x + 1, c.y),
-                       map_entry(h, first, c.x, c.y + 1), map_entry(h, first, c.x + 1, c.y + 1));
-    let own = clamp(vec2<i32>(floor(at)), vec2(0), vec2(res - 1));
-    let k = first + u32(own.y * res + own.x);
+fn lit_path_inside(h: TranslucentMaps, m: u32, f: TranslucentFrame, p: vec3<f32>) -> LitPath {
+    var lit: LitPath;
+    let place = translucent_place(f, p, h.resolution);
+    if !place.on {
+        lit.inside = false;
+        return lit;
+    }
+    let texel = translucent_texel_width(f, place.depth, h.resolution);
+    let c = vec2<i32>(floor(place.at - 0.5));
+    let t = place.at - 0.5 - floor(place.at - 0.5);
+    let corners = vec4(map_entry(h, m, c.x, c.y), map_entry(h, m, c.x + 1, c.y),
+                       map_entry(h, m, c.x, c.y + 1), map_entry(h, m, c.x + 1, c.y + 1));
+    let own = vec2<i32>(floor(place.at));
+    let k = u32(translucent_texel(h, m, own.x, own.y, true));
     var near = translucent_map_depth(translucent_depths[2u * k]);
     let far = translucent_map_depth(translucent_depths[2u * k + 1u]);
     if all(corners < vec4(3.0e38)) {
         near = mix(mix(corners.x, corners.y, t.x), mix(corners.z, corners.w, t.x), t.y);
     }
-    var lit: LitPath;
-    lit.inside = near < 3.0e38 && depth >= near - texel && depth <= far + texel;
-    lit.path = max(depth - near, 0.0);
-    lit.light = translucent_maps[translucent_light_at(h, m) + u32(own.y * res + own.x)];
+    lit.inside = near < 3.0e38 && place.depth >= near - texel && place.depth <= far + texel;
+    lit.path = max(place.depth - near, 0.0);
+    lit.light = translucent_maps[translucent_light_at(h, m) + k - m * h.resolution * h.resolution];
+    // From a point, the light spreads on inside as outside (index-matched): its irradiance at
+    // the entry times (entry distance / distance)².
+    if f.perspective && place.depth > near {
+        lit.light = vec4(lit.light.rgb * (near * near) / (place.depth * place.depth), lit.light.w);
+    }
     return lit;
 }
 
@@ -349,7 +351,9 @@ fn marched_single_scattering(object: i32, s: Surface) -> vec3<f32> {
     for (var l = 0u; l < h.lights; l++) {
         let m = l * h.slots + u32(medium.w);
         let frame_at = translucent_frame_at(h, m);
-        if translucent_maps[frame_at + 3u].w <= 0.0 {
+        let f = translucent_frame_of(translucent_maps[frame_at], translucent_maps[frame_at + 1u],
+                                     translucent_maps[frame_at + 2u], translucent_maps[frame_at + 3u]);
+        if !f.present {
             continue;
         }
         for (var c = 0u; c < 3u; c++) {
@@ -361,7 +365,7 @@ fn marched_single_scattering(object: i32, s: Surface) -> vec3<f32> {
             for (var k = 0u; k < MARCHED_DEPTHS; k++) {
                 // `optical_depth_quantile`.
                 let depth = -log(1.0 - (f32(k) + 0.5) / f32(MARCHED_DEPTHS)) / sigma_t[c];
-                let lit = lit_path_inside(h, m, frame_at, s.x + into * depth);
+                let lit = lit_path_inside(h, m, f, s.x + into * depth);
                 if lit.inside {
                     sum += lit.light[c] * exp(-sigma_t[c] * lit.path * lit.light.w);
                     entered = true;

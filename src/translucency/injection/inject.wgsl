@@ -432,16 +432,18 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
 
 // Translucent shadow maps (`translucent_shadow_map.rs`, their CPU twin): per translucent
 // object and light, where the light enters the object and where it first leaves it again,
-// over the object's bounding sphere along the light's travel to its centre, 256² — the
-// injection's maps are centimetres wide in a room, the light's path inside needs a fraction
-// of a mean free path — and each texel's light inside (`entry_light`), for the gather's single
-// scattering marched per pixel (`marched_single_scattering` in gather.wgsl).
+// over the object's bounding sphere, 256², each texel's column one of the light's rays
+// (`TranslucentFrame` in boundary.wgsl: across the travel of a directional light, in
+// perspective from a point or spot) — the injection's maps are centimetres wide in a room,
+// the light's path inside needs a fraction of a mean free path — and each texel's light
+// inside (`entry_light`), for the gather's single scattering marched per pixel
+// (`marched_single_scattering` in gather.wgsl).
 //
 // `translucent_maps`, in vec4s: a header (objects, object slots with maps, resolution,
 // lights); per object (σt per world unit, slot or −1), (α, η); per map (light × slots + slot)
-// and texel its light; then per map its frame (centre, half width), (u, object), (v, 0),
-// (travel, 1 where there is a map). `translucent_depths`: per map and texel its entry and exit
-// depths along the travel from the centre's plane (`translucent_map_depth`).
+// and texel its light; then per map its frame (`MapFrame::to_vec4s`). `translucent_depths`:
+// per map and texel its entry and exit depths along its ray (`translucent_place`,
+// `translucent_map_depth`).
 @group(1) @binding(0) var<storage, read_write> translucent_maps: array<vec4<f32>>;
 @group(1) @binding(1) var<storage, read_write> translucent_depths: array<atomic<u32>>;
 
@@ -452,22 +454,11 @@ fn translucent_maps_header() -> TranslucentMaps {
     return translucent_maps_of(translucent_maps[0]);
 }
 
-struct TranslucentFrame {
-    centre: vec3<f32>,
-    half_width: f32,
-    u: vec3<f32>,
-    v: vec3<f32>,
-    travel: vec3<f32>,
-    present: bool,
-}
-
 fn translucent_frame(h: TranslucentMaps, m: u32) -> TranslucentFrame {
     let at = translucent_frame_at(h, m);
-    let a = translucent_maps[at];
-    let t = translucent_maps[at + 3u];
-    return TranslucentFrame(a.xyz, a.w, translucent_maps[at + 1u].xyz, translucent_maps[at + 2u].xyz, t.xyz, t.w > 0.0);
+    return translucent_frame_of(translucent_maps[at], translucent_maps[at + 1u], translucent_maps[at + 2u],
+                                translucent_maps[at + 3u]);
 }
-
 
 // The pass: the entries (true) or the exits, which need every entry splatted before.
 override ENTERING: bool = true;
@@ -503,32 +494,27 @@ fn splat_translucent(l: u32, s: u32, entering: bool) {
     let m = l * h.slots + u32(slot);
     let f = translucent_frame(h, m);
     let n = b.xyz;
-    let facing = dot(n, f.travel);
-    if !f.present || (facing < 0.0) != entering {
+    let place = translucent_place(f, a.xyz, h.resolution);
+    if !f.present || !place.on
+        || (dot(n, translucent_ray(f, place.at, h.resolution).towards) < 0.0) != entering {
         return;
     }
     let res = i32(h.resolution);
-    let texel_world = 2.0 * f.half_width / f32(h.resolution);
     let cover = SPLAT_COVER * a.w;
-    let local = a.xyz - f.centre;
-    let at = (vec2(dot(local, f.u), dot(local, f.v)) + f.half_width) / texel_world;
-    let depth = dot(local, f.travel);
-    let reach = min(cover / texel_world, TRANSLUCENT_SPLAT_TEXELS);
-    let own = vec2<i32>(floor(at));
-    let lo = vec2<i32>(floor(at - reach));
-    let hi = vec2<i32>(floor(at + reach));
-    let first = m * h.resolution * h.resolution;
+    let reach = min(cover / translucent_texel_width(f, place.depth, h.resolution), TRANSLUCENT_SPLAT_TEXELS);
+    let own = vec2<i32>(floor(place.at));
+    let lo = vec2<i32>(floor(place.at - reach));
+    let hi = vec2<i32>(floor(place.at + reach));
     for (var y = max(lo.y, 0); y <= min(hi.y, res - 1); y++) {
         for (var x = max(lo.x, 0); x <= min(hi.x, res - 1); x++) {
             // Where this texel's ray meets the sample's plane.
-            let offset = (vec2(f32(x), f32(y)) + 0.5 - at) * texel_world;
-            let across = f.u * offset.x + f.v * offset.y;
-            let along = select(-dot(n, across) / facing, 0.0, abs(facing) < 1e-4);
-            if any(vec2(x, y) != own) && length(across + f.travel * along) > cover {
+            let ray = translucent_ray(f, vec2(f32(x), f32(y)) + 0.5, h.resolution);
+            let facing = dot(n, ray.towards);
+            let d = select(dot(n, a.xyz - ray.origin) / facing, place.depth, abs(facing) < 1e-4);
+            if any(vec2(x, y) != own) && distance(ray.origin + ray.towards * d, a.xyz) > cover {
                 continue;
             }
-            let k = first + u32(y * res + x);
-            let d = depth + along;
+            let k = u32(translucent_texel(h, m, x, y, true));
             if entering {
                 atomicMax(&translucent_depths[2u * k], ~ordered_bits(d));
             } else if d > translucent_map_depth(atomicLoad(&translucent_depths[2u * k])) {
@@ -540,33 +526,42 @@ fn splat_translucent(l: u32, s: u32, entering: bool) {
 
 // Map m's entry depth at texel (x, y), +∞ outside the map or where the light does not enter.
 fn translucent_entry_depth(h: TranslucentMaps, m: u32, x: i32, y: i32) -> f32 {
-    let res = i32(h.resolution);
-    if x < 0 || y < 0 || x >= res || y >= res {
+    let k = translucent_texel(h, m, x, y, false);
+    if k < 0 {
         return bitcast<f32>(0x7f800000u);
     }
-    let k = m * h.resolution * h.resolution + u32(y * res + x);
-    return translucent_map_depth(atomicLoad(&translucent_depths[2u * k]));
+    return translucent_map_depth(atomicLoad(&translucent_depths[2u * u32(k)]));
 }
 
 fn is_finite(d: f32) -> bool {
     return d < 3.0e38 && d > -3.0e38;
 }
 
-// The entry depths' slope along one axis at a texel (`TranslucentShadowMap::entry`):
-// central differences, one-sided beside an uncovered texel, none between two.
-fn translucent_slope(h: TranslucentMaps, m: u32, x: i32, y: i32, step: vec2<i32>, near: f32, texel: f32) -> f32 {
+// Where the light enters in texel (x, y)'s column, at depth `near` along its ray.
+fn translucent_entry_point(f: TranslucentFrame, res: u32, x: i32, y: i32, near: f32) -> vec3<f32> {
+    let ray = translucent_ray(f, vec2(f32(x), f32(y)) + 0.5, res);
+    return ray.origin + ray.towards * near;
+}
+
+// The entry surface's tangent along one of the map's axes at a texel
+// (`TranslucentShadowMap::entry`): between the entry points either side, one-sided beside an
+// uncovered texel, `across` (the map's own axis) between two.
+fn translucent_tangent(h: TranslucentMaps, m: u32, f: TranslucentFrame, x: i32, y: i32, step: vec2<i32>,
+                       here: vec3<f32>, across: vec3<f32>) -> vec3<f32> {
     let before = translucent_entry_depth(h, m, x - step.x, y - step.y);
     let after = translucent_entry_depth(h, m, x + step.x, y + step.y);
+    let b = translucent_entry_point(f, h.resolution, x - step.x, y - step.y, before);
+    let a = translucent_entry_point(f, h.resolution, x + step.x, y + step.y, after);
     if is_finite(before) && is_finite(after) {
-        return (after - before) / (2.0 * texel);
+        return a - b;
     }
     if is_finite(after) {
-        return (after - near) / texel;
+        return a - here;
     }
     if is_finite(before) {
-        return (near - before) / texel;
+        return here - b;
     }
-    return 0.0;
+    return across;
 }
 
 // Each texel's light inside the object (`TranslucentShadowMap::light_texels` with
@@ -585,7 +580,6 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let at = translucent_light_at(h, m) + id.x;
     let f = translucent_frame(h, m);
-    let res = i32(h.resolution);
     let x = i32(id.x % h.resolution);
     let y = i32(id.x / h.resolution);
     let near = translucent_entry_depth(h, m, x, y);
@@ -593,12 +587,18 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
         translucent_maps[at] = vec4(0.0);
         return;
     }
-    let texel = 2.0 * f.half_width / f32(h.resolution);
-    let gx = translucent_slope(h, m, x, y, vec2(1, 0), near, texel);
-    let gy = translucent_slope(h, m, x, y, vec2(0, 1), near, texel);
-    let cos_entry = inverseSqrt(1.0 + gx * gx + gy * gy);
-    let across = (vec2(f32(x), f32(y)) + 0.5) * texel - f.half_width;
-    let entry = f.centre + f.u * across.x + f.v * across.y + f.travel * near;
+    let entry = translucent_entry_point(f, h.resolution, x, y, near);
+    let towards = translucent_ray(f, vec2(f32(x), f32(y)) + 0.5, h.resolution).towards;
+    var normal = cross(translucent_tangent(h, m, f, x, y, vec2(1, 0), entry, f.u),
+                       translucent_tangent(h, m, f, x, y, vec2(0, 1), entry, f.v));
+    var cos_entry = 1.0;
+    if dot(normal, normal) > 0.0 {
+        // Outward: against the light's ray.
+        normal = normalize(normal) * -sign(dot(normal, towards));
+        cos_entry = abs(dot(normal, towards));
+    } else {
+        normal = -towards;
+    }
     let light = injection.lights[m / h.slots];
     var e = light.intensity;
     var ray = f.travel;
@@ -615,9 +615,8 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
         face = cube_face(d);
     }
     // Shadowed by what else the light meets on its way, as `inject` sees a patch: the entry
-    // lifted off the surface by a texel along its normal (from the entry depths' slope),
+    // lifted off the surface by a texel along its normal (from the entry points' tangents),
     // with the slope-scaled bias.
-    let normal = normalize(gx * f.u + gy * f.v - f.travel);
     let here = map_point(light, face, entry);
     let lifted = map_point(light, face, entry + normal * here.texel_world);
     let slope = min(sqrt(max(1.0 - cos_entry * cos_entry, 0.0)) / max(cos_entry, 1e-3), 8.0);

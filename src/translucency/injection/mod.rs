@@ -29,7 +29,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{
     diffusion::{IncidenceWeight, diffuse_single_scattering_shape, single_scattering_shape},
-    translucent_shadow_map::{MarchedMedium, PLUGIN_RESOLUTION, object_bounds},
+    translucent_shadow_map::{MapFrame, MarchedMedium, PLUGIN_RESOLUTION, object_bounds},
     gather::{TranslucencyCamera, TranslucencyGpu},
     iteration::{GpuTransport, compute_pipeline, packed_buffers_layout, specialized_compute_pipeline},
     patches::Patches,
@@ -187,12 +187,15 @@ impl TranslucentMaps {
         let objects = marched.len();
         let mut head = vec![[0.0f32; 4]; 1 + 2 * objects];
         let mut slots = Vec::new();
+        // Each marched object's samples, in one pass over the patches.
+        let mut samples = vec![Vec::new(); objects];
+        for (i, patch) in patches.patches.iter().enumerate() {
+            if let Some(Some(_)) = marched.get(patch.object as usize) {
+                samples[patch.object as usize].extend_from_slice(patches.samples_of(i));
+            }
+        }
         for (object, medium) in marched.iter().enumerate() {
-            let samples: Vec<_> = (0..patches.patches.len())
-                .filter(|&i| patches.patches[i].object as usize == object)
-                .flat_map(|i| patches.samples_of(i).iter().copied())
-                .collect();
-            let (medium, bounds) = match (medium, object_bounds(&samples)) {
+            let (medium, bounds) = match (medium, object_bounds(&samples[object])) {
                 (Some(m), Some(b)) => (m, b),
                 _ => {
                     head[1 + 2 * object] = [0.0, 0.0, 0.0, -1.0];
@@ -263,19 +266,7 @@ impl TranslucentMaps {
         let mut frames: Vec<[f32; 4]> = Vec::new();
         for light in &lights[..taken as usize] {
             for &(object, centre, radius) in &self.slots {
-                // `TranslucentShadowMap::splat`'s frame: its axes and width.
-                let frame = match light.travel_towards(centre) {
-                    Some(travel) => {
-                        let (u, v) = travel.any_orthonormal_pair();
-                        [
-                            centre.extend(radius * 1.02).to_array(),
-                            u.extend(object as f32).to_array(),
-                            v.extend(0.0).to_array(),
-                            travel.extend(1.0).to_array(),
-                        ]
-                    }
-                    None => [[0.0; 4]; 4],
-                };
+                let frame = MapFrame::towards(light, centre, radius).map_or([[0.0; 4]; 4], |f| f.to_vec4s(object));
                 frames.extend(frame);
             }
         }
