@@ -168,3 +168,35 @@ fn orthographic_maps_miss_a_near_lights_own_rays() {
         }
     }
 }
+
+/// A map's frame for each kind of light: a directional light's orthographic; a point light's
+/// in perspective from it beyond `PERSPECTIVE_NEAREST` bounding radii (its half-angle's
+/// tangent `sin/cos` of the sphere's, with 2 % to spare), orthographic nearer; none for a
+/// light on the centre or a non-finite one, and never a panic. A point's place and its
+/// texel's ray agree: the ray at a point's texel coordinates, out to its depth, is the point.
+#[test]
+fn a_maps_frame_follows_its_light() {
+    use crate::translucency::{PatchLight, translucent_shadow_map::{MapFrame, PERSPECTIVE_NEAREST}};
+    let point = |position: Vec3| PatchLight::Point { position, intensity: Vec3::ONE, range: 10.0 };
+    let directional = PatchLight::Directional { direction: Vec3::NEG_Y, illuminance: Vec3::ONE };
+    let f = MapFrame::towards(&directional, Vec3::ZERO, 1.0).expect("a frame");
+    assert!(!f.perspective && (f.width - 1.02).abs() < 1e-6 && f.travel == Vec3::NEG_Y);
+    let f = MapFrame::towards(&point(Vec3::new(0.0, 4.0, 0.0)), Vec3::ZERO, 1.0).expect("a frame");
+    let sine = 1.02f32 / 4.0;
+    assert!(f.perspective && (f.width - sine / (1.0 - sine * sine).sqrt()).abs() < 1e-6, "{f:?}");
+    let near = MapFrame::towards(&point(Vec3::new(0.0, PERSPECTIVE_NEAREST * 0.99, 0.0)), Vec3::ZERO, 1.0).expect("a frame");
+    assert!(!near.perspective, "{near:?}");
+    assert_eq!(MapFrame::towards(&point(Vec3::ZERO), Vec3::ZERO, 1.0), None);
+    assert_eq!(MapFrame::towards(&point(Vec3::splat(f32::NAN)), Vec3::ZERO, 1.0), None);
+    assert_eq!(MapFrame::towards(&directional, Vec3::ZERO, f32::NAN), None);
+    for frame in [f, near] {
+        for x in [Vec3::new(0.3, 0.2, -0.5), Vec3::new(-0.7, -0.4, 0.1)] {
+            let (at, depth) = frame.place(x, 256);
+            let (origin, towards) = frame.ray(at, 256);
+            let back = origin + towards * depth;
+            assert!(back.distance(x) < 1e-5, "{x} came back as {back} ({frame:?})");
+        }
+    }
+    // Behind a perspective map's light: off the map.
+    assert_eq!(f.place(Vec3::new(0.0, 5.0, 0.0), 256).1, f32::INFINITY);
+}
