@@ -126,7 +126,9 @@ fn ball_single_scattering_by_rays(light: &crate::translucency::PatchLight, alpha
 /// from 1.5 to 10 radii away, as it does under a directional light (the map's own error: its
 /// texels and the ball's facets). Relative L1 against rays over the ball's face to the camera,
 /// measured: lit from the front 0.0062 (directional) and at most 0.0083 (point), from behind
-/// 0.0613 and at most 0.0625; held within 0.015 and 0.08. An orthographic map along the line
+/// 0.0613 and at most 0.0625; held within 0.015 and 0.08. At 1.1 radii, just outside the
+/// ball's bounds, 0.125 and 0.119, held within 0.2 (orthographic there: 1.6 and 2.5·10³). An
+/// orthographic map along the line
 /// from the light, with the light's irradiance where it enters (the frame before), was 0.078 /
 /// 0.16 / 0.30 / 0.51 / 0.80 off from the front at 10 / 5 / 3 / 2 / 1.5 radii, and 1.3 / 5.0
 /// / 18 / 77 / 353 from behind: the parallel columns light the whole hemisphere, where the
@@ -148,7 +150,7 @@ fn orthographic_maps_miss_a_near_lights_own_rays() {
         .collect();
     for (side, from, held) in [("front", Vec3::new(0.4, 0.2, 1.0), 0.015), ("behind", Vec3::new(-0.4, 0.2, -1.0), 0.08)] {
         let from = from.normalize();
-        for distance in [0.0f32, 10.0, 5.0, 3.0, 2.0, 1.5] {
+        for distance in [0.0f32, 10.0, 5.0, 3.0, 2.0, 1.5, 1.1] {
             let light = if distance == 0.0 {
                 PatchLight::Directional { direction: -from, illuminance: Vec3::ONE }
             } else {
@@ -164,6 +166,9 @@ fn orthographic_maps_miss_a_near_lights_own_rays() {
             }
             let off = diff / total;
             eprintln!("lit from {side}, {}: {off:.4} off rays", if distance == 0.0 { "directional".into() } else { format!("a point {distance} radii away") });
+            // Just outside the ball's bounds the texels near the map's edge are wide and the
+            // entries grazing.
+            let held = if distance < 1.5 { 0.2 } else { held };
             assert!(off < held, "lit from {side}, light {distance} radii away: {off} off rays");
         }
     }
