@@ -191,23 +191,21 @@ impl TranslucentShadowMap {
         // parts (an ear before the head) is not taken for the inside.
         for entering in [true, false] {
             for s in samples.iter() {
-                let (_, towards) = map.frame.ray(map.frame.place(s.position, resolution).0, resolution);
-                if (s.normal.dot(towards) < 0.0) == entering {
-                    map.splat_one(s, entering);
+                let (at, depth) = map.frame.place(s.position, resolution);
+                let (_, towards) = map.frame.ray(at, resolution);
+                if depth.is_finite() && (s.normal.dot(towards) < 0.0) == entering {
+                    map.splat_one(s, at, depth, entering);
                 }
             }
         }
         Some(map)
     }
 
-    /// One sample's splat: into `near` (`entering`) or into `far` where deeper than `near`.
-    fn splat_one(&mut self, s: &PatchSample, entering: bool) {
+    /// One sample's splat (its place `at`, `depth` in the map): into `near` (`entering`) or
+    /// into `far` where deeper than `near`.
+    fn splat_one(&mut self, s: &PatchSample, at: Vec2, depth: f32, entering: bool) {
         let res = self.resolution as usize;
         let cover = SPLAT_COVER * (s.area.max(0.0) / std::f32::consts::PI).sqrt();
-        let (at, depth) = self.frame.place(s.position, self.resolution);
-        if !depth.is_finite() {
-            return;
-        }
         let reach = (cover / self.texel_width_at(depth)).min(MAX_SPLAT_TEXELS);
         let own = (at.x.floor() as i64, at.y.floor() as i64);
         let (lo, hi) = ((at - reach).floor(), (at + reach).floor());
@@ -313,14 +311,14 @@ impl TranslucentShadowMap {
                 .filter(|d| d.is_finite())
                 .map(|d| point(sx, sy, d))
         };
-        let here = point(x, y, near);
+        let (origin, towards) = self.frame.ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), self.resolution);
+        let here = origin + towards * near;
         let tangent = |dx: i64, dy: i64, across: Vec3| match (entry_at(x - dx, y - dy), entry_at(x + dx, y + dy)) {
             (Some(a), Some(b)) => b - a,
             (None, Some(b)) => b - here,
             (Some(a), None) => here - a,
             (None, None) => across,
         };
-        let (_, towards) = self.frame.ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5), self.resolution);
         let cos = tangent(1, 0, self.frame.u)
             .cross(tangent(0, 1, self.frame.v))
             .try_normalize()

@@ -587,8 +587,9 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
         translucent_maps[at] = vec4(0.0);
         return;
     }
-    let entry = translucent_entry_point(f, h.resolution, x, y, near);
-    let towards = translucent_ray(f, vec2(f32(x), f32(y)) + 0.5, h.resolution).towards;
+    let column = translucent_ray(f, vec2(f32(x), f32(y)) + 0.5, h.resolution);
+    let entry = column.origin + column.towards * near;
+    let towards = column.towards;
     var normal = cross(translucent_tangent(h, m, f, x, y, vec2(1, 0), entry, f.u),
                        translucent_tangent(h, m, f, x, y, vec2(0, 1), entry, f.v));
     var cos_entry = 1.0;
@@ -601,7 +602,6 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let light = injection.lights[m / h.slots];
     var e = light.intensity;
-    var ray = f.travel;
     var face = 0u;
     if light.kind != DIRECTIONAL {
         let d = entry - light.position;
@@ -610,8 +610,7 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
             translucent_maps[at] = vec4(0.0);
             return;
         }
-        ray = d * inverseSqrt(dist2);
-        e *= falloff_over_distance2(light, ray, dist2);
+        e *= falloff_over_distance2(light, d * inverseSqrt(dist2), dist2);
         face = cube_face(d);
     }
     // Shadowed by what else the light meets on its way, as `inject` sees a patch: the entry
