@@ -114,6 +114,118 @@ impl PatchLight {
     }
 }
 
+impl PatchLight {
+    /// The most irradiance across its travel this light gives anywhere in the sphere about
+    /// `centre` of `radius`, unshadowed: zero where its range window, or a spot's cone, leaves
+    /// the whole sphere dark; infinite where a point or spot light sits inside it; zero for a
+    /// light with a non-finite number (Bevy would not draw it either). What the lights are
+    /// culled and ranked by ([`lights_reaching`]).
+    pub fn irradiance_bound(&self, centre: Vec3, radius: f32) -> Vec3 {
+        // Every number finite, but a range may be unbounded.
+        let numbers = light_numbers(self);
+        let range_at = match self {
+            PatchLight::Directional { .. } => None,
+            _ => Some(numbers.len() - 1),
+        };
+        let finite = numbers.iter().enumerate().all(|(k, x)| x.is_finite() || (Some(k) == range_at && *x == f32::INFINITY));
+        if !finite {
+            return Vec3::ZERO;
+        }
+        let (position, intensity, axis) = match *self {
+            PatchLight::Directional { illuminance, .. } => return illuminance.max(Vec3::ZERO),
+            PatchLight::Point { position, intensity, .. } => (position, intensity, None),
+            PatchLight::Spot { position, direction, intensity, .. } => (position, intensity, Some(direction)),
+        };
+        let to_centre = centre - position;
+        let d = to_centre.length();
+        let nearest = d - radius;
+        if !(nearest * nearest > 1e-20) || nearest < 0.0 {
+            return intensity.max(Vec3::ZERO).map(|i| if i > 0.0 { f32::INFINITY } else { 0.0 });
+        }
+        let towards = to_centre / d;
+        // Every point of the sphere is at least `nearest` from the light and at least the
+        // sphere's half-angle nearer a spot's axis than its centre: the fall-off, the cone
+        // and the range window each fall away from there, so their value at that distance
+        // and angle bounds them all.
+        let direction = match axis.map(Vec3::normalize_or_zero) {
+            Some(axis) if axis != Vec3::ZERO => {
+                let half = (radius / d).clamp(0.0, 1.0).asin();
+                let angle = axis.dot(towards).clamp(-1.0, 1.0).acos();
+                if angle <= half {
+                    axis
+                } else {
+                    let across = (axis - towards * axis.dot(towards))
+                        .try_normalize()
+                        .unwrap_or_else(|| towards.any_orthonormal_vector());
+                    towards * half.cos() + across * half.sin()
+                }
+            }
+            _ => towards,
+        };
+        self.irradiance_across(position + direction * nearest).max(Vec3::ZERO)
+    }
+}
+
+/// The lights the transport takes out of a scene's ([`lights_reaching`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ReachingLights {
+    /// The lights taken, in the order given.
+    pub lights: Vec<PatchLight>,
+    /// Lights left out because none of their light can reach the participants (lossless).
+    pub unreachable: usize,
+    /// Lights that reach the participants but were left out for the `most` brighter ones.
+    pub left_out: usize,
+    /// Their share of the reaching lights' summed [`PatchLight::irradiance_bound`] (0 – 1):
+    /// at most what they would have added.
+    pub left_out_share: f32,
+}
+
+/// Of `lights`, those whose light can reach the participants within the sphere about
+/// `centre` of `radius` ([`PatchLight::irradiance_bound`] above zero), and of them at most
+/// `most`: the brightest by that bound, kept in the order given (so that a light's place,
+/// and the GPU's maps for it, change only when the choice does).
+pub fn lights_reaching(lights: &[PatchLight], centre: Vec3, radius: f32, most: usize) -> ReachingLights {
+    // Finite ranks for the lights inside the sphere, so that shares stay numbers.
+    let cap = f32::MAX / (lights.len() as f32 + 1.0);
+    let ranked: Vec<(usize, f32)> = lights
+        .iter()
+        .enumerate()
+        .map(|(i, l)| (i, l.irradiance_bound(centre, radius).element_sum().min(cap)))
+        .filter(|&(_, bound)| bound > 0.0)
+        .collect();
+    let unreachable = lights.len() - ranked.len();
+    let mut by_brightness = ranked.clone();
+    by_brightness.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let total: f32 = ranked.iter().map(|r| r.1).sum();
+    let left: f32 = by_brightness.iter().skip(most).map(|r| r.1).sum();
+    let mut taken: Vec<usize> = by_brightness.iter().take(most).map(|r| r.0).collect();
+    taken.sort_unstable();
+    ReachingLights {
+        lights: taken.iter().map(|&i| lights[i]).collect(),
+        unreachable,
+        left_out: ranked.len().saturating_sub(most),
+        left_out_share: if total > 0.0 { left / total } else { 0.0 },
+    }
+}
+
+/// A light's numbers (position, direction, intensity, angles, range): what says whether it
+/// changed, and whether it is finite.
+pub fn light_numbers(light: &PatchLight) -> Vec<f32> {
+    match *light {
+        PatchLight::Directional { direction, illuminance } => [direction.to_array(), illuminance.to_array()].concat(),
+        PatchLight::Point { position, intensity, range } => {
+            [position.to_array().as_slice(), &intensity.to_array(), &[range]].concat()
+        }
+        PatchLight::Spot { position, direction, intensity, inner_angle, outer_angle, range } => [
+            position.to_array().as_slice(),
+            &direction.to_array(),
+            &intensity.to_array(),
+            &[inner_angle, outer_angle, range],
+        ]
+        .concat(),
+    }
+}
+
 /// Each patch's direct irradiance `E⁰` from `lights`, shadowed by one ray from its centre:
 /// `LightInjection::ShadowRays`, and the CPU oracle of the GPU's light-view injection
 /// (`injection/`).

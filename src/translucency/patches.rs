@@ -77,6 +77,20 @@ impl Patches {
     pub fn samples_of(&self, i: usize) -> &[PatchSample] {
         &self.samples[self.sample_offsets[i] as usize..self.sample_offsets[i + 1] as usize]
     }
+
+    /// A sphere about every sample (centre, radius): the middle of their bounding box and
+    /// 1 % beyond its half-diagonal. The unit sphere about the origin where there are none.
+    pub fn bounding_sphere(&self) -> (Vec3, f32) {
+        let (lo, hi) = self.samples.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), s| (lo.min(s.position), hi.max(s.position)),
+        );
+        if lo.x <= hi.x {
+            ((lo + hi) * 0.5, ((hi - lo).length() * 0.5).max(1e-6) * 1.01)
+        } else {
+            (Vec3::ZERO, 1.0)
+        }
+    }
 }
 
 /// A surface sample: a small piece of one triangle.

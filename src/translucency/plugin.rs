@@ -18,6 +18,7 @@ use super::{
     precompute::{Precompute, hash_f32s},
     patches::Patches,
     translucent_shadow_map::MarchedMedium,
+    lights::{light_numbers, lights_reaching},
     transport::{
         DirectLight, EnergyTransport, PatchLight, SceneRays, TransportReport,
         TransportSettings, direct_light,
@@ -125,9 +126,11 @@ pub enum LightInjection {
     /// patches' samples in compute (`resolution` texels a side per face: one face for a
     /// directional light over the whole scene, six for a point or spot light), and each
     /// patch's light with the share of 3×3 texels about it that the light reaches. Costs the
-    /// CPU nothing when lights move; shadow edges soften over a texel. More than
-    /// [`MAX_INJECTED_LIGHTS`](super::injection::MAX_INJECTED_LIGHTS) lights are injected by
-    /// `ShadowRays` (with a warning).
+    /// CPU nothing when lights move; shadow edges soften over a texel. Of more than
+    /// [`MAX_INJECTED_LIGHTS`](super::injection::MAX_INJECTED_LIGHTS) lights that reach the
+    /// patches, that many are taken, the brightest at them (with a warning saying how much
+    /// light the rest could have given); lights that cannot reach them (range, cone) are
+    /// left out with either injection.
     LightViewMaps {
         /// Texels a side of each map face (32 – 2048).
         resolution: u32,
@@ -270,6 +273,9 @@ pub struct TranslucencyScene {
     ///
     /// [`BeamTableSettings::single_scattering_to_pixels`]: super::beam_table::BeamTableSettings::single_scattering_to_pixels
     pub marched: Vec<Option<MarchedMedium>>,
+    /// A sphere about every patch ([`Patches::bounding_sphere`]): the lights that cannot reach
+    /// it are left out of the injection.
+    pub bounds: (Vec3, f32),
 }
 
 /// What the render world takes each frame.
@@ -382,12 +388,32 @@ pub(crate) fn inject_direct_light(
     let ambient = ambient.map_or(Vec3::ZERO, |a| {
         colour(a.color, a.brightness * std::f32::consts::PI)
     });
+    // Only the lights whose light can reach the patches (lossless: the rest give none), and
+    // for the GPU's injection at most as many as it takes, the brightest at the scene.
+    let most = match frame.settings.light_injection {
+        LightInjection::LightViewMaps { .. } => super::injection::MAX_INJECTED_LIGHTS,
+        LightInjection::ShadowRays => usize::MAX,
+    };
+    let reaching = lights_reaching(&lights, scene.bounds.0, scene.bounds.1, most);
+    if reaching.left_out > 0 {
+        warned.warn("translucency-injection-lights", || {
+            format!(
+                "translucency: {} lights reach the translucent scene, more than the GPU injection's {}; \
+                 the {} brightest there are taken and {} left out of the transport (at most {:.0} % \
+                 of the light there; LightInjection::ShadowRays takes every light, on the CPU)",
+                reaching.lights.len() + reaching.left_out,
+                super::injection::MAX_INJECTED_LIGHTS,
+                reaching.lights.len(),
+                reaching.left_out,
+                100.0 * reaching.left_out_share
+            )
+        });
+    }
+    let lights = reaching.lights;
     let mut signature: Vec<u64> = lights.iter().map(|l| hash_f32s(light_numbers(l))).collect();
     signature.push(hash_f32s(ambient.to_array()));
     let on_gpu = match frame.settings.light_injection {
-        LightInjection::LightViewMaps { resolution }
-            if lights.len() <= super::injection::MAX_INJECTED_LIGHTS =>
-        {
+        LightInjection::LightViewMaps { resolution } => {
             let range = super::injection::LIGHT_VIEW_RESOLUTIONS;
             if !range.contains(&resolution) {
                 warned.warn("translucency-injection-resolution", || {
@@ -399,18 +425,6 @@ pub(crate) fn inject_direct_light(
                 });
             }
             Some(resolution.clamp(*range.start(), *range.end()))
-        }
-        LightInjection::LightViewMaps { .. } => {
-            warned.warn("translucency-injection-lights", || {
-                format!(
-                    "translucency: {} lights are more than the GPU injection's {}; they are injected on the CPU, \
-                     and single scattering is not marched per pixel (the beam table leaves it to \
-                     the GPU injection's maps)",
-                    lights.len(),
-                    super::injection::MAX_INJECTED_LIGHTS
-                )
-            });
-            None
         }
         LightInjection::ShadowRays => None,
     };
@@ -442,39 +456,6 @@ pub(crate) fn inject_direct_light(
         }
     }
     frame.direct = Some((state.direct_generation, Arc::new(direct)));
-}
-
-fn light_numbers(light: &PatchLight) -> Vec<f32> {
-    match *light {
-        PatchLight::Directional {
-            direction,
-            illuminance,
-        } => [direction.to_array(), illuminance.to_array()].concat(),
-        PatchLight::Point {
-            position,
-            intensity,
-            range,
-        } => [
-            position.to_array().as_slice(),
-            &intensity.to_array(),
-            &[range],
-        ]
-        .concat(),
-        PatchLight::Spot {
-            position,
-            direction,
-            intensity,
-            inner_angle,
-            outer_angle,
-            range,
-        } => [
-            position.to_array().as_slice(),
-            &direction.to_array(),
-            &intensity.to_array(),
-            &[inner_angle, outer_angle, range],
-        ]
-        .concat(),
-    }
 }
 
 /// Shows each translucent mesh without its diffuse while its transport is ready, and with

@@ -315,7 +315,8 @@ pub(crate) fn run_precompute(
                 Some(table) if table.settings.single_scattering_to_pixels => surfaces.iter().map(MarchedMedium::of).collect(),
                 _ => Vec::new(),
             };
-            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, source_depths, entities, marched }, notes, from_cache)
+            let bounds = patches.bounding_sphere();
+            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, source_depths, entities, marched, bounds }, notes, from_cache)
         }));
         *status = TranslucencyStatus::Precomputing {
             since: Instant::now(),

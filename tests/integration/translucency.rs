@@ -1363,7 +1363,8 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     assert!(warnings(&app).iter().any(|c| c == "translucency-injection-resolution"));
     let frame = app.world().resource::<TranslucencyFrame>();
     assert_eq!(frame.lights.as_ref().map(|l| l.1.resolution), Some(32));
-    // More lights than the GPU injection takes: a warning, and the CPU injects them.
+    // More lights in reach than the GPU injection takes: a warning, and it takes the
+    // brightest that many (`lights_out_of_reach_are_left_out_and_the_brightest_eight_are_taken`).
     for i in 0..=MAX_INJECTED_LIGHTS {
         app.world_mut().spawn((
             PointLight::default(),
@@ -1373,7 +1374,8 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     run(&mut app, 2);
     assert!(warnings(&app).iter().any(|c| c == "translucency-injection-lights"));
     let frame = app.world().resource::<TranslucencyFrame>();
-    assert!(frame.direct.is_some() && frame.lights.is_none());
+    assert!(frame.direct.is_none());
+    assert_eq!(frame.lights.as_ref().map(|l| l.1.lights.len()), Some(MAX_INJECTED_LIGHTS));
 }
 
 #[test]
@@ -1455,13 +1457,35 @@ fn a_kept_transport_is_read_back_instead_of_built_again() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// An app with the translucency plugin (300 patches, no beam table) and a white 5 cm
+/// translucent ball at the origin, seen from 25 cm by a `size`² HDR-less, untonemapped
+/// camera: the target it draws to.
+fn small_translucent_ball(app: &mut App, size: u32) -> Handle<Image> {
+    use bevy_mesostructure::translucency::{TranslucencyCamera, TranslucencySettings, Translucent};
+    app.insert_resource(TranslucencySettings {
+        patch_budget: 300,
+        transport: TransportSettings { beam_table: None, ..default() },
+        ..default()
+    });
+    let ball = mesh(app, Sphere::new(0.05).mesh().uv(48, 24));
+    let material = matte_white(app);
+    app.world_mut().spawn((ball, MeshMaterial3d(material), Translucent::default(), Transform::IDENTITY));
+    let image = target(app, size, size);
+    app.world_mut().spawn((
+        Camera3d::default(),
+        bevy::camera::RenderTarget::Image(image.clone().into()),
+        Msaa::Off,
+        bevy::core_pipeline::tonemapping::Tonemapping::None,
+        TranslucencyCamera,
+        Transform::from_xyz(0.0, 0.0, 0.25).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    image
+}
+
 #[test]
 fn ambient_light_reaches_translucent_objects() {
     use bevy::light::GlobalAmbientLight;
-    use bevy_mesostructure::translucency::{
-        TranslucencyCamera, TranslucencyFrame, TranslucencyPlugin, TranslucencySettings,
-        Translucent,
-    };
+    use bevy_mesostructure::translucency::{TranslucencyFrame, TranslucencyPlugin};
     if !gpu_or_skip() {
         return;
     }
@@ -1475,29 +1499,8 @@ fn ambient_light_reaches_translucent_objects() {
         brightness,
         ..default()
     });
-    app.insert_resource(TranslucencySettings {
-        patch_budget: 300,
-        transport: TransportSettings { beam_table: None, ..default() },
-        ..default()
-    });
-    let ball = mesh(&mut app, Sphere::new(0.05).mesh().uv(48, 24));
-    let material = matte_white(&mut app);
-    app.world_mut().spawn((
-        ball,
-        MeshMaterial3d(material),
-        Translucent::default(),
-        Transform::IDENTITY,
-    ));
     let size = 32;
-    let image = target(&mut app, size, size);
-    app.world_mut().spawn((
-        Camera3d::default(),
-        bevy::camera::RenderTarget::Image(image.clone().into()),
-        Msaa::Off,
-        bevy::core_pipeline::tonemapping::Tonemapping::None,
-        TranslucencyCamera,
-        Transform::from_xyz(0.0, 0.0, 0.25).looking_at(Vec3::ZERO, Vec3::Y),
-    ));
+    let image = small_translucent_ball(&mut app, size);
     run_until_ready(&mut app);
     run(&mut app, 3);
     // Injected by the GPU (the default), which adds it to the translucent patches.
@@ -1541,6 +1544,73 @@ fn ambient_light_reaches_translucent_objects() {
     // Exitance ≈ A · π L (marble's red A ≈ 0.9) → radiance ≈ 0.9 × 400 × exposure (≈ 1e-3):
     // about 0.36 linear, 160/255 in sRGB; measured 158.
     assert!((130.0..=185.0).contains(&centre), "{centre}");
+}
+
+#[test]
+fn lights_out_of_reach_are_left_out_and_the_brightest_eight_are_taken() {
+    use bevy_mesostructure::translucency::{TranslucencyFrame, TranslucencyPlugin, injection::MAX_INJECTED_LIGHTS};
+    if !gpu_or_skip() {
+        return;
+    }
+    let mut app = bare_app_with(|app| {
+        app.add_plugins(TranslucencyPlugin);
+    });
+    small_translucent_ball(&mut app, 32);
+    // A level's lights: one spot on the ball, twelve lamps elsewhere whose range ends well
+    // short of it, and a spot beside it aimed away.
+    app.world_mut().spawn((
+        SpotLight { intensity: 4e4, range: 2.0, outer_angle: 0.4, inner_angle: 0.3, shadow_maps_enabled: false, ..default() },
+        Transform::from_xyz(0.0, 0.0, 0.5).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    for k in 0..12 {
+        let angle = k as f32 * std::f32::consts::TAU / 12.0;
+        app.world_mut().spawn((
+            PointLight { intensity: 1e6, range: 1.0, shadow_maps_enabled: false, ..default() },
+            Transform::from_xyz(3.0 * angle.cos(), 1.0, 3.0 * angle.sin()),
+        ));
+    }
+    app.world_mut().spawn((
+        SpotLight { intensity: 1e6, range: 5.0, outer_angle: 0.3, inner_angle: 0.2, shadow_maps_enabled: false, ..default() },
+        Transform::from_xyz(0.0, 0.3, 0.0).looking_at(Vec3::new(0.0, 1.0, 0.0), Vec3::Z),
+    ));
+    run_until_ready(&mut app);
+    run(&mut app, 2);
+    let taken = |app: &App| {
+        let (_, lights) = app.world().resource::<TranslucencyFrame>().lights.clone().expect("injected on the GPU");
+        lights.lights.clone()
+    };
+    // Fourteen lights, one of them reaching the ball: the GPU injects (and marches) it alone,
+    // where before more than eight lights sent every one to the CPU.
+    let lights = taken(&app);
+    assert!(
+        matches!(lights.as_slice(), [PatchLight::Spot { range, .. }] if *range == 2.0),
+        "{lights:?}"
+    );
+    let left_out = "translucency-injection-lights".to_string();
+    assert!(!warnings(&app).contains(&left_out), "{:?}", warnings(&app));
+    // Nine more lamps in reach, the k-th (2 + k)·10 cm away, all dimmer at the ball than the
+    // spot: of the ten lights that reach it, the eight brightest are taken.
+    for k in 0..9 {
+        app.world_mut().spawn((
+            PointLight { intensity: 1e3, range: 5.0, shadow_maps_enabled: false, ..default() },
+            Transform::from_xyz(0.0, 0.2 + 0.1 * k as f32, 0.0),
+        ));
+    }
+    run(&mut app, 2);
+    let lights = taken(&app);
+    assert_eq!(lights.len(), MAX_INJECTED_LIGHTS);
+    let heights: Vec<f32> = lights
+        .iter()
+        .filter_map(|l| match l {
+            PatchLight::Point { position, .. } => Some(position.y),
+            _ => None,
+        })
+        .collect();
+    assert!(lights.iter().any(|l| matches!(l, PatchLight::Spot { range, .. } if *range == 2.0)), "{lights:?}");
+    assert_eq!(heights.len(), 7, "{lights:?}");
+    assert!(heights.iter().all(|&y| y < 0.2 + 0.1 * 6.5), "the two farthest lamps are left out: {heights:?}");
+    // Said once.
+    assert!(warnings(&app).contains(&left_out), "{:?}", warnings(&app));
 }
 
 #[path = "../../examples/common/translucent_accuracy_scene.rs"]

@@ -365,15 +365,7 @@ impl GpuInjection {
         scene.push([0.0; 4]);
 
         // The maps see the patches' bounding sphere (directional lights).
-        let (lo, hi) = patches.samples.iter().fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(lo, hi), s| (lo.min(s.position), hi.max(s.position)),
-        );
-        let (centre, radius) = if lo.x <= hi.x {
-            ((lo + hi) * 0.5, ((hi - lo).length() * 0.5).max(1e-6) * 1.01)
-        } else {
-            (Vec3::ZERO, 1.0)
-        };
+        let (centre, radius) = patches.bounding_sphere();
         let (direct, direct_exitance) = target.direct_offsets();
         let beams = target.beam_offsets();
         let table = transport.beam_table.as_ref().map(|t| t.settings);

@@ -8,6 +8,7 @@
 mod beam_table;
 mod cache_and_gather;
 mod energy;
+mod lights;
 mod media;
 mod patches;
 mod profiles;

@@ -35,7 +35,7 @@ pub use solve::{
 
 use std::time::Instant;
 
-pub use super::lights::{DirectLight, PatchLight, direct_irradiance, direct_light};
+pub use super::lights::{DirectLight, PatchLight, ReachingLights, direct_irradiance, direct_light, lights_reaching};
 use super::{
     diffusion::DiffusionKernel,
     beam_table::{ExitLean, TableFlow, from_afar},
