@@ -280,6 +280,18 @@ pub enum SceneLighting {
     Uniform,
 }
 
+impl SceneLighting {
+    /// The way the light travels at `x` (unit): a directional light's everywhere, a point
+    /// light's from it; none for uniform light (or at the point light itself).
+    pub fn travel_at(&self, x: Vec3) -> Option<Vec3> {
+        match *self {
+            SceneLighting::Directional(travel) => travel.try_normalize(),
+            SceneLighting::Point(position) => (x - position).try_normalize(),
+            SceneLighting::Uniform => None,
+        }
+    }
+}
+
 /// Where the translucent object's scattering `K` comes from.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ScatteringSource {
@@ -448,16 +460,12 @@ pub fn plugin_picture(
     // Each patch's launch: diffuse, the light's beam, or its beam snapped to a table's.
     // The walk oracles' one beam for every patch (a point light's beams differ by patch: the
     // table's alone take them, `beam_of`).
+    // Light from everywhere has no one beam: diffuse walks.
     let beam = match lighting {
-        SceneLighting::Directional(beam) => Some(beam.normalize()),
-        // Light from everywhere has no one beam: diffuse walks.
+        SceneLighting::Directional(_) => lighting.travel_at(Vec3::ZERO),
         SceneLighting::Uniform | SceneLighting::Point(_) => None,
     };
-    let beam_of = |q: &bevy_mesostructure::translucency::Patch| match lighting {
-        SceneLighting::Directional(beam) => Some(beam.normalize()),
-        SceneLighting::Point(position) => (q.centre - position).try_normalize(),
-        SceneLighting::Uniform => None,
-    };
+    let beam_of = |q: &bevy_mesostructure::translucency::Patch| lighting.travel_at(q.centre);
     let walked = match (oracles.scattering, beam) {
         (ScatteringSource::Walks(walks), _)
         | (ScatteringSource::BeamWalks(walks), None)

@@ -117,9 +117,14 @@ fn translucent_maps_of(header: vec4<f32>) -> TranslucentMaps {
     return TranslucentMaps(h.x, h.y, h.z, h.w);
 }
 
+// Where texel k's light is (k counted over every map, as `translucent_texel` gives it).
+fn translucent_texel_light(h: TranslucentMaps, k: u32) -> u32 {
+    return 1u + 2u * h.objects + k;
+}
+
 // Where map m's texels' light starts.
 fn translucent_light_at(h: TranslucentMaps, m: u32) -> u32 {
-    return 1u + 2u * h.objects + m * h.resolution * h.resolution;
+    return translucent_texel_light(h, m * h.resolution * h.resolution);
 }
 
 // Where map m's frame starts (after every map's texels).

@@ -211,7 +211,7 @@ pub fn surface_albedo(alpha: f64) -> f64 {
 ///
 /// Its weight: the share `g = 1 − √(3(1 − α))` of light arriving from elsewhere that is in
 /// that mode — all of it for no absorption, none where a mean free path is a diffusion length
-/// (skin's blue). Returns `(α, ν, 1/N, g)`, what [`deep_exit_shape`] and `gather.wgsl` read
+/// (skin's blue). Returns `(α, ν, 1/N, g)`, what [`deep_exit_shape`] and `gathered.wgsl` read
 /// with the same `eta`.
 pub fn deep_exit_law(alpha: f64, eta: f64) -> [f32; 4] {
     let alpha = alpha.clamp(0.0, 1.0);
@@ -237,7 +237,7 @@ pub fn deep_exit_law(alpha: f64, eta: f64) -> [f32; 4] {
 }
 
 /// `s(μ)` of a [`deep_exit_law`] behind a boundary of index `eta` at exit cosine `mu` (the
-/// same arithmetic as `gather.wgsl`).
+/// same arithmetic as `gathered.wgsl`).
 pub fn deep_exit_shape(law: [f32; 4], eta: f32, mu: f32) -> f32 {
     let eta = f64::from(if eta.is_finite() { eta } else { 1.0 }).clamp(1.0, 3.0);
     let mu = mu.clamp(0.0, 1.0) as f64;

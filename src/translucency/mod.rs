@@ -72,7 +72,10 @@ impl Plugin for TranslucencyPlugin {
     fn build(&self, app: &mut App) {
         crate::warn_once::install(app);
         bevy::shader::load_shader_library!(app, "boundary.wgsl");
+        bevy::shader::load_shader_library!(app, "gather/marched.wgsl");
+        bevy::shader::load_shader_library!(app, "gather/gathered.wgsl");
         bevy::asset::embedded_asset!(app, "gather/gather.wgsl");
+        bevy::asset::embedded_asset!(app, "gather/gather_compute.wgsl");
         app.register_type::<Translucent>()
             .register_type::<RadiosityReceiver>()
             .register_type::<TranslucencyCamera>()

@@ -36,7 +36,7 @@ pub const MAX_RESOLUTION: u32 = 4096;
 /// rays (`docs/translucent.md`, "Single scattering marched per pixel").
 pub const PLUGIN_RESOLUTION: u32 = 256;
 
-/// The plugin's depths a channel (`MARCHED_DEPTHS` in `gather.wgsl`). On the bunny and the
+/// The plugin's depths a channel (`MARCHED_DEPTHS` in `marched.wgsl`). On the bunny and the
 /// torus 8 are as good as 64 (the bunny's skin from behind 0.160 against 0.157, 0.169 at 4);
 /// on the ball's skin lit from the front they are not: 0.061 at 8, 0.052 at 16, 0.048 at 64.
 pub const PLUGIN_DEPTHS: u32 = 16;
@@ -440,7 +440,7 @@ impl MarchedMedium {
 
 /// One translucent object's single scattering marched per pixel, as the plugin takes it: its
 /// medium and one map a light (the CPU twin of the GPU's, `translucent_maps` in `inject.wgsl`
-/// and `marched_single_scattering` in `gather.wgsl`).
+/// and `marched_single_scattering` in `marched.wgsl`).
 #[derive(Clone, Debug)]
 pub struct MarchedObject {
     /// The medium.

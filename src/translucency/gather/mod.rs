@@ -1,10 +1,11 @@
 //! The translucency's render-world state ([`TranslucencyGpu`]: the scene's transport, light
 //! injection and gather buffers, uploaded in `prepare_translucency`; the injection's and the
 //! iteration's passes are in `injection/` and `iteration/`) and the gather that puts the
-//! patches' light into each view (`gather.wgsl`: a compute pass culling the patches per 8×8
-//! tile where the view's main images take storage writes — at one pixel in 2×2 and
-//! upsampled by surface, by default ([`GatherResolution`]) — else a fullscreen pass added to
-//! the lit image). Its CPU twin is `twin.rs`.
+//! patches' light into each view (`gather_compute.wgsl`: a compute pass culling the patches
+//! per 8×8 tile where the view's main images take storage writes — at one pixel in 2×2 and
+//! upsampled by surface, by default ([`GatherResolution`]); else `gather.wgsl`, a fullscreen
+//! pass added to the lit image). What they share is `gathered.wgsl`, and single scattering
+//! marched per pixel `marched.wgsl`, both imported. Its CPU twin is `twin.rs`.
 
 use std::sync::Arc;
 
@@ -31,7 +32,7 @@ mod twin;
 
 pub use twin::{BeamSingleScattering, PatchGrid, gathered_radiance};
 
-/// `GatherParams` in `gather.wgsl`.
+/// `GatherParams` in `gathered.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable, ShaderType)]
 struct GatherParams {
@@ -188,7 +189,7 @@ fn gather_buffers(
         .collect();
     let centres: Vec<Vec3> = patches.patches.iter().map(|p| p.surface_point).collect();
     let grids = PatchGrid::levels(&centres, &reaches);
-    // `GatherPatch` in gather.wgsl: (surface point, reach), (normal, area), (albedo, object),
+    // `GatherPatch` in gathered.wgsl: (surface point, reach), (normal, area), (albedo, object),
     // (the exit law's local albedo, η), its law per channel, (α, η) of its medium where a
     // beam table carries its beams (single scattering's law; zero elsewhere).
     // Where single scattering is marched per pixel, the lit face's law is not given as well.
@@ -408,9 +409,10 @@ pub fn init_gather_pipeline(
     let unserved_layout =
         BindGroupLayoutDescriptor::new("translucency_gather_unserved_layout", &unserved_entries);
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "gather.wgsl");
+    let compute_shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "gather_compute.wgsl");
     let queue = |label: &'static str, layout: &BindGroupLayoutDescriptor, entry: &'static str, half: bool| {
         [GatherMethod::Interpolation, GatherMethod::PhotonDensity].map(|method| {
-            let mut shader_defs = vec!["COMPUTE_GATHER".into()];
+            let mut shader_defs = Vec::new();
             if half {
                 shader_defs.push("HALF_RESOLUTION".into());
             }
@@ -418,7 +420,7 @@ pub fn init_gather_pipeline(
             pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
                 label: Some(label.into()),
                 layout: vec![layout.clone()],
-                shader: shader.clone(),
+                shader: compute_shader.clone(),
                 shader_defs,
                 entry_point: Some(entry.into()),
                 ..default()

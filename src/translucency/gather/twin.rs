@@ -1,5 +1,5 @@
 //! The gather's CPU twin: the patches' hashed grids, and each pixel's light from the patches
-//! about it as `gather.wgsl` takes it (the oracle the GPU gather is tested against).
+//! about it as `gathered.wgsl` takes it (the oracle the GPU gather is tested against).
 
 use bevy::prelude::*;
 
@@ -56,7 +56,7 @@ impl PatchGrid {
         }
     }
 
-    /// A cell's bucket: `bucket` in `gather.wgsl`.
+    /// A cell's bucket: `bucket` in `gathered.wgsl`.
     pub fn bucket(cell: IVec3, mask: u32) -> u32 {
         let c = cell.as_uvec3();
         (c.x.wrapping_mul(73_856_093) ^ c.y.wrapping_mul(19_349_663) ^ c.z.wrapping_mul(83_492_791))
@@ -102,7 +102,7 @@ pub const MAX_GRID_LEVELS: usize = 8;
 /// interpolated, or as photons of that exitance times the patch's area under a kernel of
 /// unit integral; `None` where no patch is near. With `marched` (per object; `None` on those
 /// without), the single scattering marched per pixel of the translucent object whose patch
-/// weighs most at `x` ([`MarchedObject::radiance`]) is added. The CPU twin of `gather.wgsl`
+/// weighs most at `x` ([`MarchedObject::radiance`]) is added. The CPU twin of `gathered.wgsl`
 /// (brute force instead of the hashed grid), the oracle of its tests.
 #[allow(clippy::too_many_arguments)]
 pub fn gathered_radiance(

@@ -437,7 +437,7 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
 // perspective from a point or spot) — the injection's maps are centimetres wide in a room,
 // the light's path inside needs a fraction of a mean free path — and each texel's light
 // inside (`entry_light`), for the gather's single scattering marched per pixel
-// (`marched_single_scattering` in gather.wgsl).
+// (`marched_single_scattering` in marched.wgsl).
 //
 // `translucent_maps`, in vec4s: a header (objects, object slots with maps, resolution,
 // lights); per object (σt per world unit, slot or −1), (α, η); per map (light × slots + slot)
@@ -550,18 +550,19 @@ fn translucent_tangent(h: TranslucentMaps, m: u32, f: TranslucentFrame, x: i32, 
                        here: vec3<f32>, across: vec3<f32>) -> vec3<f32> {
     let before = translucent_entry_depth(h, m, x - step.x, y - step.y);
     let after = translucent_entry_depth(h, m, x + step.x, y + step.y);
-    let b = translucent_entry_point(f, h.resolution, x - step.x, y - step.y, before);
-    let a = translucent_entry_point(f, h.resolution, x + step.x, y + step.y, after);
-    if is_finite(before) && is_finite(after) {
-        return a - b;
+    if !is_finite(before) && !is_finite(after) {
+        return across;
+    }
+    // A neighbour off the object stands in by this texel's own point (a one-sided difference).
+    var b = here;
+    var a = here;
+    if is_finite(before) {
+        b = translucent_entry_point(f, h.resolution, x - step.x, y - step.y, before);
     }
     if is_finite(after) {
-        return a - here;
+        a = translucent_entry_point(f, h.resolution, x + step.x, y + step.y, after);
     }
-    if is_finite(before) {
-        return here - b;
-    }
-    return across;
+    return a - b;
 }
 
 // Each texel's light inside the object (`TranslucentShadowMap::light_texels` with

@@ -103,7 +103,7 @@ impl ExitLaw {
     /// The exit radiance over the Lambertian `B/π` at exit cosine `mu`, per channel, for
     /// exitance `b` and direct irradiance `e0`: `1 + D (s(μ) − 1)`, with
     /// `D = g · clamp(1 − A E⁰/B, 0, 1)` the share of `B` that came from elsewhere in the deep
-    /// field's mode (the same arithmetic as `gather.wgsl`).
+    /// field's mode (the same arithmetic as `gathered.wgsl`).
     pub fn factor(&self, b: Vec3, e0: Vec3, mu: f32) -> Vec3 {
         Vec3::from_array(std::array::from_fn(|c| {
             self.channel_factor(c, b[c], e0[c], |law| super::diffusion::deep_exit_shape(law, self.eta, mu))
@@ -186,7 +186,7 @@ impl ExitLaw {
     /// [`factor`](Self::factor) towards the unit `towards` from a point of unit normal `n`,
     /// the deep field's mode about each channel's [`flow`](Self::flow) axis where it has one.
     /// The share `lobe_exitance / B` of the exitance leaving by its lobe leaves by it, the
-    /// rest by the law above as if it were all there were (`exit_factor` in `gather.wgsl`).
+    /// rest by the law above as if it were all there were (`exit_factor` in `gathered.wgsl`).
     pub fn factor_towards(&self, b: Vec3, e0: Vec3, n: Vec3, towards: Vec3) -> Vec3 {
         Vec3::from_array(std::array::from_fn(|c| {
             let lobe = self.lobes[c];

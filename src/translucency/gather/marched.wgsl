@@ -1,0 +1,114 @@
+#define_import_path bevy_mesostructure::translucency::marched
+
+#import bevy_mesostructure::translucency::boundary::{
+    fresnel_reflectance, translucent_map_depth, TranslucentMaps, translucent_maps_of,
+    translucent_texel_light, translucent_frame_at, TranslucentFrame, translucent_frame_of,
+    translucent_place, translucent_texel_width, translucent_texel,
+}
+
+// The translucent objects' maps towards each light and their light (`translucent_maps`,
+// `translucent_depths` in inject.wgsl, where they are laid out).
+@group(0) @binding(13) var<storage, read> translucent_maps: array<vec4<f32>>;
+@group(0) @binding(14) var<storage, read> translucent_depths: array<u32>;
+
+// Single scattering marched per pixel (`MarchedObject::radiance`, translucent_shadow_map.rs):
+// at `MARCHED_DEPTHS` optical depths a channel (the midpoint quantiles of e^{−τ}) along the
+// view ray refracted into the pixel's object, each against each light's map of the object —
+// the light's path inside to it (scaled for its refraction) and its column's light — out
+// through the boundary, T(μ)/η².
+const MARCHED_DEPTHS: u32 = 16u;
+
+// `TranslucentShadowMap::lit_path_inside`: the light's path inside to `p` in map `m` and
+// its own texel's light (the path's scale in w); `inside` false before the entry or beyond
+// the first exit by more than a texel, or off the object.
+struct LitPath {
+    inside: bool,
+    path: f32,
+    light: vec4<f32>,
+}
+
+fn map_entry(h: TranslucentMaps, m: u32, x: i32, y: i32) -> f32 {
+    return translucent_map_depth(translucent_depths[2u * u32(translucent_texel(h, m, x, y, true))]);
+}
+
+fn lit_path_inside(h: TranslucentMaps, m: u32, f: TranslucentFrame, p: vec3<f32>) -> LitPath {
+    var lit: LitPath;
+    let place = translucent_place(f, p, h.resolution);
+    if !place.on {
+        lit.inside = false;
+        return lit;
+    }
+    let texel = translucent_texel_width(f, place.depth, h.resolution);
+    let c = vec2<i32>(floor(place.at - 0.5));
+    let t = place.at - 0.5 - floor(place.at - 0.5);
+    let corners = vec4(map_entry(h, m, c.x, c.y), map_entry(h, m, c.x + 1, c.y),
+                       map_entry(h, m, c.x, c.y + 1), map_entry(h, m, c.x + 1, c.y + 1));
+    let own = vec2<i32>(floor(place.at));
+    let k = u32(translucent_texel(h, m, own.x, own.y, true));
+    var near = translucent_map_depth(translucent_depths[2u * k]);
+    let far = translucent_map_depth(translucent_depths[2u * k + 1u]);
+    if all(corners < vec4(3.0e38)) {
+        near = mix(mix(corners.x, corners.y, t.x), mix(corners.z, corners.w, t.x), t.y);
+    }
+    lit.inside = near < 3.0e38 && place.depth >= near - texel && place.depth <= far + texel;
+    lit.path = max(place.depth - near, 0.0);
+    lit.light = translucent_maps[translucent_texel_light(h, k)];
+    // From a point, the light spreads on inside as outside (index-matched): its irradiance at
+    // the entry times (entry distance / distance)².
+    if f.perspective && place.depth > near {
+        lit.light = vec4(lit.light.rgb * (near * near) / (place.depth * place.depth), lit.light.w);
+    }
+    return lit;
+}
+
+// At the pixel's world point `x` of unit normal `n`, seen along the unit `towards` at exit
+// cosine `mu`, in translucent object `object` (-1: none).
+fn marched_single_scattering(object: i32, x: vec3<f32>, n: vec3<f32>, towards: vec3<f32>, mu: f32) -> vec3<f32> {
+    let h = translucent_maps_of(translucent_maps[0]);
+    if object < 0 || u32(object) >= h.objects || mu <= 0.0 {
+        return vec3(0.0);
+    }
+    let medium = translucent_maps[1u + 2u * u32(object)];
+    if medium.w < 0.0 {
+        return vec3(0.0);
+    }
+    let sigma_t = medium.xyz;
+    let albedo_eta = translucent_maps[2u + 2u * u32(object)];
+    let eta = clamp(albedo_eta.w, 1.0, 3.0);
+    let inside = sqrt(max(1.0 - (1.0 - mu * mu) / (eta * eta), 0.0));
+    // Snell's law: the ray's part along the surface shrinks by η.
+    let into = (-towards + n * mu) / eta - n * inside;
+    var total = vec3(0.0);
+    for (var l = 0u; l < h.lights; l++) {
+        let m = l * h.slots + u32(medium.w);
+        let frame_at = translucent_frame_at(h, m);
+        let f = translucent_frame_of(translucent_maps[frame_at], translucent_maps[frame_at + 1u],
+                                     translucent_maps[frame_at + 2u], translucent_maps[frame_at + 3u]);
+        if !f.present {
+            continue;
+        }
+        for (var c = 0u; c < 3u; c++) {
+            if !(sigma_t[c] > 0.0) {
+                continue;
+            }
+            var sum = 0.0;
+            var entered = false;
+            for (var k = 0u; k < MARCHED_DEPTHS; k++) {
+                // `optical_depth_quantile`.
+                let depth = -log(1.0 - (f32(k) + 0.5) / f32(MARCHED_DEPTHS)) / sigma_t[c];
+                let lit = lit_path_inside(h, m, f, x + into * depth);
+                if lit.inside {
+                    sum += lit.light[c] * exp(-sigma_t[c] * lit.path * lit.light.w);
+                    entered = true;
+                } else if entered {
+                    // Once the ray has left the object, what lies beyond may be air.
+                    break;
+                }
+            }
+            total[c] += sum / f32(MARCHED_DEPTHS);
+        }
+    }
+    let exit = (1.0 - fresnel_reflectance(mu, eta)) / (eta * eta);
+    return albedo_eta.rgb / (4.0 * 3.14159265358979) * total * exit;
+}
+
