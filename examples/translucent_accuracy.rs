@@ -184,8 +184,9 @@ struct Cli {
     /// A point light this far (metres) from the object's centre, back along the light's
     /// direction, of irradiance 1 across its rays at the centre, instead of the directional
     /// light: each patch's beam from it, each object's map in perspective from it.
-    /// Index-matched, `--scattering beam-table` or `profile`; the reference is Mitsuba's.
-    /// Lighting suffix `_point<distance>`
+    /// Index-matched, `--scattering beam-table` or `profile`; the ball's reference is made by
+    /// `--tracer` (the light tracer by default), the other shapes' by Mitsuba. Lighting suffix
+    /// `_point<distance>`
     #[arg(long, value_name = "DISTANCE")]
     point_light: Option<f32>,
     /// The ball's pixels on its triangles (as the GPU's depth prepass puts them), not on the
@@ -456,10 +457,10 @@ fn main() {
     let reference_path = cli.reference.clone().unwrap_or_else(|| {
         let dir = PathBuf::from("out/translucent_accuracy");
         std::fs::create_dir_all(&dir).unwrap_or_else(|e| fail(format!("cannot create {}: {e}", dir.display())));
-        // The light tracer takes a directional light only: a uniform environment is Mitsuba's.
-        // The light tracer traces the ball (the sphere) only.
+        // The light tracer takes a directional or a point light: a uniform environment is
+        // Mitsuba's. It traces the ball (the sphere) only.
         let on_sphere = shape == Shape::Ball && !cli.pixels_on_mesh;
-        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && on_sphere && cli.point_light.is_none();
+        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && on_sphere;
         // Named by renderer and version: the first Mitsuba references (in metres, `volpath`)
         // were dark by Mitsuba's ray offsets (tools/translucent_reference.py says why).
         let (tool, renderer, samples) = if light_traced {

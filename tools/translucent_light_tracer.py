@@ -39,7 +39,9 @@ the exit's view cosine / (π · the pixel's solid angle · r²)); the unscattere
 counted. `--part lobe-exit` gives the same exits out by a lobe instead: per pixel, the von
 Mises–Fisher lobe `exp(k ω·u)` on the outward hemisphere whose flux-weighted mean exit
 direction is the exits' own (fitted on a grid of k and u's angle to the normal), scaled to
-their exitance — what a method that carried each patch's mean exit direction could give. `--uniform` lights the ball by a uniform environment of radiance 1 instead (photons start
+their exitance — what a method that carried each patch's mean exit direction could give. `--point-light DISTANCE` lights it by a point light that far back along `--light` instead, of
+irradiance 1 across its rays at the centre (photons uniform in solid angle over the cone the
+ball subtends). `--uniform` lights the ball by a uniform environment of radiance 1 instead (photons start
 uniformly over the sphere, cosine-distributed inward): against Mitsuba's reference of the
 same scene it checks the dielectric machinery end to end.
 
@@ -64,7 +66,7 @@ import time
 
 import numpy as np
 
-from translucent_scene import add_scene_arguments
+from translucent_scene import add_scene_arguments, point_light_position
 
 
 def normalize(v):
@@ -217,6 +219,22 @@ def trace_channel(sigma_t, albedo, args, camera, rng, batch):
     c = np.einsum("ij,ij->i", origin, origin) - radius * radius
     x = origin + (-b - np.sqrt(np.maximum(b * b - c, 0.0)))[:, None] * light
     w = np.tile(light, (batch, 1))
+    if args.point_light is not None:
+        # A point light `--point-light` back along the light, of intensity d² (irradiance 1
+        # across its rays at the centre): photons uniform in solid angle over the cone the
+        # ball subtends from it, each carrying d² Ω / batch, entering where they first meet
+        # the ball.
+        d = args.point_light
+        lamp = np.array(point_light_position(args))
+        cos_max = math.sqrt(max(0.0, 1.0 - (radius / d) ** 2))
+        power = d * d * 2.0 * math.pi * (1.0 - cos_max) / batch
+        ct = 1.0 - rng.random(batch) * (1.0 - cos_max)
+        st = np.sqrt(np.maximum(0.0, 1.0 - ct * ct))
+        phi = 2.0 * math.pi * rng.random(batch)
+        w = ct[:, None] * light + (st * np.cos(phi))[:, None] * lu + (st * np.sin(phi))[:, None] * lv
+        b = w @ lamp
+        c = lamp @ lamp - radius * radius
+        x = lamp + (-b - np.sqrt(np.maximum(b * b - c, 0.0)))[:, None] * w
     if args.uniform:
         # A uniform environment of radiance 1: irradiance π on every point of the ball,
         # 4π²R² in all; photons start uniformly over the sphere, cosine-distributed inward.
@@ -416,6 +434,8 @@ def main():
         parser.error("--radius, --size and --batch must be positive, --photons at least 2")
     if not all(a >= 0 and s > 0 for a, s in zip(args.sigma_a, args.sigma_s)):
         parser.error("--sigma-a must be ≥ 0 and --sigma-s > 0 in every channel")
+    if args.point_light is not None and (not args.point_light > args.radius or args.uniform):
+        parser.error("--point-light takes a distance beyond the ball's radius, and not with --uniform")
     if np.linalg.norm(args.light) == 0 or np.linalg.norm(args.eye) <= args.radius:
         parser.error("--light must be a direction and --eye outside the ball")
     if np.linalg.norm(np.cross(args.eye, [0.0, 1.0, 0.0])) < 1e-9 * np.linalg.norm(args.eye):

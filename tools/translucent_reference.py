@@ -55,7 +55,7 @@ pixel), leaving the light that came through the medium.
 import argparse
 import sys
 
-from translucent_scene import add_scene_arguments
+from translucent_scene import add_scene_arguments, point_light_position
 
 
 def main():
@@ -70,10 +70,6 @@ def main():
                         help="a uniform environment of radiance 1 instead of the light")
     parser.add_argument("--max-depth", type=int, default=-1,
                         help="longest path (2: single scattering alone; -1: unbounded)")
-    parser.add_argument("--point-light", type=float, default=None, metavar="DISTANCE",
-                        help="a point light this far (metres) from the origin, back along --light, "
-                             "of irradiance 1 across its rays at the origin, instead of the "
-                             "directional light")
     parser.add_argument("--seed", type=int, default=0,
                         help="the sampler's seed (two renders of different seeds give the noise)")
     args = parser.parse_args()
@@ -145,10 +141,6 @@ def main():
     print(f"wrote {args.out}")
 
 
-def point_light_position(args, mm):
-    """`--point-light`'s position in millimetres: back along `--light` from the origin."""
-    length = sum(v * v for v in args.light) ** 0.5
-    return [-mm * args.point_light * v / length for v in args.light]
 
 
 def fresnel(cos_i, eta):

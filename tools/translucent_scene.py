@@ -1,7 +1,7 @@
 """The translucency accuracy scene's command-line arguments, shared by the two reference
 renderers (translucent_reference.py: Mitsuba; translucent_light_tracer.py: numpy): a ball of a
 homogeneous medium at the origin (or, Mitsuba only, a closed triangle mesh about it: `--mesh`),
-a perspective camera looking at it, one directional light.
+a perspective camera looking at it, one directional light (or a point light back along it).
 """
 
 import argparse
@@ -31,3 +31,14 @@ def add_scene_arguments(parser):
     parser.add_argument("--fov", type=float, default=45.0, help="vertical field of view, degrees")
     parser.add_argument("--size", type=int, default=96, help="image width = height, pixels")
     parser.add_argument("--out", required=True, help="EXR to write")
+    parser.add_argument("--point-light", type=float, default=None, metavar="DISTANCE",
+                        help="a point light this far (metres) from the origin, back along --light, "
+                             "of irradiance 1 across its rays at the origin, instead of the "
+                             "directional light")
+
+
+def point_light_position(args, scale=1.0):
+    """`--point-light`'s position (in metres times `scale`): back along `--light` from the
+    origin."""
+    length = sum(v * v for v in args.light) ** 0.5
+    return [-scale * args.point_light * v / length for v in args.light]
