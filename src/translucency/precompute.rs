@@ -243,18 +243,17 @@ pub(crate) fn run_precompute(
             table.single_scattering_to_pixels = marches(&settings, table);
         }
         // Each translucent object marching its single scattering takes a map a light
-        // (1.5 MiB each); beyond `MAX_MARCHED_OBJECTS` the table keeps single scattering.
+        // (1.5 MiB each); beyond `MAX_MARCHED_OBJECTS` the table keeps it for the smaller ones.
         let translucent_objects = objects.iter().filter(|o| matches!(o.2, PatchSurface::Translucent { .. })).count();
-        if let Some(table) = transport_settings.beam_table.as_mut()
+        if let Some(table) = transport_settings.beam_table.as_ref()
             && table.single_scattering_to_pixels
             && translucent_objects > MAX_MARCHED_OBJECTS
         {
-            table.single_scattering_to_pixels = false;
             warned.warn("translucency-marched-objects", || {
                 format!(
                     "translucency: {translucent_objects} translucent objects are more than the \
-                     {MAX_MARCHED_OBJECTS} that march their single scattering per pixel; the beam \
-                     table keeps it for all"
+                     {MAX_MARCHED_OBJECTS} that march their single scattering per pixel; the \
+                     {MAX_MARCHED_OBJECTS} largest march, the beam table keeps it for the others"
                 )
             });
         }
@@ -312,7 +311,10 @@ pub(crate) fn run_precompute(
             let exit_laws = transport.exit_laws(&patches, &surfaces, &transport_settings);
             let source_depths = EnergyTransport::source_depths(&patches, &surfaces);
             let marched = match transport.beam_table.as_ref() {
-                Some(table) if table.settings.single_scattering_to_pixels => surfaces.iter().map(MarchedMedium::of).collect(),
+                Some(table) if table.settings.single_scattering_to_pixels => {
+                    let marching = super::beam_table::marched_objects(&patches, &surfaces);
+                    surfaces.iter().zip(marching).map(|(s, m)| if m { MarchedMedium::of(s) } else { None }).collect()
+                }
                 _ => Vec::new(),
             };
             let bounds = patches.bounding_sphere();

@@ -178,6 +178,7 @@ impl BeamTable {
             return Self { settings, slots: vec![u32::MAX; n], ..default() };
         }
         let medium_of = |j: usize| tabled_medium(surfaces, p[j].object);
+        let marched = marched_objects(patches, surfaces);
         let mut slots = vec![u32::MAX; n];
         let mut tabled = Vec::new();
         let mut media = Vec::new();
@@ -232,7 +233,7 @@ impl BeamTable {
                     .collect(),
                 last_order: settings.last_order,
                 directions: settings.exit_directions,
-                single_to_pixels: settings.single_scattering_to_pixels,
+                single_to_pixels: settings.single_scattering_to_pixels && marched[p[j].object as usize],
                 source_depth: source_depths.get(j).copied().unwrap_or(Vec3::ZERO),
                 seed_offset: settings.seed as u64 * SEED_STRIDE,
             };
@@ -323,6 +324,29 @@ impl BeamTable {
 
 /// Object `object`'s medium and scale where the table walks its patches: translucent, with a
 /// valid medium and a positive scale (else its patches keep the profile's `K`).
+/// Per object, whether it marches its single scattering per pixel where the table leaves
+/// that to the pixels ([`BeamTableSettings::single_scattering_to_pixels`]): the
+/// [`MAX_MARCHED_OBJECTS`](crate::translucency::MAX_MARCHED_OBJECTS) translucent objects of
+/// the largest surface (the first of equal ones); the others' single scattering stays in the
+/// table. A map a light each, so the count is capped; the largest are those a camera most
+/// likely sees large.
+pub fn marched_objects(patches: &Patches, surfaces: &[PatchSurface]) -> Vec<bool> {
+    let mut area = vec![0.0f64; surfaces.len()];
+    for p in &patches.patches {
+        if let Some(a) = area.get_mut(p.object as usize) {
+            *a += p.area.max(0.0) as f64;
+        }
+    }
+    let mut translucent: Vec<usize> =
+        (0..surfaces.len()).filter(|&o| tabled_medium(surfaces, o as u32).is_some()).collect();
+    translucent.sort_by(|&a, &b| area[b].total_cmp(&area[a]).then(a.cmp(&b)));
+    let mut marched = vec![false; surfaces.len()];
+    for &o in translucent.iter().take(crate::translucency::MAX_MARCHED_OBJECTS) {
+        marched[o] = true;
+    }
+    marched
+}
+
 pub(crate) fn tabled_medium(
     surfaces: &[PatchSurface],
     object: u32,

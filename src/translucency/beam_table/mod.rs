@@ -36,7 +36,7 @@ pub mod directions;
 pub mod flow;
 pub mod single_scattering;
 
-pub use build::ExitPatches;
+pub use build::{ExitPatches, marched_objects};
 pub use directions::{bin_direction, direction_bin, direction_weights};
 pub use flow::{ExitLean, LOBE_SOURCE_DISTANCE, TableFlow, from_afar};
 pub use single_scattering::{entering, law_gives_single_scattering, single_scattering_radiance};
@@ -71,9 +71,10 @@ pub struct BeamTableSettings {
     /// leaves by the lit face, for the gather to march per pixel through the object against
     /// the light's own path in it (a map per translucent object and light in the GPU light
     /// injection: `docs/translucent.md`, "Single scattering marched per pixel on the GPU").
-    /// On by default. Where lights are injected by `LightInjection::ShadowRays` (no maps) or
-    /// more than [`MAX_MARCHED_OBJECTS`](super::MAX_MARCHED_OBJECTS) objects are
-    /// translucent, the table keeps single scattering (the latter with a warning).
+    /// On by default. Where lights are injected by `LightInjection::ShadowRays` (no maps) the
+    /// table keeps single scattering; of more than
+    /// [`MAX_MARCHED_OBJECTS`](super::MAX_MARCHED_OBJECTS) translucent objects, it keeps it
+    /// for all but the largest that many ([`marched_objects`], with a warning).
     pub single_scattering_to_pixels: bool,
     /// Offsets every walk's seed (0: the tables the docs' figures come from). Tables of
     /// different seeds differ by their walks' noise alone, which moves the accuracy figures

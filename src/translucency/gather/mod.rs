@@ -192,13 +192,20 @@ fn gather_buffers(
     // `GatherPatch` in gathered.wgsl: (surface point, reach), (normal, area), (albedo, object),
     // (the exit law's local albedo, η), its law per channel, (α, η) of its medium where a
     // beam table carries its beams (single scattering's law; zero elsewhere).
-    // Where single scattering is marched per pixel, the lit face's law is not given as well.
-    let media = scene
+    // Where an object's single scattering is marched per pixel, the lit face's law is not
+    // given as well.
+    let marches = |object: u32| scene.marched.get(object as usize).is_some_and(Option::is_some);
+    let media: Vec<Vec4> = scene
         .transport
         .beam_table
         .as_ref()
-        .filter(|t| !t.settings.single_scattering_to_pixels)
-        .map(|t| t.patch_media())
+        .map(|t| {
+            t.patch_media()
+                .into_iter()
+                .zip(&patches.patches)
+                .map(|(m, p)| if marches(p.object) { Vec4::ZERO } else { m })
+                .collect()
+        })
         .unwrap_or_default();
     let records: Vec<[f32; 32]> = patches
         .patches

@@ -485,3 +485,36 @@ fn exit_patches_are_the_nearest_samples_facing_the_exit() {
         assert_eq!(exits.of(0, x, outward), expected, "exit at {x}");
     }
 }
+
+/// Of more translucent objects than march, the largest that many march; opaque ones, and
+/// translucent ones of a bad medium, never do.
+#[test]
+fn the_largest_translucent_objects_march_their_single_scattering() {
+    use crate::translucency::{MAX_MARCHED_OBJECTS, beam_table::marched_objects};
+    // Eleven balls, radii 1 – 3.5 cm out of order, the largest opaque and one of a NaN medium.
+    let radii = [0.02, 0.035, 0.01, 0.03, 0.0125, 0.0275, 0.015, 0.0325, 0.0175, 0.0225, 0.025];
+    let objects: Vec<_> = radii
+        .iter()
+        .enumerate()
+        .map(|(k, &r)| mesh_object(Sphere::new(r).mesh().ico(2).unwrap(), Transform::from_xyz(0.1 * k as f32, 0.0, 0.0)))
+        .collect();
+    let patches = resample_into_patches(&views_of(&objects), 2000);
+    let skin = PatchSurface::Translucent {
+        medium: TranslucentPreset::Skin1.medium(),
+        world_units_per_mm: 0.001,
+        oriented_dipole: false,
+    };
+    let mut surfaces = vec![skin; radii.len()];
+    surfaces[1] = PatchSurface::Opaque { albedo: Vec3::splat(0.5) };
+    let mut broken = TranslucentPreset::Skin1.medium();
+    broken.absorption.x = f32::NAN;
+    surfaces[3] = PatchSurface::Translucent { medium: broken, world_units_per_mm: 0.001, oriented_dipole: false };
+    let marched = marched_objects(&patches, &surfaces);
+    // Of the nine good translucent balls, all but the smallest (1 cm, object 2).
+    let expected: Vec<bool> = (0..radii.len()).map(|o| o != 1 && o != 3 && o != 2).collect();
+    assert_eq!(marched, expected);
+    assert_eq!(marched.iter().filter(|&&m| m).count(), MAX_MARCHED_OBJECTS);
+    // Fewer than that: every good translucent one.
+    let few = marched_objects(&patches, &surfaces[..5]);
+    assert_eq!(few, vec![true, false, true, false, true]);
+}
