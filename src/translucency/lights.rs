@@ -187,23 +187,21 @@ pub struct ReachingLights {
 pub fn lights_reaching(lights: &[PatchLight], centre: Vec3, radius: f32, most: usize) -> ReachingLights {
     // Finite ranks for the lights inside the sphere, so that shares stay numbers.
     let cap = f32::MAX / (lights.len() as f32 + 1.0);
-    let ranked: Vec<(usize, f32)> = lights
+    let mut by_brightness: Vec<(usize, f32)> = lights
         .iter()
         .enumerate()
         .map(|(i, l)| (i, l.irradiance_bound(centre, radius).element_sum().min(cap)))
         .filter(|&(_, bound)| bound > 0.0)
         .collect();
-    let unreachable = lights.len() - ranked.len();
-    let mut by_brightness = ranked.clone();
     by_brightness.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let total: f32 = ranked.iter().map(|r| r.1).sum();
+    let total: f32 = by_brightness.iter().map(|r| r.1).sum();
     let left: f32 = by_brightness.iter().skip(most).map(|r| r.1).sum();
     let mut taken: Vec<usize> = by_brightness.iter().take(most).map(|r| r.0).collect();
     taken.sort_unstable();
     ReachingLights {
         lights: taken.iter().map(|&i| lights[i]).collect(),
-        unreachable,
-        left_out: ranked.len().saturating_sub(most),
+        unreachable: lights.len() - by_brightness.len(),
+        left_out: by_brightness.len().saturating_sub(most),
         left_out_share: if total > 0.0 { left / total } else { 0.0 },
     }
 }
