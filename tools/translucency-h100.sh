@@ -46,3 +46,7 @@ run off_prepass_moving --swing --translucency false --prepass
 run table_moving_cap2 --swing --max-iterations 2
 run profile_moving --swing --beam-table false
 run table_moving_full --swing --gather-resolution full
+# The lights' maps gone (the CPU's shadow rays inject): no march, single scattering in the
+# table; the gather's time against table_moving_* is what the march costs (a new table: the
+# first run of this builds it).
+run shadow_rays_moving --swing --injection shadow-rays

@@ -103,8 +103,8 @@ fn translucent_map_depth(stored: u32) -> f32 {
 
 // The translucent maps' header and layout (`translucent_maps` in inject.wgsl, which writes
 // them; the gather reads them): objects, object slots with maps, each map's resolution and
-// the lights, in the first vec4; then per object two vec4s, per map and texel its light, per
-// map its frame.
+// the lights, in the first vec4; then per object two vec4s, per slot its samples, per map and
+// texel its light, per map its frame.
 struct TranslucentMaps {
     objects: u32,
     slots: u32,
@@ -117,9 +117,15 @@ fn translucent_maps_of(header: vec4<f32>) -> TranslucentMaps {
     return TranslucentMaps(h.x, h.y, h.z, h.w);
 }
 
+// Where slot j's samples are: (first, count) in the scene's samples (its object's patches
+// are consecutive, and so are their samples), as floats.
+fn translucent_slot_samples_at(h: TranslucentMaps, j: u32) -> u32 {
+    return 1u + 2u * h.objects + j;
+}
+
 // Where texel k's light is (k counted over every map, as `translucent_texel` gives it).
 fn translucent_texel_light(h: TranslucentMaps, k: u32) -> u32 {
-    return 1u + 2u * h.objects + k;
+    return translucent_slot_samples_at(h, h.slots) + k;
 }
 
 // Where map m's texels' light starts.
@@ -129,7 +135,7 @@ fn translucent_light_at(h: TranslucentMaps, m: u32) -> u32 {
 
 // Where map m's frame starts (after every map's texels).
 fn translucent_frame_at(h: TranslucentMaps, m: u32) -> u32 {
-    return 1u + 2u * h.objects + h.lights * h.slots * h.resolution * h.resolution + 4u * m;
+    return translucent_texel_light(h, h.lights * h.slots * h.resolution * h.resolution) + 4u * m;
 }
 
 // `MapFrame` (translucent_shadow_map.rs): a map's frame from its four vec4s (origin, width),

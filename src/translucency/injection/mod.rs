@@ -170,10 +170,13 @@ pub fn incidence_table(weight: Option<&IncidenceWeight>) -> Vec<[f32; 4]> {
 /// `translucent_depths` in `inject.wgsl`, where their layout is), for single scattering
 /// marched per pixel in the gather.
 struct TranslucentMaps {
-    /// The header and per object its medium (σt, slot or −1), (α, η).
+    /// The header, per object its medium (σt, slot or −1), (α, η), and per slot the range
+    /// of the scene's samples that holds its object's (first, count).
     head: Vec<[f32; 4]>,
     /// Per slot (object with maps), its object and the sphere its maps see.
     slots: Vec<(u32, Vec3, f32)>,
+    /// The most samples a slot's range holds: the splats' workgroups.
+    most_slot_samples: u32,
     /// Maps for this many lights.
     capacity: u32,
     maps: Buffer,
@@ -187,11 +190,16 @@ impl TranslucentMaps {
         let objects = marched.len();
         let mut head = vec![[0.0f32; 4]; 1 + 2 * objects];
         let mut slots = Vec::new();
-        // Each marched object's samples, in one pass over the patches.
+        // Each marched object's samples, and the range of the scene's samples that holds them
+        // (the patches are grouped by object: the range is theirs alone), in one pass.
         let mut samples = vec![Vec::new(); objects];
+        let mut ranges = vec![(u32::MAX, 0u32); objects];
         for (i, patch) in patches.patches.iter().enumerate() {
             if let Some(Some(_)) = marched.get(patch.object as usize) {
                 samples[patch.object as usize].extend_from_slice(patches.samples_of(i));
+                let range = &mut ranges[patch.object as usize];
+                range.0 = range.0.min(patches.sample_offsets[i]);
+                range.1 = range.1.max(patches.sample_offsets[i + 1]);
             }
         }
         for (object, medium) in marched.iter().enumerate() {
@@ -207,6 +215,12 @@ impl TranslucentMaps {
             slots.push((object as u32, bounds.0, bounds.1));
         }
         head[0] = [objects as f32, slots.len() as f32, PLUGIN_RESOLUTION as f32, 0.0];
+        // Sample indices as floats: exact below 2²⁴, and the budget's 200 000 patches have
+        // some millions.
+        let slot_ranges: Vec<(u32, u32)> =
+            slots.iter().map(|&(object, ..)| ranges[object as usize]).map(|(first, end)| (first, end - first)).collect();
+        head.extend(slot_ranges.iter().map(|&(first, count)| [first as f32, count as f32, 0.0, 0.0]));
+        let most_slot_samples = slot_ranges.iter().map(|r| r.1).max().unwrap_or(0);
         let layout = device.create_bind_group_layout(
             Some("translucency_translucent_maps_layout"),
             &bevy::render::render_resource::BindGroupLayoutEntries::sequential(
@@ -219,7 +233,7 @@ impl TranslucentMaps {
         );
         let (maps, depths) = Self::buffers(device, head.len(), slots.len() as u32, 0);
         let bind_group = Self::bind_group(device, &layout, &maps, &depths);
-        Self { head, slots, capacity: 0, maps, depths, bind_group, layout }
+        Self { head, slots, most_slot_samples, capacity: 0, maps, depths, bind_group, layout }
     }
 
     /// The maps' buffers for `lights` lights: the head, the texels' light and every map's
@@ -559,11 +573,8 @@ impl GpuInjection {
                 pass.set_bind_group(0, &self.bind_group, &[]);
                 pass.set_bind_group(1, &self.translucent_maps.bind_group, &[]);
                 pass.set_pipeline(&self.splat);
-                pass.dispatch_workgroups(
-                    injection.samples.div_ceil(WORKGROUP).min(65_535),
-                    lights,
-                    1,
-                );
+                // Eight samples a workgroup (`SPLAT_LANES` in inject.wgsl).
+                pass.dispatch_workgroups(injection.samples.div_ceil(WORKGROUP / 8).min(65_535), lights, 1);
             }
             span.end(encoder);
             self.record_translucent_maps(encoder, spans, lights);
@@ -586,27 +597,36 @@ impl GpuInjection {
 
 impl GpuInjection {
     /// The translucent objects' maps for `lights` lights: cleared, their entries and then
-    /// their exits splatted (each its own pass: the exits are those deeper than the entries),
-    /// then each texel's light, shadowed by the scene's maps splatted before.
+    /// their exits splatted (each its own pass: the exits are those deeper than the entries;
+    /// a workgroup per sample of each slot's object and light), then each texel's light,
+    /// shadowed by the scene's maps splatted before. Each its own time span (`entries`,
+    /// `exits`, `light`) in `translucent_maps`.
     fn record_translucent_maps(&self, encoder: &mut CommandEncoder, spans: &impl RecordDiagnostics, lights: u32) {
         let maps = &self.translucent_maps;
         let slots = maps.slots.len() as u32;
-        if slots == 0 || self.injection.samples == 0 {
+        if slots == 0 || maps.most_slot_samples == 0 {
             return;
         }
         let span = spans.time_span(encoder, "translucent_maps");
         encoder.clear_buffer(&maps.depths, 0, Some(maps.depth_bytes(lights)));
         let texels = PLUGIN_RESOLUTION * PLUGIN_RESOLUTION;
-        for (label, pipeline, (x, y)) in [
-            ("translucency_translucent_entries", &self.splat_entries, (self.injection.samples.div_ceil(WORKGROUP).min(65_535), lights)),
-            ("translucency_translucent_exits", &self.splat_exits, (self.injection.samples.div_ceil(WORKGROUP).min(65_535), lights)),
-            ("translucency_translucent_light", &self.translucent_light, (texels.div_ceil(WORKGROUP), lights * slots)),
+        // A workgroup a sample (`splat_translucent_maps`).
+        let splats = (maps.most_slot_samples.min(65_535), lights * slots);
+        for (name, label, pipeline, (x, y)) in [
+            ("entries", "translucency_translucent_entries", &self.splat_entries, splats),
+            ("exits", "translucency_translucent_exits", &self.splat_exits, splats),
+            ("light", "translucency_translucent_light", &self.translucent_light, (texels.div_ceil(WORKGROUP), lights * slots)),
         ] {
-            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some(label), timestamp_writes: None });
-            pass.set_bind_group(0, &self.bind_group, &[]);
-            pass.set_bind_group(1, &maps.bind_group, &[]);
-            pass.set_pipeline(pipeline);
-            pass.dispatch_workgroups(x, y, 1);
+            let part = spans.time_span(encoder, name);
+            {
+                let mut pass =
+                    encoder.begin_compute_pass(&ComputePassDescriptor { label: Some(label), timestamp_writes: None });
+                pass.set_bind_group(0, &self.bind_group, &[]);
+                pass.set_bind_group(1, &maps.bind_group, &[]);
+                pass.set_pipeline(pipeline);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+            part.end(encoder);
         }
         span.end(encoder);
     }
