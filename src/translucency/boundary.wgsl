@@ -103,29 +103,42 @@ fn translucent_map_depth(stored: u32) -> f32 {
 
 // The translucent maps' header and layout (`translucent_maps` in inject.wgsl, which writes
 // them; the gather reads them): objects, object slots with maps, each map's resolution and
-// the lights, in the first vec4; then per object two vec4s, per slot its samples, per map and
-// texel its light, per map its frame.
+// the lights, in the first vec4, and the maps in the second; then per object two vec4s, per
+// slot its samples, per light and slot its maps, per map and texel its light, per map its
+// frame.
 struct TranslucentMaps {
     objects: u32,
     slots: u32,
     resolution: u32,
     lights: u32,
+    maps: u32,
 }
 
-fn translucent_maps_of(header: vec4<f32>) -> TranslucentMaps {
+fn translucent_maps_of(header: vec4<f32>, counts: vec4<f32>) -> TranslucentMaps {
     let h = vec4<u32>(header);
-    return TranslucentMaps(h.x, h.y, h.z, h.w);
+    return TranslucentMaps(h.x, h.y, h.z, h.w, u32(counts.x));
+}
+
+// Where object o's medium is: (σt per world unit, slot or −1), then (α, η).
+fn translucent_medium_at(o: u32) -> u32 {
+    return 2u + 2u * o;
 }
 
 // Where slot j's samples are: (first, count) in the scene's samples (its object's patches
 // are consecutive, and so are their samples), as floats.
 fn translucent_slot_samples_at(h: TranslucentMaps, j: u32) -> u32 {
-    return 1u + 2u * h.objects + j;
+    return translucent_medium_at(h.objects) + j;
+}
+
+// Where light l's maps of slot j are: (first map, how many: 0, 1, or 6 cube faces in
+// `cube_face`'s order), as floats.
+fn translucent_light_maps_at(h: TranslucentMaps, l: u32, j: u32) -> u32 {
+    return translucent_slot_samples_at(h, h.slots) + l * h.slots + j;
 }
 
 // Where texel k's light is (k counted over every map, as `translucent_texel` gives it).
 fn translucent_texel_light(h: TranslucentMaps, k: u32) -> u32 {
-    return translucent_slot_samples_at(h, h.slots) + k;
+    return translucent_light_maps_at(h, h.lights, 0u) + k;
 }
 
 // Where map m's texels' light starts.
@@ -135,11 +148,25 @@ fn translucent_light_at(h: TranslucentMaps, m: u32) -> u32 {
 
 // Where map m's frame starts (after every map's texels).
 fn translucent_frame_at(h: TranslucentMaps, m: u32) -> u32 {
-    return translucent_texel_light(h, h.lights * h.slots * h.resolution * h.resolution) + 4u * m;
+    return translucent_texel_light(h, h.maps * h.resolution * h.resolution) + 4u * m;
+}
+
+// The cube face (+x, −x, +y, −y, +z, −z) that `local` (from the light) points into: its
+// largest axis (`translucent_shadow_map::cube_face`), for the injection's maps of a point
+// light and the translucent maps' cube about a light inside an object's bounds.
+fn cube_face(local: vec3<f32>) -> u32 {
+    let a = abs(local);
+    if a.x >= a.y && a.x >= a.z {
+        return select(1u, 0u, local.x >= 0.0);
+    }
+    if a.y >= a.z {
+        return select(3u, 2u, local.y >= 0.0);
+    }
+    return select(5u, 4u, local.z >= 0.0);
 }
 
 // `MapFrame` (translucent_shadow_map.rs): a map's frame from its four vec4s (origin, width),
-// (u, object), (v, 1 if perspective), (travel, 1 where there is a map). Orthographic for a
+// (u, object), (v, 1 if perspective), (travel, 1 + its light). Orthographic for a
 // directional light (origin the object's centre, width in world units), perspective for a
 // point or spot (origin the light, width the tangent of the half-angle).
 struct TranslucentFrame {
@@ -149,11 +176,12 @@ struct TranslucentFrame {
     v: vec3<f32>,
     travel: vec3<f32>,
     perspective: bool,
-    present: bool,
+    object: u32,
+    light: u32,
 }
 
 fn translucent_frame_of(a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, d: vec4<f32>) -> TranslucentFrame {
-    return TranslucentFrame(a.xyz, a.w, b.xyz, c.xyz, d.xyz, c.w > 0.0, d.w > 0.0);
+    return TranslucentFrame(a.xyz, a.w, b.xyz, c.xyz, d.xyz, c.w > 0.0, u32(b.w), u32(d.w) - 1u);
 }
 
 // `MapFrame::place`: a point's texel coordinates (centres at k + ½) and depth in a map of

@@ -67,13 +67,34 @@ pub struct MapFrame {
     pub perspective: bool,
 }
 
-/// The nearest a point or spot light may be, in bounding radii, for a perspective map (its
-/// half-angle then 76°): nearer, the light is about inside the object's bounds, and the map
-/// keeps the orthographic frame. Just outside them perspective still serves: a skin ball's
-/// single scattering under a point light 1.1 radii away is 0.12 off rays from the front and
-/// from behind, where an orthographic map was 1.6 and 2.5·10³ off
-/// (`orthographic_maps_miss_a_near_lights_own_rays`).
+/// The nearest a point or spot light may be, in bounding radii, for one perspective map (its
+/// half-angle then 76°): nearer, the light is about inside the object's bounds, and the object
+/// gets a cube of six perspective maps about the light ([`MapFrame::frames_towards`]). Just
+/// outside them one map still serves: a skin ball's single scattering under a point light 1.1
+/// radii away is 0.12 off rays from the front and from behind, where an orthographic map was
+/// 1.6 and 2.5·10³ off (`orthographic_maps_miss_a_near_lights_own_rays`).
 pub const PERSPECTIVE_NEAREST: f32 = 1.05;
+
+/// A cube face's half-width (the tangent of its half-angle): a little past 45°, so that a
+/// point at a face's edge finds the four texels about it in that face (at 256², 2.6 texels
+/// past the edge).
+pub const CUBE_FACE_WIDTH: f32 = 1.02;
+
+/// The cube face (+x, −x, +y, −y, +z, −z) that `local` (from the light) points into: its
+/// largest axis (`cube_face` in `inject.wgsl` and `translucent_cube_face` in boundary.wgsl
+/// are its twins).
+pub fn cube_face(local: Vec3) -> usize {
+    let a = local.abs();
+    if a.x >= a.y && a.x >= a.z {
+        if local.x >= 0.0 { 0 } else { 1 }
+    } else if a.y >= a.z {
+        if local.y >= 0.0 { 2 } else { 3 }
+    } else if local.z >= 0.0 {
+        4
+    } else {
+        5
+    }
+}
 
 impl MapFrame {
     /// The frame of a map of the object in the sphere `centre`, `radius` (with 2 % to spare)
@@ -91,6 +112,29 @@ impl MapFrame {
             }
             None => Self::new(centre, radius * 1.02, travel, false),
         }
+    }
+
+    /// The frames of the maps an object in the sphere `centre`, `radius` gets for `light`:
+    /// [`towards`](Self::towards)'s one, or for a point or spot light within
+    /// [`PERSPECTIVE_NEAREST`] bounding radii of the centre (about inside the object's bounds)
+    /// a cube of six perspective faces about it, +x, −x, +y, −y, +z, −z ([`cube_face`]). One
+    /// map cannot hold what lies round such a light on every side: the torus's skin with a
+    /// point light in its hole scored 0.325 with the orthographic map it had
+    /// (`docs/translucent.md`, "A light inside an object's bounds").
+    pub fn frames_towards(light: &PatchLight, centre: Vec3, radius: f32) -> Vec<Self> {
+        if let PatchLight::Point { position, .. } | PatchLight::Spot { position, .. } = *light
+            && (radius > 0.0 && radius.is_finite() && centre.is_finite())
+            && position.distance(centre) <= PERSPECTIVE_NEAREST * radius
+        {
+            return Self::cube_faces(position);
+        }
+        Self::towards(light, centre, radius).into_iter().collect()
+    }
+
+    /// The six faces of a cube of maps about `light_position` (none if it is not finite).
+    pub fn cube_faces(light_position: Vec3) -> Vec<Self> {
+        const AXES: [Vec3; 6] = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z];
+        AXES.iter().filter_map(|&axis| Self::new(light_position, CUBE_FACE_WIDTH, axis, true)).collect()
     }
 
     fn new(origin: Vec3, width: f32, travel: Vec3, perspective: bool) -> Option<Self> {
@@ -127,14 +171,14 @@ impl MapFrame {
         }
     }
 
-    /// The frame as the GPU takes it (`translucent_frame` in boundary.wgsl): (origin, width),
-    /// (u, `object`), (v, 1 if perspective), (travel, 1: a map).
-    pub fn to_vec4s(&self, object: u32) -> [[f32; 4]; 4] {
+    /// The frame as the GPU takes it (`translucent_frame_of` in boundary.wgsl): (origin,
+    /// width), (u, `object`), (v, 1 if perspective), (travel, 1 + `light`).
+    pub fn to_vec4s(&self, object: u32, light: u32) -> [[f32; 4]; 4] {
         [
             self.origin.extend(self.width).to_array(),
             self.u.extend(object as f32).to_array(),
             self.v.extend(if self.perspective { 1.0 } else { 0.0 }).to_array(),
-            self.travel.extend(1.0).to_array(),
+            self.travel.extend(1.0 + light as f32).to_array(),
         ]
     }
 }
@@ -338,6 +382,32 @@ impl TranslucentShadowMap {
     }
 }
 
+/// The maps an object has of one light: one, or a cube's six faces about a light inside its
+/// bounds ([`MapFrame::frames_towards`]).
+#[derive(Clone, Debug)]
+pub struct LightMaps {
+    /// One map, or six in [`cube_face`]'s order.
+    pub faces: Vec<TranslucentShadowMap>,
+}
+
+impl From<TranslucentShadowMap> for LightMaps {
+    fn from(map: TranslucentShadowMap) -> Self {
+        Self { faces: vec![map] }
+    }
+}
+
+impl LightMaps {
+    /// [`TranslucentShadowMap::lit_path_inside`] in the map that sees `x`: the one, or the
+    /// cube face `x` lies in from the light.
+    pub fn lit_path_inside(&self, x: Vec3) -> Option<(f32, Vec4)> {
+        match self.faces.as_slice() {
+            [one] => one.lit_path_inside(x),
+            faces @ [first, ..] if faces.len() == 6 => faces[cube_face(x - first.frame.origin)].lit_path_inside(x),
+            _ => None,
+        }
+    }
+}
+
 /// The least scale [`entry_light`] puts on the light's path inside (`μ₀/μ₀′` is 0.84 at
 /// 45° into η = 1.3, 0.67 at 60°). The half-space's scale holds where the surface is flat
 /// along the path; at a grazing entry on a curved object it would go to 0 and leave the light
@@ -371,11 +441,11 @@ pub fn optical_depth_quantile(k: u32, depths: u32) -> f32 {
 /// unit direction it travels into the object), lit by the light `map` is of:
 /// `α/(4π) ∫ e^{−τ} E e^{−σt s ℓ(τ)} dτ` over the optical depth `τ` along the ray where it is
 /// inside the object as `map` sees it, `ℓ` the light's path inside
-/// ([`TranslucentShadowMap::path_inside`]), `E` and `s` its texel's light and path scale
+/// ([`LightMaps::lit_path_inside`]), `E` and `s` its texel's light and path scale
 /// (1 until [`TranslucentShadowMap::light_texels`]: unit irradiance, index-matched). `depths` depths a channel
 /// ([`optical_depth_quantile`]); `alpha` the single-scattering albedo and `sigma_t` the extinction per world unit.
 pub fn marched_single_scattering(
-    map: &TranslucentShadowMap,
+    map: &LightMaps,
     alpha: Vec3,
     sigma_t: Vec3,
     x: Vec3,
@@ -445,8 +515,9 @@ impl MarchedMedium {
 pub struct MarchedObject {
     /// The medium.
     pub medium: MarchedMedium,
-    /// One map a light (none for a light on the object's centre).
-    pub maps: Vec<TranslucentShadowMap>,
+    /// Each light's maps ([`MapFrame::frames_towards`]; none for a directional light of no
+    /// direction).
+    pub maps: Vec<LightMaps>,
 }
 
 /// The sphere the plugin's maps of an object see: about its samples' mean, out to the
@@ -461,9 +532,10 @@ pub fn object_bounds(samples: &[PatchSample]) -> Option<(Vec3, f32)> {
 }
 
 impl MarchedObject {
-    /// The object of `samples` in `medium`, lit by `lights`: a map a
-    /// light at `resolution`, each texel's light that light's irradiance where it enters the
-    /// object times `visible(entry point, light)` ([`entry_light`]).
+    /// The object of `samples` in `medium`, lit by `lights`: each light's maps
+    /// ([`MapFrame::frames_towards`]) at `resolution`, each texel's light that light's
+    /// irradiance where it enters the object times `visible(entry point, light)`
+    /// ([`entry_light`]).
     pub fn new(
         samples: &[PatchSample],
         medium: MarchedMedium,
@@ -477,10 +549,17 @@ impl MarchedObject {
                 lights
                     .iter()
                     .filter_map(|light| {
-                        let frame = MapFrame::towards(light, centre, radius)?;
-                        let mut map = TranslucentShadowMap::splat_in(samples, frame, resolution)?;
-                        map.light_texels(|entry, cos| entry_light(light.irradiance_across(entry) * visible(entry, light), cos, eta));
-                        Some(map)
+                        let faces: Vec<TranslucentShadowMap> = MapFrame::frames_towards(light, centre, radius)
+                            .into_iter()
+                            .filter_map(|frame| {
+                                let mut map = TranslucentShadowMap::splat_in(samples, frame, resolution)?;
+                                map.light_texels(|entry, cos| {
+                                    entry_light(light.irradiance_across(entry) * visible(entry, light), cos, eta)
+                                });
+                                Some(map)
+                            })
+                            .collect();
+                        (!faces.is_empty()).then_some(LightMaps { faces })
                     })
                     .collect()
             })

@@ -1,9 +1,9 @@
 #define_import_path bevy_mesostructure::translucency::marched
 
 #import bevy_mesostructure::translucency::boundary::{
-    fresnel_reflectance, translucent_map_depth, TranslucentMaps, translucent_maps_of,
-    translucent_texel_light, translucent_frame_at, TranslucentFrame, translucent_frame_of,
-    translucent_place, translucent_texel_width, translucent_texel,
+    cube_face, fresnel_reflectance, translucent_map_depth, TranslucentMaps, translucent_maps_of,
+    translucent_light_maps_at, translucent_medium_at, translucent_texel_light, translucent_frame_at,
+    TranslucentFrame, translucent_frame_of, translucent_place, translucent_texel_width, translucent_texel,
 }
 
 // The translucent objects' maps towards each light and their light (`translucent_maps`,
@@ -61,32 +61,40 @@ fn lit_path_inside(h: TranslucentMaps, m: u32, f: TranslucentFrame, p: vec3<f32>
     return lit;
 }
 
+fn map_frame(h: TranslucentMaps, m: u32) -> TranslucentFrame {
+    let at = translucent_frame_at(h, m);
+    return translucent_frame_of(translucent_maps[at], translucent_maps[at + 1u], translucent_maps[at + 2u],
+                                translucent_maps[at + 3u]);
+}
+
 // At the pixel's world point `x` of unit normal `n`, seen along the unit `towards` at exit
-// cosine `mu`, in translucent object `object` (-1: none).
+// cosine `mu`, in translucent object `object` (-1: none). Each light's maps of the object are
+// one, or a cube's six faces about a light inside its bounds: each depth then looks in the
+// face it lies in from the light (`LightMaps::lit_path_inside`).
 fn marched_single_scattering(object: i32, x: vec3<f32>, n: vec3<f32>, towards: vec3<f32>, mu: f32) -> vec3<f32> {
-    let h = translucent_maps_of(translucent_maps[0]);
+    let h = translucent_maps_of(translucent_maps[0], translucent_maps[1]);
     if object < 0 || u32(object) >= h.objects || mu <= 0.0 {
         return vec3(0.0);
     }
-    let medium = translucent_maps[1u + 2u * u32(object)];
+    let medium = translucent_maps[translucent_medium_at(u32(object))];
     if medium.w < 0.0 {
         return vec3(0.0);
     }
     let sigma_t = medium.xyz;
-    let albedo_eta = translucent_maps[2u + 2u * u32(object)];
+    let albedo_eta = translucent_maps[translucent_medium_at(u32(object)) + 1u];
     let eta = clamp(albedo_eta.w, 1.0, 3.0);
     let inside = sqrt(max(1.0 - (1.0 - mu * mu) / (eta * eta), 0.0));
     // Snell's law: the ray's part along the surface shrinks by η.
     let into = (-towards + n * mu) / eta - n * inside;
     var total = vec3(0.0);
     for (var l = 0u; l < h.lights; l++) {
-        let m = l * h.slots + u32(medium.w);
-        let frame_at = translucent_frame_at(h, m);
-        let f = translucent_frame_of(translucent_maps[frame_at], translucent_maps[frame_at + 1u],
-                                     translucent_maps[frame_at + 2u], translucent_maps[frame_at + 3u]);
-        if !f.present {
+        let maps = translucent_maps[translucent_light_maps_at(h, l, u32(medium.w))];
+        let first = u32(maps.x);
+        let faces = u32(maps.y);
+        if faces == 0u {
             continue;
         }
+        let first_frame = map_frame(h, first);
         for (var c = 0u; c < 3u; c++) {
             if !(sigma_t[c] > 0.0) {
                 continue;
@@ -96,7 +104,14 @@ fn marched_single_scattering(object: i32, x: vec3<f32>, n: vec3<f32>, towards: v
             for (var k = 0u; k < MARCHED_DEPTHS; k++) {
                 // `optical_depth_quantile`.
                 let depth = -log(1.0 - (f32(k) + 0.5) / f32(MARCHED_DEPTHS)) / sigma_t[c];
-                let lit = lit_path_inside(h, m, f, x + into * depth);
+                let p = x + into * depth;
+                var m = first;
+                var f = first_frame;
+                if faces == 6u {
+                    m = first + cube_face(p - first_frame.origin);
+                    f = map_frame(h, m);
+                }
+                let lit = lit_path_inside(h, m, f, p);
                 if lit.inside {
                     sum += lit.light[c] * exp(-sigma_t[c] * lit.path * lit.light.w);
                     entered = true;
@@ -111,4 +126,3 @@ fn marched_single_scattering(object: i32, x: vec3<f32>, n: vec3<f32>, towards: v
     let exit = (1.0 - fresnel_reflectance(mu, eta)) / (eta * eta);
     return albedo_eta.rgb / (4.0 * 3.14159265358979) * total * exit;
 }
-

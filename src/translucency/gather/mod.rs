@@ -121,7 +121,8 @@ pub fn prepare_translucency(
         gpu.no_translucent_maps = Some((
             device.create_buffer_with_data(&BufferInitDescriptor {
                 label: Some("translucency_no_translucent_maps"),
-                contents: bytemuck::cast_slice(&[0.0f32; 4]),
+                // The header's two vec4s (`translucent_maps_of`): no objects, no maps.
+                contents: bytemuck::cast_slice(&[0.0f32; 8]),
                 usage: BufferUsages::STORAGE,
             }),
             device.create_buffer_with_data(&BufferInitDescriptor {

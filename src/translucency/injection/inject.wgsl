@@ -285,17 +285,6 @@ fn seen_share(l: u32, m: MapPoint, bias: f32) -> f32 {
     return seen / 9.0;
 }
 
-fn cube_face(local: vec3<f32>) -> u32 {
-    let a = abs(local);
-    if a.x >= a.y && a.x >= a.z {
-        return select(1u, 0u, local.x >= 0.0);
-    }
-    if a.y >= a.z {
-        return select(3u, 2u, local.y >= 0.0);
-    }
-    return select(5u, 4u, local.z >= 0.0);
-}
-
 fn incidence_entry(object: u32, cos_i: f32) -> vec4<f32> {
     let last = f32(injection.table_size - 1u);
     let f = clamp(cos_i, 0.0, 1.0) * last;
@@ -452,10 +441,12 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
 // (`marched_single_scattering` in marched.wgsl).
 //
 // `translucent_maps`, in vec4s: a header (objects, object slots with maps, resolution,
-// lights); per object (σt per world unit, slot or −1), (α, η); per slot the first of its
-// object's samples and how many there are (a range that may hold others: `splat_translucent`
-// keeps its object's); per map (light × slots + slot) and texel its light; then per map its frame (`MapFrame::to_vec4s`). `translucent_depths`:
-// per map and texel its entry and exit depths along its ray (`translucent_place`,
+// lights) and the maps; per object (σt per world unit, slot or −1), (α, η); per slot the
+// first of its object's samples and how many there are (a range that may hold others:
+// `splat_translucent` keeps its object's); per light and slot its first map and how many
+// (none, one, or a cube's six faces about a light inside the object's bounds); per map and
+// texel its light; then per map its frame (`MapFrame::to_vec4s`). `translucent_depths`: per
+// map and texel its entry and exit depths along its ray (`translucent_place`,
 // `translucent_map_depth`).
 @group(1) @binding(0) var<storage, read_write> translucent_maps: array<vec4<f32>>;
 @group(1) @binding(1) var<storage, read_write> translucent_depths: array<atomic<u32>>;
@@ -464,7 +455,7 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
 const TRANSLUCENT_SPLAT_TEXELS: f32 = 64.0;
 
 fn translucent_maps_header() -> TranslucentMaps {
-    return translucent_maps_of(translucent_maps[0]);
+    return translucent_maps_of(translucent_maps[0], translucent_maps[1]);
 }
 
 fn translucent_frame(h: TranslucentMaps, m: u32) -> TranslucentFrame {
@@ -476,9 +467,9 @@ fn translucent_frame(h: TranslucentMaps, m: u32) -> TranslucentFrame {
 // The pass: the entries (true) or the exits, which need every entry splatted before.
 override ENTERING: bool = true;
 
-// Dispatched light × slot in y, a workgroup a sample of the slot's object in x (strided),
-// its 64 threads over the texels of the sample's splat. A thread a sample, walking its up to
-// 129² texels alone, left the GPU waiting on each thread's atomics: the objects have a few
+// Dispatched a map in y, a workgroup a sample of the map's object in x (strided), its 64
+// threads over the texels of the sample's splat. A thread a sample, walking its up to 129²
+// texels alone, left the GPU waiting on each thread's atomics: the objects have a few
 // thousand samples (on an H100 at 1080p, 17.9 k patches: 0.043 ms for the entries, 0.052 for
 // the exits).
 @compute @workgroup_size(64)
@@ -488,41 +479,38 @@ fn splat_translucent_maps(
     @builtin(num_workgroups) groups: vec3<u32>,
 ) {
     let h = translucent_maps_header();
-    if h.slots == 0u {
+    let m = group.y;
+    if m >= h.maps {
         return;
     }
-    let range = translucent_maps[translucent_slot_samples_at(h, group.y % h.slots)];
-    let first = u32(range.x);
-    for (var s = group.x; s < u32(range.y); s += groups.x) {
-        splat_translucent(group.y / h.slots, first + s, ENTERING, thread);
-    }
-}
-
-// `TranslucentShadowMap::splat_one`: a sample of a translucent object into its map for light
-// `l`, facing the light (`entering`: the entry depths) or away from it (the exit depths,
-// only deeper than the entry: the object's first stretch along each of the light's rays);
-// this thread's share of its texels (`thread` of 64).
-fn splat_translucent(l: u32, s: u32, entering: bool, thread: u32) {
-    let h = translucent_maps_header();
-    if l >= h.lights || h.slots == 0u {
+    let f = translucent_frame(h, m);
+    if f.object >= h.objects {
         return;
     }
-    let a = scene[injection.samples_at + 2u * s];
-    let b = scene[injection.samples_at + 2u * s + 1u];
-    let object = u32(b.w);
-    if object >= h.objects {
-        return;
-    }
-    let slot = translucent_maps[1u + 2u * object].w;
+    let slot = translucent_maps[translucent_medium_at(f.object)].w;
     if slot < 0.0 {
         return;
     }
-    let m = l * h.slots + u32(slot);
-    let f = translucent_frame(h, m);
+    let range = translucent_maps[translucent_slot_samples_at(h, u32(slot))];
+    let first = u32(range.x);
+    for (var s = group.x; s < u32(range.y); s += groups.x) {
+        splat_translucent(h, m, f, first + s, ENTERING, thread);
+    }
+}
+
+// `TranslucentShadowMap::splat_one`: a sample of a translucent object into its map `m`
+// (frame `f`), facing the light (`entering`: the entry depths) or away from it (the exit
+// depths, only deeper than the entry: the object's first stretch along each of the light's
+// rays); this thread's share of its texels (`thread` of 64).
+fn splat_translucent(h: TranslucentMaps, m: u32, f: TranslucentFrame, s: u32, entering: bool, thread: u32) {
+    let a = scene[injection.samples_at + 2u * s];
+    let b = scene[injection.samples_at + 2u * s + 1u];
+    if u32(b.w) != f.object {
+        return;
+    }
     let n = b.xyz;
     let place = translucent_place(f, a.xyz, h.resolution);
-    if !f.present || !place.on
-        || (dot(n, translucent_ray(f, place.at, h.resolution).towards) < 0.0) != entering {
+    if !place.on || (dot(n, translucent_ray(f, place.at, h.resolution).towards) < 0.0) != entering {
         return;
     }
     let res = i32(h.resolution);
@@ -607,7 +595,7 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
     let h = translucent_maps_header();
     let m = id.y;
     let texels = h.resolution * h.resolution;
-    if id.x >= texels || m >= h.lights * h.slots {
+    if id.x >= texels || m >= h.maps {
         return;
     }
     let at = translucent_light_at(h, m) + id.x;
@@ -615,7 +603,7 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
     let x = i32(id.x % h.resolution);
     let y = i32(id.x / h.resolution);
     let near = translucent_entry_depth(h, m, x, y);
-    if !f.present || !is_finite(near) {
+    if f.light >= h.lights || !is_finite(near) {
         translucent_maps[at] = vec4(0.0);
         return;
     }
@@ -632,7 +620,7 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
     } else {
         normal = -towards;
     }
-    let light = injection.lights[m / h.slots];
+    let light = injection.lights[f.light];
     var e = light.intensity;
     var face = 0u;
     if light.kind != DIRECTIONAL {
@@ -651,13 +639,9 @@ fn translucent_light(@builtin(global_invocation_id) id: vec3<u32>) {
     let here = map_point(light, face, entry);
     let lifted = map_point(light, face, entry + normal * here.texel_world);
     let slope = min(sqrt(max(1.0 - cos_entry * cos_entry, 0.0)) / max(cos_entry, 1e-3), 8.0);
-    e *= seen_share(m / h.slots, lifted, lifted.texel_world * (1.5 + slope));
-    let eta = clamp(translucent_maps[2u + 2u * u32(translucent_frame_object(h, m))].w, 1.0, 3.0);
+    e *= seen_share(f.light, lifted, lifted.texel_world * (1.5 + slope));
+    let eta = clamp(translucent_maps[translucent_medium_at(f.object) + 1u].w, 1.0, 3.0);
     translucent_maps[at] = entry_light(e, cos_entry, eta);
-}
-
-fn translucent_frame_object(h: TranslucentMaps, m: u32) -> f32 {
-    return translucent_maps[translucent_frame_at(h, m) + 1u].w;
 }
 
 // `entry_light` (translucent_shadow_map.rs): E T(μ₀) μ₀/μ₀′, and the path's scale μ₀/μ₀′ at

@@ -52,7 +52,7 @@ fn marched_single_scattering_on_a_thick_slab_is_the_half_space_law() {
         let map = box_map(travel);
         for mu in [1.0f32, 0.5] {
             let into = Vec3::new(0.0, -mu, (1.0 - mu * mu).sqrt());
-            let got = marched_single_scattering(&map, alpha, sigma_t, Vec3::new(0.1, 0.5, -0.1), into, 64);
+            let got = marched_single_scattering(&map.clone().into(), alpha, sigma_t, Vec3::new(0.1, 0.5, -0.1), into, 64);
             let law = alpha * mu0 / (4.0 * std::f32::consts::PI * (mu0 + mu));
             let off = (got / law - Vec3::ONE).abs().max_element();
             eprintln!("μ₀ {mu0}, μ {mu}: {off:.5} off the law");
@@ -177,11 +177,17 @@ fn orthographic_maps_miss_a_near_lights_own_rays() {
 /// A map's frame for each kind of light: a directional light's orthographic; a point light's
 /// in perspective from it beyond `PERSPECTIVE_NEAREST` bounding radii (its half-angle's
 /// tangent `sin/cos` of the sphere's, with 2 % to spare), orthographic nearer; none for a
-/// light on the centre or a non-finite one, and never a panic. A point's place and its
-/// texel's ray agree: the ray at a point's texel coordinates, out to its depth, is the point.
+/// light on the centre or a non-finite one, and never a panic. The maps an object gets
+/// (`frames_towards`): that one, or nearer a cube of six perspective faces about the light,
+/// the centre included, each face the one `cube_face` names for its own axis. A point's place
+/// and its texel's ray agree: the ray at a point's texel coordinates, out to its depth, is
+/// the point.
 #[test]
 fn a_maps_frame_follows_its_light() {
-    use crate::translucency::{PatchLight, translucent_shadow_map::{MapFrame, PERSPECTIVE_NEAREST}};
+    use crate::translucency::{
+        PatchLight,
+        translucent_shadow_map::{CUBE_FACE_WIDTH, MapFrame, PERSPECTIVE_NEAREST, cube_face},
+    };
     let point = |position: Vec3| PatchLight::Point { position, intensity: Vec3::ONE, range: 10.0 };
     let directional = PatchLight::Directional { direction: Vec3::NEG_Y, illuminance: Vec3::ONE };
     let f = MapFrame::towards(&directional, Vec3::ZERO, 1.0).expect("a frame");
@@ -194,9 +200,26 @@ fn a_maps_frame_follows_its_light() {
     assert_eq!(MapFrame::towards(&point(Vec3::ZERO), Vec3::ZERO, 1.0), None);
     assert_eq!(MapFrame::towards(&point(Vec3::splat(f32::NAN)), Vec3::ZERO, 1.0), None);
     assert_eq!(MapFrame::towards(&directional, Vec3::ZERO, f32::NAN), None);
-    for frame in [f, near] {
-        for x in [Vec3::new(0.3, 0.2, -0.5), Vec3::new(-0.7, -0.4, 0.1)] {
+    assert_eq!(MapFrame::frames_towards(&directional, Vec3::ZERO, 1.0), vec![MapFrame::towards(&directional, Vec3::ZERO, 1.0).unwrap()]);
+    assert_eq!(MapFrame::frames_towards(&point(Vec3::new(0.0, 4.0, 0.0)), Vec3::ZERO, 1.0), vec![f]);
+    let inside = Vec3::new(0.0, PERSPECTIVE_NEAREST * 0.99, 0.0);
+    for light in [inside, Vec3::ZERO] {
+        let cube = MapFrame::frames_towards(&point(light), Vec3::ZERO, 1.0);
+        assert_eq!(cube.len(), 6, "{cube:?}");
+        for (face, frame) in cube.iter().enumerate() {
+            assert!(frame.perspective && frame.origin == light && frame.width == CUBE_FACE_WIDTH, "{frame:?}");
+            assert_eq!(cube_face(frame.travel), face, "{frame:?}");
+        }
+    }
+    assert!(MapFrame::frames_towards(&point(Vec3::splat(f32::NAN)), Vec3::ZERO, 1.0).is_empty());
+    assert!(MapFrame::frames_towards(&point(inside), Vec3::ZERO, f32::NAN).is_empty());
+    let cube = MapFrame::frames_towards(&point(inside), Vec3::ZERO, 1.0);
+    for frame in [Some(f), Some(near), None] {
+        for x in [Vec3::new(0.3, 0.2, -0.5), Vec3::new(-0.7, -0.4, 0.1), Vec3::new(0.2, 1.3, 0.1), Vec3::new(0.1, 1.0, 0.9)] {
+            // The cube: the face the point lies in from the light, inside its texels.
+            let frame = frame.unwrap_or(cube[cube_face(x - inside)]);
             let (at, depth) = frame.place(x, 256);
+            assert!(frame != cube[cube_face(x - inside)] || at.cmpge(Vec2::ZERO).all() && at.cmple(Vec2::splat(256.0)).all(), "{x} at {at}");
             let (origin, towards) = frame.ray(at, 256);
             let back = origin + towards * depth;
             assert!(back.distance(x) < 1e-5, "{x} came back as {back} ({frame:?})");
