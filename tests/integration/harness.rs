@@ -190,14 +190,19 @@ pub fn screenshot(app: &mut App, target: &Handle<Image>) -> Image {
             *s.lock().unwrap() = Some(ev.image.clone());
         });
     // (Usually 2–3 frames; with every test rendering at once on two cores a screenshot has
-    // taken more than 10, and more than 60 with two other processes busy on those cores.)
-    for _ in 0..240 {
+    // taken more than 10, more than 60 with two other processes busy on those cores, and more
+    // than 240 beside a test's precompute busy on every core: frames run on while the
+    // software driver waits its turn. So at least 240 frames and at least two minutes.)
+    let start = std::time::Instant::now();
+    let mut frames = 0;
+    while frames < 240 || start.elapsed() < std::time::Duration::from_secs(120) {
         run(app, 1);
+        frames += 1;
         if let Some(image) = slot.lock().unwrap().take() {
             return image;
         }
     }
-    panic!("no screenshot after 240 frames");
+    panic!("no screenshot after {frames} frames and {:.0} s", start.elapsed().as_secs_f32());
 }
 
 /// Keys of the one-time warnings given so far, main and render world together.

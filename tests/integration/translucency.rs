@@ -866,6 +866,60 @@ fn fragment_gather_difference(
     a.iter().zip(b).map(|(p, q)| p.abs_diff(*q)).max().unwrap()
 }
 
+/// The GPU's picture of `image` with single scattering marched per pixel against its CPU twin
+/// (`MarchedObject` in `gathered_radiance`), the scene's first object marching, over `pixels`
+/// (x, y, the view ray's hit, its normal) seen from `eye`: (pixels, mean |GPU − CPU|, worst,
+/// pixels the march gives more than 2/255).
+fn marched_against_its_twin(app: &mut App, image: &Handle<Image>, pixels: &[(u32, u32, Vec3, Vec3)], eye: Vec3) -> (usize, f32, f32, usize) {
+    use bevy::camera::Exposure;
+    use bevy_mesostructure::translucency::{
+        GatherMethod, TranslucencyFrame, direct_light,
+        gather::gathered_radiance,
+        translucent_shadow_map::{MarchedObject, PLUGIN_RESOLUTION},
+    };
+    let exposure = Exposure::default().exposure();
+    let frame = app.world().resource::<TranslucencyFrame>().clone();
+    let (_, scene) = frame.scene.expect("a scene");
+    let table = scene.transport.beam_table.as_ref().expect("the scene has its beam table");
+    assert!(table.settings.single_scattering_to_pixels, "the table leaves single scattering to the pixels");
+    let (_, lights) = frame.lights.expect("the GPU injects the light");
+    let direct = direct_light(&scene.patches, Some(&scene.transport), &lights.lights, &scene.rays);
+    let solution = scene.transport.solve_with(&direct, frame.settings.iteration_threshold, frame.settings.max_iterations);
+    let exit_laws = scene.transport.exit_laws_along_flow(&scene.patches, &scene.exit_laws, &direct, &scene.source_depths);
+    let medium = scene.marched.first().copied().flatten().expect("the object marches");
+    let objects = [Some(MarchedObject::new(&scene.patches.samples, medium, &lights.lights, PLUGIN_RESOLUTION, |_, _| 1.0))];
+    let shot = screenshot(app, image);
+    let (mut compared, mut sum_error, mut worst, mut marching) = (0, 0.0f32, 0.0f32, 0);
+    for &(x, y, hit, n) in pixels {
+        let twin = |marched: Option<&[Option<MarchedObject>]>| {
+            gathered_radiance(
+                GatherMethod::Interpolation,
+                &scene.patches,
+                &scene.albedo,
+                &exit_laws,
+                &direct.irradiance,
+                &solution.exitance,
+                None,
+                marched,
+                eye,
+                hit,
+                n,
+            )
+            .map_or(0.0, |l| l.x * exposure)
+        };
+        let expected = twin(Some(&objects));
+        let error = (shot.get_color_at(x, y).unwrap().to_srgba().red * 255.0 - srgb8(expected)).abs();
+        compared += 1;
+        sum_error += error;
+        worst = worst.max(error);
+        // Where the march gives a pixel light of its own.
+        if srgb8(expected) - srgb8(twin(None)) > 2.0 {
+            marching += 1;
+        }
+    }
+    (compared, sum_error / compared.max(1) as f32, worst, marching)
+}
+
 #[test]
 fn a_translucent_ball_shows_the_light_its_patches_carry() {
     use bevy::{camera::Exposure, light::GlobalAmbientLight};
@@ -874,8 +928,6 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
         Translucent, GatherMethod, GatherResolution, LightInjection, DirectLight, ExitLaw,
         gather::{BeamSingleScattering, gathered_radiance},
         transport::TransportSolution,
-        direct_light,
-        translucent_shadow_map::{MarchedObject, PLUGIN_RESOLUTION},
     };
     if !gpu_or_skip() {
         return;
@@ -1123,53 +1175,7 @@ fn a_translucent_ball_shows_the_light_its_patches_carry() {
     run(&mut app, 3);
     // |GPU − CPU twin| over the ball's pixels with the march: (pixels, mean, worst, pixels the
     // march gives more than 2/255).
-    let compare_marched = |app: &mut App| {
-        let frame = app.world().resource::<TranslucencyFrame>().clone();
-        let (_, marched_scene) = frame.scene.expect("a scene");
-        let table = marched_scene.transport.beam_table.as_ref().expect("the scene has its beam table");
-        assert!(table.settings.single_scattering_to_pixels, "the table leaves single scattering to the pixels");
-        let (_, lights) = frame.lights.expect("the GPU injects the light");
-        let direct = direct_light(&marched_scene.patches, Some(&marched_scene.transport), &lights.lights, &marched_scene.rays);
-        let solution = marched_scene.transport.solve_with(&direct, frame.settings.iteration_threshold, frame.settings.max_iterations);
-        let exit_laws = marched_scene.transport.exit_laws_along_flow(
-            &marched_scene.patches,
-            &marched_scene.exit_laws,
-            &direct,
-            &marched_scene.source_depths,
-        );
-        let medium = marched_scene.marched.first().copied().flatten().expect("the ball marches");
-        let objects = [Some(MarchedObject::new(&marched_scene.patches.samples, medium, &lights.lights, PLUGIN_RESOLUTION, |_, _| 1.0))];
-        let marched_shot = screenshot(app, &image);
-        let (mut compared, mut sum_error, mut worst, mut marching) = (0, 0.0f32, 0.0f32, 0);
-        for &(x, y, hit, n) in &ball_pixels {
-            let twin = |marched: Option<&[Option<MarchedObject>]>| {
-                gathered_radiance(
-                    GatherMethod::Interpolation,
-                    &marched_scene.patches,
-                    &marched_scene.albedo,
-                    &exit_laws,
-                    &direct.irradiance,
-                    &solution.exitance,
-                    None,
-                    marched,
-                    camera_transform.translation(),
-                    hit,
-                    n,
-                )
-                .map_or(0.0, |l| l.x * exposure)
-            };
-            let expected = twin(Some(&objects));
-            let error = (marched_shot.get_color_at(x, y).unwrap().to_srgba().red * 255.0 - srgb8(expected)).abs();
-            compared += 1;
-            sum_error += error;
-            worst = worst.max(error);
-            // Where the march gives a pixel light of its own.
-            if srgb8(expected) - srgb8(twin(None)) > 2.0 {
-                marching += 1;
-            }
-        }
-        (compared, sum_error / compared.max(1) as f32, worst, marching)
-    };
+    let compare_marched = |app: &mut App| marched_against_its_twin(app, &image, &ball_pixels, camera_transform.translation());
     let (compared, mean, worst, marching) = compare_marched(&mut app);
     eprintln!("marched: {compared} pixels: mean |GPU − CPU| {mean:.2}/255, worst {worst:.1}/255; the march gives {marching} more than 2/255");
     // Measured 0.66/255 mean and 2.8/255 worst (the lit face towards the terminator: the GPU
@@ -2239,11 +2245,10 @@ fn the_tiled_gather_draws_what_the_fragment_gather_does_across_depth_edges() {
 /// holds the ball's under the sun and a spot.
 #[test]
 fn a_light_inside_a_translucent_objects_bounds_marches_against_a_cube_of_maps() {
-    use bevy::{camera::Exposure, light::GlobalAmbientLight};
+    use bevy::light::GlobalAmbientLight;
     use bevy_mesostructure::translucency::{
-        GatherMethod, GatherResolution, PatchObject, SceneRays, TranslucencyFrame, TranslucencyPlugin,
-        TranslucencySettings, Translucent, direct_light, gather::gathered_radiance,
-        translucent_shadow_map::{MapFrame, MarchedObject, PLUGIN_RESOLUTION},
+        GatherResolution, PatchObject, SceneRays, TranslucencyFrame, TranslucencyPlugin, TranslucencySettings,
+        Translucent, beam_table::BeamTableSettings, translucent_shadow_map::MapFrame,
     };
     if !gpu_or_skip() {
         return;
@@ -2252,11 +2257,16 @@ fn a_light_inside_a_translucent_objects_bounds_marches_against_a_cube_of_maps() 
         app.add_plugins(TranslucencyPlugin);
     });
     app.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
-    // Every pixel gathered, as the twin does; the beam table (on by default) leaves single
-    // scattering to the march.
+    // Every pixel gathered, as the twin does; the beam table leaves single scattering to the
+    // march (few walks: the GPU and its twin share the table, and a full one would keep both
+    // cores from the tests rendering beside this one for ~20 s).
     app.insert_resource(TranslucencySettings {
         patch_budget: 500,
         gather_resolution: GatherResolution::Full,
+        transport: TransportSettings {
+            beam_table: Some(BeamTableSettings { walks: 32, late_walks: 128, ..default() }),
+            ..default()
+        },
         ..default()
     });
     let torus = Torus::new(0.02, 0.04);
@@ -2280,69 +2290,31 @@ fn a_light_inside_a_translucent_objects_bounds_marches_against_a_cube_of_maps() 
     let camera = hdr_translucency_camera(&mut app, &image, eye);
     run_until_ready(&mut app);
     run(&mut app, 3);
-    let shot = screenshot(&mut app, &image);
-
     let frame = app.world().resource::<TranslucencyFrame>().clone();
     let (_, scene) = frame.scene.expect("a scene");
     let (_, lights) = frame.lights.expect("the GPU injects the light");
     let (centre, radius) = scene.bounds;
     let faces = MapFrame::frames_towards(&lights.lights[0], centre, radius);
     assert_eq!(faces.len(), 6, "a light {} bounding radii from the centre takes a cube", light_at.distance(centre) / radius);
-    let direct = direct_light(&scene.patches, Some(&scene.transport), &lights.lights, &scene.rays);
-    let solution = scene.transport.solve_with(&direct, frame.settings.iteration_threshold, frame.settings.max_iterations);
-    let exit_laws = scene.transport.exit_laws_along_flow(&scene.patches, &scene.exit_laws, &direct, &scene.source_depths);
-    let medium = scene.marched.first().copied().flatten().expect("the torus marches");
-    let objects = [Some(MarchedObject::new(&scene.patches.samples, medium, &lights.lights, PLUGIN_RESOLUTION, |_, _| 1.0))];
-    let exposure = Exposure::default().exposure();
     let (camera_component, camera_transform) = app
         .world_mut()
         .query::<(&Camera, &GlobalTransform)>()
         .get(app.world(), camera)
         .map(|(c, t)| (c.clone(), *t))
         .unwrap();
+    // The torus's pixels facing the camera, the outline's grazing ones left out (where the
+    // facets and their smooth normals part).
     let rays = SceneRays::new(&[PatchObject { positions: &positions, indices: &indices }]);
-    let (mut compared, mut sum_error, mut worst, mut marching) = (0, 0.0f32, 0.0f32, 0);
-    for k in 0..size * size {
-        let (x, y) = (k % size, k / size);
-        let Ok(ray) = camera_component.viewport_to_world(&camera_transform, Vec2::new(x as f32 + 0.5, y as f32 + 0.5)) else {
-            continue;
-        };
-        let Some((t, normal)) = rays.first_hit(ray.origin, *ray.direction) else {
-            continue;
-        };
-        // Facing the camera, the outline's grazing pixels left out (where the facets and
-        // their smooth normals part).
-        let n = if normal.dot(*ray.direction) < 0.0 { normal } else { -normal };
-        if n.dot(-*ray.direction) < 0.3 {
-            continue;
-        }
-        let hit = ray.origin + *ray.direction * t;
-        let twin = |marched: Option<&[Option<MarchedObject>]>| {
-            gathered_radiance(
-                GatherMethod::Interpolation,
-                &scene.patches,
-                &scene.albedo,
-                &exit_laws,
-                &direct.irradiance,
-                &solution.exitance,
-                None,
-                marched,
-                camera_transform.translation(),
-                hit,
-                n,
-            )
-            .map_or(0.0, |l| l.x * exposure)
-        };
-        let expected = twin(Some(&objects));
-        let error = (shot.get_color_at(x, y).unwrap().to_srgba().red * 255.0 - srgb8(expected)).abs();
-        compared += 1;
-        sum_error += error;
-        worst = worst.max(error);
-        if srgb8(expected) - srgb8(twin(None)) > 2.0 {
-            marching += 1;
-        }
-    }
-    let mean = sum_error / compared.max(1) as f32;
+    let pixels: Vec<(u32, u32, Vec3, Vec3)> = (0..size * size)
+        .filter_map(|k| {
+            let (x, y) = (k % size, k / size);
+            let ray = camera_component.viewport_to_world(&camera_transform, Vec2::new(x as f32 + 0.5, y as f32 + 0.5)).ok()?;
+            let (t, normal) = rays.first_hit(ray.origin, *ray.direction)?;
+            let n = if normal.dot(*ray.direction) < 0.0 { normal } else { -normal };
+            (n.dot(-*ray.direction) >= 0.3).then_some((x, y, ray.origin + *ray.direction * t, n))
+        })
+        .collect();
+    let (compared, mean, worst, marching) = marched_against_its_twin(&mut app, &image, &pixels, camera_transform.translation());
     eprintln!("a light in the torus's hole: {compared} pixels: mean |GPU − CPU| {mean:.2}/255, worst {worst:.1}/255; the march gives {marching} more than 2/255");
     assert!(compared > 500 && marching > 100, "{compared} compared, {marching} marching");
     assert!(mean <= 1.0 && worst <= 3.0, "a light in the torus's hole: mean {mean}, worst {worst}");
