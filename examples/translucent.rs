@@ -84,6 +84,11 @@ struct Cli {
     /// `TranslucencyCamera` asks for all the same (what the prepass alone costs)
     #[arg(long)]
     prepass: bool,
+    /// Add a small lamp 1 mm off the skin sphere's face, inside its bounds: the sphere's
+    /// single scattering from it is marched against a cube of six maps about it (what a cube
+    /// costs)
+    #[arg(long)]
+    lamp: bool,
 }
 
 /// `--gather-resolution`: [`GatherResolution`]'s two.
@@ -174,11 +179,11 @@ fn main() {
             fixed: (!windowed && !cli.swing).then_some(0.0),
         })
         .add_systems(Update, move_spot);
-    setup(app.world_mut(), cli.translucency, cli.prepass);
+    setup(app.world_mut(), cli.translucency, cli.prepass, cli.lamp);
     common::run(app);
 }
 
-fn setup(world: &mut World, translucency: bool, prepass: bool) {
+fn setup(world: &mut World, translucency: bool, prepass: bool, lamp: bool) {
     let target = world.resource::<common::Output>().target();
     let mut camera = world.spawn((
         Camera3d::default(),
@@ -235,10 +240,18 @@ fn setup(world: &mut World, translucency: bool, prepass: bool) {
             ..default()
         },
     ));
+    let sphere_at = Vec3::new(0.08, 0.03, 0.02);
+    if lamp {
+        // 1.033 radii from the centre, towards the camera and the room's middle.
+        world.spawn((
+            PointLight { intensity: 2.0, range: 1.0, ..default() },
+            Transform::from_translation(sphere_at + Vec3::new(-0.5, 0.3, 0.8).normalize() * 0.031),
+        ));
+    }
     world.spawn((
         Mesh3d(sphere),
         MeshMaterial3d(skin),
-        Transform::from_xyz(0.08, 0.03, 0.02),
+        Transform::from_translation(sphere_at),
         Translucent {
             medium: TranslucentPreset::Skin1.medium(),
             world_units_per_mm: 0.001,
