@@ -2318,4 +2318,31 @@ fn a_light_inside_a_translucent_objects_bounds_marches_against_a_cube_of_maps() 
     eprintln!("a light in the torus's hole: {compared} pixels: mean |GPU − CPU| {mean:.2}/255, worst {worst:.1}/255; the march gives {marching} more than 2/255");
     assert!(compared > 500 && marching > 100, "{compared} compared, {marching} marching");
     assert!(mean <= 1.0 && worst <= 3.0, "a light in the torus's hole: mean {mean}, worst {worst}");
+    assert!(!warnings(&app).iter().any(|c| c == "translucency-cube-maps"));
+
+    // More lights inside objects' bounds than take a cube (`MAX_CUBE_MAPS`, 8): a small ball
+    // in the hole and five lights about it, each inside both the ball's bounds and the
+    // torus's (with the first light, eleven pairs). The three past the cap keep one map, with
+    // one warning.
+    let ball = mesh(&mut app, Sphere::new(0.006).mesh().ico(3).expect("a sphere"));
+    let material = matte_white(&mut app);
+    app.world_mut().spawn((
+        ball,
+        MeshMaterial3d(material),
+        Translucent { medium: TranslucentPreset::Skin1.medium(), ..default() },
+        Transform::from_xyz(0.0, 0.012, 0.0),
+    ));
+    for k in 0..4 {
+        let angle = k as f32 * std::f32::consts::FRAC_PI_2;
+        let at = Vec3::new(angle.cos(), 0.3, angle.sin()).normalize() * 0.0062 + Vec3::new(0.0, 0.012, 0.0);
+        app.world_mut().spawn((PointLight { intensity: 1.0, range: 1.0, ..default() }, Transform::from_translation(at)));
+    }
+    app.world_mut().spawn((PointLight { intensity: 1.0, range: 1.0, ..default() }, Transform::from_xyz(0.0, 0.0182, 0.0)));
+    run_until_ready(&mut app);
+    run(&mut app, 3);
+    assert!(
+        warnings(&app).iter().any(|c| c == "translucency-cube-maps"),
+        "eleven lights and objects inside bounds, past the cap: {:?}",
+        warnings(&app)
+    );
 }

@@ -94,12 +94,13 @@ impl TranslucencyGpu {
 }
 
 /// Uploads a new scene and each frame's new direct light (render `PrepareResources`).
-pub fn prepare_translucency(
+pub(crate) fn prepare_translucency(
     frame: Res<TranslucencyFrame>,
     mut gpu: ResMut<TranslucencyGpu>,
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
     adapter: Res<RenderAdapterInfo>,
+    mut warned: ResMut<crate::warn_once::WarnedOnce>,
 ) {
     let row_lanes = RowLanes::for_adapter(&adapter);
     let Some((generation, scene)) = &frame.scene else {
@@ -171,6 +172,19 @@ pub fn prepare_translucency(
             )),
         };
         injection.write_lights(&device, &queue, &lights.lights, lights.ambient);
+        let (cubes, beyond) = injection.cube_maps();
+        if beyond > 0 {
+            warned.warn("translucency-cube-maps", || {
+                format!(
+                    "translucency: {} lights lie inside translucent objects' bounds, more than the {} that take a \
+                     cube of maps; the other {} march single scattering against one map along the line to \
+                     the object's centre (less accurate)",
+                    cubes + beyond,
+                    cubes,
+                    beyond
+                )
+            });
+        }
         gpu.lights_generation = *lights_generation;
         gpu.maps_current = true;
         gpu.injection_pending = true;

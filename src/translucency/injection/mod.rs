@@ -179,6 +179,9 @@ struct TranslucentMaps {
     most_slot_samples: u32,
     /// The maps the lights written last have (one a light and slot, six for a cube).
     maps_written: u32,
+    /// Of the lights written last and the objects, those that took a cube, and those that
+    /// would have past [`MAX_CUBE_MAPS`].
+    cubes: (usize, usize),
     /// The buffers' room: vec4s of `maps` and maps of `depths`.
     capacity: (u64, u32),
     maps: Buffer,
@@ -243,7 +246,7 @@ impl TranslucentMaps {
         let capacity = (head.len() as u64, 0);
         let (maps, depths) = Self::buffers(device, capacity);
         let bind_group = Self::bind_group(device, &layout, &maps, &depths);
-        Self { head, slots, most_slot_samples, maps_written: 0, capacity, maps, depths, bind_group, layout }
+        Self { head, slots, most_slot_samples, maps_written: 0, cubes: (0, 0), capacity, maps, depths, bind_group, layout }
     }
 
     /// The maps' buffers for `vec4s` of `translucent_maps` and `maps` maps' depths.
@@ -280,13 +283,14 @@ impl TranslucentMaps {
         // major, as `translucent_light_maps_at` reads them).
         let mut light_maps: Vec<[f32; 4]> = Vec::with_capacity(taken * slots);
         let mut frames: Vec<[f32; 4]> = Vec::new();
-        let mut cubes = 0;
+        let (mut cubes, mut beyond) = (0, 0);
         for (l, light) in lights[..taken].iter().enumerate() {
             for &(object, centre, radius) in &self.slots {
                 let mut faces = MapFrame::frames_towards(light, centre, radius);
                 if faces.len() > 1 {
                     if cubes == MAX_CUBE_MAPS {
                         faces = MapFrame::towards(light, centre, radius).into_iter().collect();
+                        beyond += 1;
                     } else {
                         cubes += 1;
                     }
@@ -312,6 +316,7 @@ impl TranslucentMaps {
         // The frames after every map's texels (`translucent_frame_at`).
         queue.write_buffer(&self.maps, (head.len() as u64 + texels) * 16, bytemuck::cast_slice(&frames));
         self.maps_written = maps;
+        self.cubes = (cubes, beyond);
     }
 
     /// Bytes of the depths of the maps written last.
@@ -563,6 +568,13 @@ impl GpuInjection {
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&self.injection));
         self.translucent_maps.write_lights(device, queue, lights);
         taken
+    }
+
+    /// Of the lights written last and the translucent objects that march, the pairs that
+    /// took a cube of maps (a light inside the object's bounds), and those past
+    /// [`MAX_CUBE_MAPS`] that kept one map.
+    pub fn cube_maps(&self) -> (usize, usize) {
+        self.translucent_maps.cubes
     }
 
     /// Records the injection: the maps cleared and splatted, then every patch's `E⁰` and `S⁰`
