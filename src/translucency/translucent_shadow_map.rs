@@ -81,8 +81,8 @@ pub const PERSPECTIVE_NEAREST: f32 = 1.05;
 pub const CUBE_FACE_WIDTH: f32 = 1.02;
 
 /// The cube face (+x, −x, +y, −y, +z, −z) that `local` (from the light) points into: its
-/// largest axis (`cube_face` in `inject.wgsl` and `translucent_cube_face` in boundary.wgsl
-/// are its twins).
+/// largest axis (`cube_face` in boundary.wgsl, which the injection's own cube maps share, is
+/// its twin).
 pub fn cube_face(local: Vec3) -> usize {
     let a = local.abs();
     if a.x >= a.y && a.x >= a.z {

@@ -634,9 +634,10 @@ impl GpuInjection {
 }
 
 impl GpuInjection {
-    /// The translucent objects' maps for `lights` lights: cleared, their entries and then
-    /// their exits splatted (each its own pass: the exits are those deeper than the entries;
-    /// a workgroup per sample of each slot's object and light), then each texel's light,
+    /// The translucent objects' maps written last (one a light and object, six for a cube):
+    /// cleared, their entries and then their exits splatted (each its own pass: the exits are
+    /// those deeper than the entries; a workgroup per sample of each map's object and a row
+    /// per map), then each texel's light,
     /// shadowed by the scene's maps splatted before. Each its own time span (`entries`,
     /// `exits`, `light`) in `translucent_maps`.
     fn record_translucent_maps(&self, encoder: &mut CommandEncoder, spans: &impl RecordDiagnostics) {
