@@ -154,6 +154,11 @@ struct Cli {
     /// plugin's, `BeamTableSettings::default().late_walks`)
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
     late_walks: Option<u32>,
+    /// With `--scattering beam-table`: how many walks each beam walk becomes once it
+    /// scatters more than two patch sizes from its entry (`BeamTableSettings::far_splits`;
+    /// default the plugin's; 1: none). Method suffix `_far<n>` when above 1
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
+    far_splits: Option<u32>,
     /// With `--scattering beam-table`: offset its walks' seeds (`BeamTableSettings::seed`; 0
     /// the documented tables). Runs over a few seeds show what a variant must beat: one seed
     /// moves the figures by ~±0.005 from the front. Method suffix `_seed<n>` when not 0
@@ -572,6 +577,7 @@ fn main() {
                 azimuths,
                 walks: cli.walks.unwrap_or(BeamTableSettings::default().walks),
                 late_walks: cli.late_walks.unwrap_or(BeamTableSettings::default().late_walks),
+                far_splits: cli.far_splits.unwrap_or(BeamTableSettings::default().far_splits),
                 last_order: cli.beam_orders.map_or(16, |(_, last)| last),
                 exit_directions: cli.exit_axis == Axis::Lobe,
                 single_scattering_to_pixels: !cli.single_scattering_in_table,
@@ -585,8 +591,9 @@ fn main() {
                     // the table (`law_gives_single_scattering`; rows before it lack it);
                     // `_lateheld`: the late light held to the light still inside (rows
                     // before it lack it).
-                    "_beamtable{cosines}x{azimuths}_bilinear_pastterminator_lateheld_walks{}_late{}_orders{}{}{}",
+                    "_beamtable{cosines}x{azimuths}_bilinear_pastterminator_lateheld_walks{}{}_late{}_orders{}{}{}",
                     table.walks,
+                    if table.far_splits > 1 { format!("_far{}", table.far_splits) } else { String::new() },
                     table.late_walks,
                     table.last_order,
                     if table.seed == 0 { String::new() } else { format!("_seed{}", table.seed) },

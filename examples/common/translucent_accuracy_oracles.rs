@@ -44,7 +44,7 @@ pub(super) fn walked_scattering(
         let walked = |launch: WalkLaunch, orders: ScatteringOrders, walks: u32, lit_face_single_to_law: bool| {
             let mut column: Vec<(u32, Vec3)> = Vec::new();
             let mut remaining = Vec3::ZERO;
-            walk_ends(&medium, world_units_per_mm, &entries, rays, walks as usize, j as u64, launch, orders, |weight, end| {
+            walk_ends(&medium, world_units_per_mm, &entries, rays, walks as usize, j as u64, launch, orders, None, |weight, end| {
                 let exit = match end {
                     // Single scattering leaving by the lit face is the pixel's own law's.
                     WalkEnd::Exit(exit)

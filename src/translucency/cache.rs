@@ -41,8 +41,9 @@ impl Hash {
 }
 
 /// Bumped when the same settings come to build a different transport, so that files of the
-/// old one are not found (2: the beam table's walks shared by the colour channels).
-const REVISION: u32 = 2;
+/// old one are not found (2: the beam table's walks shared by the colour channels; 3: its
+/// beam walks split far from their entry, `BeamTableSettings::far_splits`).
+const REVISION: u32 = 3;
 
 /// The cache key of a scene: its objects (world-space positions, indices, surface), the
 /// patch budget, the transport settings, the crate's version and [`REVISION`].
@@ -259,7 +260,7 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
                 // The two flags share one word (bit 0 the exit directions, bit 1 single
                 // scattering left to the pixels): files written before bit 1 read as before.
                 let flags = u32::from(s.exit_directions) | u32::from(s.single_scattering_to_pixels) << 1;
-                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order, flags, s.seed])?;
+                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order, flags, s.seed, s.far_splits])?;
                 w.u32s(&t.slots)?;
                 w.f32s(t.media.iter().flat_map(|m| m.to_array()).collect::<Vec<_>>().into_iter())?;
                 w.f32s(t.late_share.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
@@ -404,7 +405,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
 /// The beam table [`save`] wrote after the transport, checked against `n` patches.
 fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<BeamTable>> {
     let settings = r.u32s()?;
-    let [cosines, azimuths, walks, late_walks, last_order, flags, seed] = settings[..] else {
+    let [cosines, azimuths, walks, late_walks, last_order, flags, seed, far_splits] = settings[..] else {
         return if settings.is_empty() { Ok(None) } else { Err(invalid("beam table settings")) };
     };
     let settings = BeamTableSettings {
@@ -412,6 +413,7 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
         azimuths,
         walks,
         late_walks,
+        far_splits,
         last_order,
         exit_directions: flags & 1 != 0,
         single_scattering_to_pixels: flags & 2 != 0,

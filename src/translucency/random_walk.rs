@@ -241,6 +241,21 @@ pub struct ScatteringOrders {
     pub last: u32,
 }
 
+/// Splitting a walk that travels far from where it entered into several of a share each
+/// (importance splitting; `walk_ends`). Far from its entry a column's exits are few, and the
+/// patches there took each its own handful of walks: a back-lit skin ball's picture was
+/// blotched by it. A split walk's copies go on from the same collision each in its own
+/// direction, so the far exits are walked `into` times as often for a fraction of the cost
+/// of that many more walks (most walks leave near their entry), and the expectation is
+/// unchanged.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FarSplit {
+    /// How far from its entry point (world units) a walk's collision must be for it to split.
+    pub beyond: f32,
+    /// How many walks it becomes there (once; 1: none).
+    pub into: u32,
+}
+
 /// How a walk ended, where it is reported.
 #[derive(Clone, Copy, Debug)]
 pub enum WalkEnd {
@@ -256,7 +271,8 @@ pub enum WalkEnd {
 /// Walks `walks` paths into `rays`' triangles from `entries` (drawn by area), shared by the
 /// three colour channels, and calls `on_end(weight, end)` for each that leaves after at least
 /// `orders.first` scatterings or is still inside after `orders.last`: `weight / walks` is its
-/// share of the light that entered, per channel. A beam's walks from entries facing away
+/// share of the light that entered, per channel (with `split`, a split walk's copies each
+/// carry their share of it in `weight`). A beam's walks from entries facing away
 /// from it are not walked (their share is lost). `false` where the medium, the scale or the
 /// entries are invalid (nothing walked). The same physics as the path-traced references
 /// (`tools/translucent_reference.py`): `translucent_accuracy --scattering walks` builds `K`
@@ -285,6 +301,7 @@ pub fn walk_ends(
     seed: u64,
     launch: WalkLaunch,
     orders: ScatteringOrders,
+    split: Option<FarSplit>,
     mut on_end: impl FnMut(Vec3, WalkEnd),
 ) -> bool {
     let Some(entry_table) = EntryTable::new(medium, world_units_per_mm, entries) else {
@@ -333,9 +350,9 @@ pub fn walk_ends(
             d,
             by_hero[w % 3],
             (query, true),
-            orders,
+            (orders, split),
             &mut random,
-            |order, length, end| on_end(weight(order, length), end),
+            |order, length, share, end| on_end(weight(order, length) * share, end),
         );
     }
     true
@@ -469,9 +486,9 @@ fn walk<'a>(
                 d,
                 medium,
                 (query, false),
-                orders,
+                (orders, None),
                 &mut random,
-                |_, _, end| ends.push((e, end)),
+                |_, _, _, end| ends.push((e, end)),
             );
         }
         ends
@@ -498,66 +515,79 @@ struct WalkMedium {
 }
 
 /// One walk from `entry` along `d` (already inside) until it leaves, is absorbed or has
-/// scattered more than `orders.last` times: `on_end(order, length, end)` for an end that
-/// [`walk_ends`] reports (`order` its scatterings, `length` its path in the medium).
-/// `query(x, d, t_max)` the nearest boundary along `d` (`bounded`: only within `t_max`, so
-/// that none is no gap but a collision).
+/// scattered more than `orders.last` times: `on_end(order, length, share, end)` for an end
+/// that [`walk_ends`] reports (`order` its scatterings, `length` its path in the medium,
+/// `share` its part of the walk: 1 unless `split` split it). `query(x, d, t_max)` the nearest
+/// boundary along `d` (`bounded`: only within `t_max`, so that none is no gap but a
+/// collision).
 fn walk_one(
     entry: &EntryPoint,
-    mut d: Vec3,
+    d: Vec3,
     medium: WalkMedium,
     (query, bounded): (impl Fn(Vec3, Vec3, f32) -> Option<(f32, Vec3)>, bool),
-    orders: ScatteringOrders,
+    (orders, split): (ScatteringOrders, Option<FarSplit>),
     random: &mut SplitMix,
-    mut on_end: impl FnMut(u32, f64, WalkEnd),
+    mut on_end: impl FnMut(u32, f64, f32, WalkEnd),
 ) {
-    let mut x = entry.position - entry.normal * medium.epsilon;
-    let (mut order, mut length) = (0u32, 0.0f64);
-    for _ in 0..MAX_EVENTS {
-        let free_path = (-(1.0 - random.next()).ln() / medium.sigma_t) as f32;
-        let (to_boundary, normal) = match query(x, d, free_path) {
-            Some((t, normal)) if t <= free_path => (t, normal),
-            // Out through a gap in the mesh: it has left.
-            None if !bounded => {
-                if order >= orders.first {
-                    on_end(order, length, WalkEnd::Gap);
+    let split = split.filter(|s| s.into > 1);
+    // The walks still to go: where, which way, their scatterings and path so far, their
+    // share, and whether they have split.
+    let mut to_walk = vec![(entry.position - entry.normal * medium.epsilon, d, 0u32, 0.0f64, 1.0f32, false)];
+    'walks: while let Some((mut x, mut d, mut order, mut length, mut share, mut split_yet)) = to_walk.pop() {
+        for _ in 0..MAX_EVENTS {
+            let free_path = (-(1.0 - random.next()).ln() / medium.sigma_t) as f32;
+            let (to_boundary, normal) = match query(x, d, free_path) {
+                Some((t, normal)) if t <= free_path => (t, normal),
+                // Out through a gap in the mesh: it has left.
+                None if !bounded => {
+                    if order >= orders.first {
+                        on_end(order, length, share, WalkEnd::Gap);
+                    }
+                    continue 'walks;
                 }
-                return;
-            }
-            // The boundary is beyond the free flight: a collision.
-            _ => {
-                x += d * free_path;
-                length += free_path as f64;
-                if random.next() >= medium.survival {
-                    return;
+                // The boundary is beyond the free flight: a collision.
+                _ => {
+                    x += d * free_path;
+                    length += free_path as f64;
+                    if random.next() >= medium.survival {
+                        continue 'walks;
+                    }
+                    order += 1;
+                    if order > orders.last {
+                        on_end(order, length, share, WalkEnd::Remainder);
+                        continue 'walks;
+                    }
+                    if let Some(split) = split.filter(|s| !split_yet && x.distance(entry.position) > s.beyond) {
+                        split_yet = true;
+                        share /= split.into as f32;
+                        for _ in 1..split.into {
+                            let d = uniform_direction(random.next(), random.next());
+                            to_walk.push((x, d, order, length, share, true));
+                        }
+                    }
+                    d = uniform_direction(random.next(), random.next());
+                    continue;
                 }
-                order += 1;
-                if order > orders.last {
-                    on_end(order, length, WalkEnd::Remainder);
-                    return;
+            };
+            length += to_boundary as f64;
+            let hit = x + d * to_boundary;
+            match cross_boundary(d, normal, medium.eta, random) {
+                Crossing::Reflected { travel, outward } => {
+                    d = travel;
+                    x = hit - outward * medium.epsilon;
                 }
-                d = uniform_direction(random.next(), random.next());
-                continue;
-            }
-        };
-        length += to_boundary as f64;
-        let hit = x + d * to_boundary;
-        match cross_boundary(d, normal, medium.eta, random) {
-            Crossing::Reflected { travel, outward } => {
-                d = travel;
-                x = hit - outward * medium.epsilon;
-            }
-            Crossing::Left { outward, leaving } => {
-                if order >= orders.first {
-                    let exit = WalkExit {
-                        position: hit,
-                        outward,
-                        order,
-                        leaving,
-                    };
-                    on_end(order, length, WalkEnd::Exit(exit));
+                Crossing::Left { outward, leaving } => {
+                    if order >= orders.first {
+                        let exit = WalkExit {
+                            position: hit,
+                            outward,
+                            order,
+                            leaving,
+                        };
+                        on_end(order, length, share, WalkEnd::Exit(exit));
+                    }
+                    continue 'walks;
                 }
-                return;
             }
         }
     }

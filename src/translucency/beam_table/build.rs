@@ -12,7 +12,7 @@ use super::{
 use crate::translucency::{
     diffusion::diffuse_fresnel_reflectance,
     patches::Patches,
-    random_walk::{EntryPoint, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
+    random_walk::{EntryPoint, FarSplit, ScatteringOrders, WalkEnd, WalkLaunch, walk_ends},
     transport::{PatchSurface, SceneRays, SparseMatrix, parallel_rows},
 };
 
@@ -232,6 +232,10 @@ impl BeamTable {
                     .map(|s| EntryPoint { position: s.position, normal: s.normal, area: s.area })
                     .collect(),
                 last_order: settings.last_order,
+                far_split: FarSplit {
+                    beyond: super::LOBE_SOURCE_DISTANCE * patches.size_of(j),
+                    into: settings.far_splits,
+                },
                 directions: settings.exit_directions,
                 single_to_pixels: settings.single_scattering_to_pixels && marched[p[j].object as usize],
                 source_depth: source_depths.get(j).copied().unwrap_or(Vec3::ZERO),
@@ -374,6 +378,9 @@ struct ColumnWalks<'a> {
     /// Patch `j`'s samples, where its walks enter (once for all its directions).
     entries: Vec<EntryPoint>,
     last_order: u32,
+    /// How a beam walk splits far from its entry ([`BeamTableSettings::far_splits`]; the
+    /// late light's diffuse walks do not split: the patches they reach are its near field).
+    far_split: FarSplit,
     /// Whether to take the exits' moments.
     directions: bool,
     /// [`BeamTableSettings::single_scattering_to_pixels`].
@@ -430,6 +437,7 @@ impl ColumnWalks<'_> {
             seed,
             launch,
             orders,
+            beam.then_some(self.far_split),
             |weight, end| match end {
                 WalkEnd::Exit(exit) if to_law(exit.order, exit.outward) => {}
                 WalkEnd::Exit(exit) => {

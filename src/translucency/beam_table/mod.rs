@@ -57,6 +57,11 @@ pub struct BeamTableSettings {
     pub walks: u32,
     /// Diffuse walks a patch for the late light's near field (≥ 1), shared by the channels.
     pub late_walks: u32,
+    /// How many walks a beam walk becomes once it scatters more than
+    /// [`LOBE_SOURCE_DISTANCE`] of its patch's sizes from where it entered (≥ 1; 1: none;
+    /// [`FarSplit`](super::random_walk::FarSplit)): the far exits, few and blotchy, walked
+    /// that many times as often for a fraction of the cost of as many more walks.
+    pub far_splits: u32,
     /// Scatterings a walk takes before it leaves as late light (≥ 1).
     pub last_order: u32,
     /// Keep the mean direction each entry's light leaves along ([`BeamTable::early_leaving`],
@@ -90,17 +95,19 @@ pub struct BeamTableSettings {
 impl Default for BeamTableSettings {
     /// 4 × 8 directions (measured as close as 6 × 12 on the bunny and the ball; with each
     /// beam spread over four of them, 3 × 6 took the bunny's skin past 0.08 in relative L1
-    /// with one seed of three: `docs/translucent.md`), 384 walks shared by the channels and
-    /// 3072 late walks (against 256 and 1024 walks a channel before: the table's build 1.6×
-    /// faster, the ball's skin from the front 0.048 → 0.044 and the bunny's 0.073 → 0.077 over
-    /// three seeds, the rest within their noise; 1024 late walks: the ball's skin 0.053), the
-    /// 17th scattering on (from the 9th the back-lit bunny's skin went 0.286 → 0.316).
+    /// with one seed of three: `docs/translucent.md`), 256 walks shared by the channels, each
+    /// split in 4 once two patch sizes from its entry, and 3072 late walks (against 384
+    /// unsplit walks before: the back-lit skin ball 0.141 → 0.112 in relative L1 over three
+    /// seeds, the bunny's 0.160 → 0.152, the rest within their noise, the 20 k room's table
+    /// built 30 % faster), the 17th scattering on (from the 9th the back-lit bunny's skin
+    /// went 0.286 → 0.316).
     fn default() -> Self {
         Self {
             cosines: 4,
             azimuths: 8,
-            walks: 384,
+            walks: 256,
             late_walks: 3072,
+            far_splits: 4,
             last_order: 16,
             exit_directions: false,
             single_scattering_to_pixels: true,
@@ -123,8 +130,8 @@ impl BeamTableSettings {
     pub fn invalid_reason(&self) -> Option<&'static str> {
         if !(1..=16).contains(&self.cosines) || !(1..=32).contains(&self.azimuths) {
             Some("a beam table takes 1 – 16 cosines and 1 – 32 azimuths")
-        } else if self.walks == 0 || self.late_walks == 0 || self.last_order == 0 {
-            Some("a beam table needs at least one walk, late walk and scattering")
+        } else if self.walks == 0 || self.late_walks == 0 || self.last_order == 0 || self.far_splits == 0 {
+            Some("a beam table needs at least one walk, late walk, scattering and far split")
         } else {
             None
         }
