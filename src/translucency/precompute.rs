@@ -26,6 +26,12 @@ use crate::warn_once::WarnedOnce;
 #[derive(Resource, Default)]
 pub(crate) struct Precompute {
     signature: Vec<u64>,
+    /// Per participant of the transport built last, its entity, mesh and transform (hashed):
+    /// what tells a mesh that moved from one added, removed or restyled.
+    placements: Vec<(u64, u64, u64)>,
+    /// How many times each mesh was modified in place (`AssetEvent::Modified`): a mesh
+    /// deformed under the same handle changes its participant's signature too.
+    mesh_revisions: bevy::platform::collections::HashMap<AssetId<Mesh>, u64>,
     /// A changed signature waiting to stay the same for [`SETTLE_FRAMES`] before a rebuild,
     /// and for how many frames it has.
     settling: Option<(Vec<u64>, u32)>,
@@ -79,7 +85,13 @@ pub(crate) fn run_precompute(
     mut status: ResMut<TranslucencyStatus>,
     mut frame: ResMut<TranslucencyFrame>,
     mut warned: ResMut<WarnedOnce>,
+    mut mesh_events: MessageReader<AssetEvent<Mesh>>,
 ) {
+    for event in mesh_events.read() {
+        if let AssetEvent::Modified { id } = event {
+            *state.mesh_revisions.entry(*id).or_default() += 1;
+        }
+    }
     if settings.patch_budget > MAX_PATCH_BUDGET || settings.patch_budget < 16 {
         let capped = settings.patch_budget.clamp(16, MAX_PATCH_BUDGET);
         warned.warn("translucency-budget", || {
@@ -125,10 +137,16 @@ pub(crate) fn run_precompute(
                 .map(|v| v as f32)
         })),
     ];
+    let mut placements = Vec::with_capacity(list.len());
     for (entity, mesh, material, transform, translucent, _) in &list {
-        signature.push(entity.to_bits());
-        signature.push(hash_of(mesh.0.id()));
-        signature.push(hash_f32s(transform.to_matrix().to_cols_array()));
+        let revision = state.mesh_revisions.get(&mesh.0.id()).copied().unwrap_or(0);
+        let placement = (
+            entity.to_bits(),
+            hash_of((mesh.0.id(), revision)),
+            hash_f32s(transform.to_matrix().to_cols_array()),
+        );
+        placements.push(placement);
+        signature.extend([placement.0, placement.1, placement.2]);
         if translucent.is_none() {
             let albedo = materials
                 .get(&material.0)
@@ -159,13 +177,29 @@ pub(crate) fn run_precompute(
                 _ => 0,
             };
             if frames == 0 {
-                if frame.scene.is_some() || state.task.is_some() {
+                // A participant whose mesh or transform is not the one the transport was built
+                // for is a warning (the transport is for static scenes); objects added or
+                // removed, a medium, an albedo or the settings changed are the game's own
+                // edits, and only say that the transport is rebuilt.
+                let moved = placements.iter().any(|&(entity, mesh, transform)| {
+                    state
+                        .placements
+                        .iter()
+                        .any(|&(e, m, t)| e == entity && (m, t) != (mesh, transform))
+                });
+                if moved && (frame.scene.is_some() || state.task.is_some()) {
                     warned.warn("translucency-moved", || {
-                        "translucency: a translucent or radiosity mesh moved, deformed or changed; \
-                         the transport is for static scenes: Bevy shades them until they stay \
-                         still, then the transport is rebuilt"
+                        "translucency: a translucent or radiosity mesh moved or deformed; the \
+                         transport is for static scenes: Bevy shades them until they stay still, \
+                         then the transport is rebuilt"
                             .to_string()
                     });
+                } else if !moved && state.settling.is_none() {
+                    info!(
+                        "translucency: translucent or radiosity objects were added, removed or \
+                         changed, or the settings were; Bevy shades them until the transport is \
+                         rebuilt"
+                    );
                 }
                 state.task = None;
                 frame.scene = None;
@@ -181,6 +215,7 @@ pub(crate) fn run_precompute(
         }
         state.settling = None;
         state.signature = signature;
+        state.placements = placements;
         state.task = None;
         frame.scene = None;
         frame.direct = None;

@@ -1337,6 +1337,16 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
     assert_eq!(shown(&mut app, bad), material);
 
+    // The game's own edit (a transport setting): rebuilt, with no warning that a mesh moved.
+    app.world_mut().resource_mut::<TranslucencySettings>().transport.form_factor_cutoff *= 2.0;
+    run(&mut app, 1);
+    assert!(!ready(&app), "a changed setting did not rebuild the transport");
+    run_until_ready(&mut app);
+    assert!(
+        !warnings(&app).iter().any(|c| c == "translucency-moved"),
+        "a changed setting warned that a mesh moved"
+    );
+
     // Moving a participant: one warning, Bevy's shading while it moves, rebuilt once still.
     for step in 0..5 {
         app.world_mut()
@@ -1349,6 +1359,24 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         assert_eq!(shown(&mut app, good), good_materials.original);
     }
     assert!(warnings(&app).iter().any(|c| c == "translucency-moved"));
+    run_until_ready(&mut app);
+    assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
+
+    // Deforming its mesh in place, under the same handle: Bevy's shading again, rebuilt once
+    // still.
+    let handle = app.world().get::<Mesh3d>(good).unwrap().0.clone();
+    {
+        let mut meshes = app.world_mut().resource_mut::<Assets<Mesh>>();
+        let mut deformed = meshes.get_mut(&handle).expect("the ball's mesh");
+        if let Some(bevy::mesh::VertexAttributeValues::Float32x3(positions)) =
+            deformed.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+        {
+            positions.iter_mut().for_each(|p| p[1] *= 1.2);
+        }
+    }
+    run(&mut app, 1);
+    assert!(!ready(&app), "a mesh deformed in place kept its transport");
+    assert_eq!(shown(&mut app, good), good_materials.original);
     run_until_ready(&mut app);
     assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
 
