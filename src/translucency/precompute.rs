@@ -50,6 +50,9 @@ type Participant<'a> = (
     &'a GlobalTransform,
     Option<&'a Translucent>,
     Option<&'a TranslucentMaterials>,
+    // Skinned or morphed: deformed on the GPU every frame, under an unchanged `Mesh`.
+    Has<bevy::mesh::skinning::SkinnedMesh>,
+    Has<bevy::mesh::morph::MeshMorphWeights>,
 );
 
 pub(super) fn hash_of(value: impl std::hash::Hash) -> u64 {
@@ -115,7 +118,7 @@ pub(crate) fn run_precompute(
             });
         }
     }
-    let mut list: Vec<Participant> = participants.iter().collect();
+    let mut list: Vec<_> = participants.iter().collect();
     list.sort_by_key(|p| p.0);
     // The signature: entities, meshes, transforms, media and albedos.
     let mut signature = vec![
@@ -138,7 +141,8 @@ pub(crate) fn run_precompute(
         })),
     ];
     let mut placements = Vec::with_capacity(list.len());
-    for (entity, mesh, material, transform, translucent, _) in &list {
+    for (entity, mesh, material, transform, translucent, _, skinned, morphed) in &list {
+        signature.push(u64::from(*skinned) | u64::from(*morphed) << 1);
         let revision = state.mesh_revisions.get(&mesh.0.id()).copied().unwrap_or(0);
         let placement = (
             entity.to_bits(),
@@ -227,7 +231,19 @@ pub(crate) fn run_precompute(
         // Every mesh loaded and a triangle list; translucent media valid.
         let mut objects = Vec::new();
         let mut entities = Vec::new();
-        for (entity, mesh, material, transform, translucent, swapped) in &list {
+        for (entity, mesh, material, transform, translucent, swapped, skinned, morphed) in &list {
+            // The transport is for static meshes: a skinned or morphed one deforms every frame
+            // without its `Mesh` changing, so it takes no part (Bevy shades it).
+            if *skinned || *morphed {
+                warned.warn(format!("translucency-animated-{entity}"), || {
+                    format!(
+                        "translucency: {entity} is {}; the transport is for static meshes, so it \
+                         takes no part and is shaded by Bevy",
+                        if *skinned { "skinned" } else { "morphed" }
+                    )
+                });
+                continue;
+            }
             // Translucent meshes may show their copy without diffuse: read the original.
             let material = swapped.map_or(&material.0, |m| &m.original);
             let (Some(mesh), Some(material)) = (meshes.get(&mesh.0), materials.get(material))

@@ -1380,6 +1380,29 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     run_until_ready(&mut app);
     assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
 
+    // A skinned translucent mesh deforms on the GPU under an unchanged `Mesh`: it takes no
+    // part, with a warning, and keeps its own material.
+    let skinned = app
+        .world_mut()
+        .spawn((
+            Mesh3d(handle.clone()),
+            MeshMaterial3d(material.clone()),
+            Translucent::default(),
+            bevy::mesh::skinning::SkinnedMesh::default(),
+            Transform::from_xyz(0.0, 0.3, 0.0),
+        ))
+        .id();
+    run(&mut app, 1);
+    run_until_ready(&mut app);
+    assert!(
+        warnings(&app).iter().any(|c| *c == format!("translucency-animated-{skinned}")),
+        "no warning of the skinned mesh: {:?}",
+        warnings(&app)
+    );
+    assert_eq!(shown(&mut app, skinned), material);
+    assert_eq!(shown(&mut app, good), good_materials.without_diffuse);
+    app.world_mut().despawn(skinned);
+
     // A light-view resolution out of range: a warning, clamped (the table built again: it
     // would leave single scattering to the pixels' march now that there are maps, but there
     // are more translucent objects than march — eight more balls, nine good ones —: a
