@@ -530,10 +530,15 @@ fn walk_one(
     mut on_end: impl FnMut(u32, f64, f32, WalkEnd),
 ) {
     let split = split.filter(|s| s.into > 1);
-    // The walks still to go: where, which way, their scatterings and path so far, their
-    // share, and whether they have split.
-    let mut to_walk = vec![(entry.position - entry.normal * medium.epsilon, d, 0u32, 0.0f64, 1.0f32, false)];
-    'walks: while let Some((mut x, mut d, mut order, mut length, mut share, mut split_yet)) = to_walk.pop() {
+    // The walk, then its split copies still to go: where, which way, their scatterings and
+    // path so far, their share, and whether they have split. Only a walk that splits fills
+    // `copies` (an empty `Vec` does not allocate: most walks never split, and the object's
+    // own walks never do).
+    let mut walk = Some((entry.position - entry.normal * medium.epsilon, d, 0u32, 0.0f64, 1.0f32, false));
+    let mut copies = Vec::new();
+    'walks: while let Some((mut x, mut d, mut order, mut length, mut share, mut split_yet)) =
+        walk.take().or_else(|| copies.pop())
+    {
         for _ in 0..MAX_EVENTS {
             let free_path = (-(1.0 - random.next()).ln() / medium.sigma_t) as f32;
             let (to_boundary, normal) = match query(x, d, free_path) {
@@ -562,7 +567,7 @@ fn walk_one(
                         share /= split.into as f32;
                         for _ in 1..split.into {
                             let d = uniform_direction(random.next(), random.next());
-                            to_walk.push((x, d, order, length, share, true));
+                            copies.push((x, d, order, length, share, true));
                         }
                     }
                     d = uniform_direction(random.next(), random.next());
