@@ -744,6 +744,14 @@ fn main() {
         {
             eprintln!("warning: cannot write {}: {e}", path.display());
         }
+        // Which pixels the score counts (white), for a look at where the error lies.
+        let mask = image::GrayImage::from_fn(size, size, |x, y| {
+            image::Luma([if view.scored[(y * size + x) as usize] { 255 } else { 0 }])
+        });
+        let path = path.with_extension("scored.png");
+        if let Err(e) = mask.save(&path) {
+            eprintln!("warning: cannot write {}: {e}", path.display());
+        }
     }
     if cli.bevy {
         let (best, transmission, thickness, colour) =
