@@ -34,6 +34,10 @@
 //! Σ|plugin − reference| / Σ reference over the ball's pixels (the silhouette's rim left out),
 //! all channels; `flip` is NVIDIA FLIP's mean on both pictures scaled by the reference's
 //! brightest pixel.
+//!
+//! Each picture is written to `out/translucent_accuracy/plugin_….exr` (linear), with the
+//! pixels the score counts beside it (`….scored.png`, white), for a look at where the error
+//! lies.
 
 // Only `save`, `line_with_points` and `legend_at` are used here.
 #[allow(dead_code)]
