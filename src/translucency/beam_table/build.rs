@@ -131,22 +131,21 @@ impl ExitPatches {
         // Of samples exactly as near, the first patch: the same whichever order the cells
         // are looked in.
         let nearer = |d: f32, patch: u32, best: Option<(f32, u32)>| best.is_none_or(|b| d < b.0 || (d == b.0 && patch < b.1));
-        let mut visit = |offset: IVec3| {
+        let visit = |offset: IVec3, any: &mut Option<(f32, u32)>, facing: &mut Option<(f32, u32)>| {
             for &(position, normal, patch) in grid.cell(key.saturating_add(offset)) {
                 let d = position.distance_squared(x);
-                if nearer(d, patch, any) {
-                    any = Some((d, patch));
+                if nearer(d, patch, *any) {
+                    *any = Some((d, patch));
                 }
-                if normal.dot(outward) > 0.0 && nearer(d, patch, facing) {
-                    facing = Some((d, patch));
+                if normal.dot(outward) > 0.0 && nearer(d, patch, *facing) {
+                    *facing = Some((d, patch));
                 }
             }
-            facing
         };
         // The exit's own cell first, then of the 26 about it only those nearer than the
         // nearest facing sample found yet (a grid's nearest-neighbour bound): most exits
         // look in a few cells, not 27 (the scan was a sixth of a table's build).
-        let mut nearest_facing = visit(IVec3::ZERO);
+        visit(IVec3::ZERO, &mut any, &mut facing);
         let within = scaled - key.as_vec3();
         // Per axis, the distance² from `x` to the cell at offset -1, 0, +1 (a hair short, so
         // rounding never skips a cell that holds a nearer sample).
@@ -159,10 +158,10 @@ impl ExitPatches {
             for dy in -1..=1i32 {
                 for dx in -1..=1i32 {
                     let bound = gx[(dx + 1) as usize] + gy[(dy + 1) as usize] + gz[(dz + 1) as usize];
-                    if (dx, dy, dz) == (0, 0, 0) || nearest_facing.is_some_and(|b| bound > b.0) {
+                    if (dx, dy, dz) == (0, 0, 0) || facing.is_some_and(|b| bound > b.0) {
                         continue;
                     }
-                    nearest_facing = visit(IVec3::new(dx, dy, dz));
+                    visit(IVec3::new(dx, dy, dz), &mut any, &mut facing);
                 }
             }
         }
