@@ -374,28 +374,11 @@ fn fail(message: String) -> ! {
     std::process::exit(1);
 }
 
-fn main() {
-    let cli: Cli = clap::Parser::parse();
-    let preset = match cli.medium {
-        Medium::Skin1 => TranslucentPreset::Skin1,
-        Medium::Skin2 => TranslucentPreset::Skin2,
-        Medium::Marble => TranslucentPreset::Marble,
-        Medium::Ketchup => TranslucentPreset::Ketchup,
-        Medium::Apple => TranslucentPreset::Apple,
-    };
-    // Index-matched by default: no Fresnel at the boundary, in either renderer.
-    let medium = bevy_mesostructure::translucency::TranslucentMedium {
-        index_of_refraction: cli.eta,
-        ..preset.medium()
-    };
+/// Fails with one line where the options asked for do not go together.
+fn check_combinations(cli: &Cli, shape: Shape) {
     if cli.eta != 1.0 && !cli.uniform && cli.tracer == Tracer::Mitsuba && cli.reference.is_none() {
         fail("--eta above 1 under the directional light needs --tracer light: in Mitsuba a directional light cannot reach the camera through a smooth dielectric".into());
     }
-    let shape = match cli.shape {
-        ShapeArg::Ball => Shape::Ball,
-        ShapeArg::Bunny => Shape::Bunny,
-        ShapeArg::Torus => Shape::Torus,
-    };
     if shape != Shape::Ball && (cli.eta != 1.0 || cli.uniform) {
         fail("the bunny and the torus are index-matched under the directional light only (their reference is Mitsuba's; drop --eta and --uniform)".into());
     }
@@ -451,6 +434,28 @@ fn main() {
             fail("--point-light takes --scattering beam-table or profile (the walk oracles launch one beam for all patches)".into());
         }
     }
+}
+
+fn main() {
+    let cli: Cli = clap::Parser::parse();
+    let preset = match cli.medium {
+        Medium::Skin1 => TranslucentPreset::Skin1,
+        Medium::Skin2 => TranslucentPreset::Skin2,
+        Medium::Marble => TranslucentPreset::Marble,
+        Medium::Ketchup => TranslucentPreset::Ketchup,
+        Medium::Apple => TranslucentPreset::Apple,
+    };
+    // Index-matched by default: no Fresnel at the boundary, in either renderer.
+    let medium = bevy_mesostructure::translucency::TranslucentMedium {
+        index_of_refraction: cli.eta,
+        ..preset.medium()
+    };
+    let shape = match cli.shape {
+        ShapeArg::Ball => Shape::Ball,
+        ShapeArg::Bunny => Shape::Bunny,
+        ShapeArg::Torus => Shape::Torus,
+    };
+    check_combinations(&cli, shape);
     let light = cli.light.unwrap_or(FRONT_LIGHT.normalize());
     let eta_suffix = if cli.eta != 1.0 { format!("_eta{}", cli.eta) } else { String::new() };
     let lighting = if cli.uniform {
@@ -734,28 +739,9 @@ fn main() {
             shape.size_name(),
             bytes as f32 / 1e6
         ));
-        // The picture for a look (linear EXR).
-        let exr = image::Rgb32FImage::from_fn(size, size, |x, y| {
-            image::Rgb(picture[(y * size + x) as usize].to_array())
-        });
         let path = PathBuf::from("out/translucent_accuracy")
-            .join(format!(
-                "plugin_{}_{name}_{lighting}_{method}_{budget}.exr",
-                shape.scene_name()
-            ));
-        if let Err(e) = std::fs::create_dir_all("out/translucent_accuracy")
-            .and_then(|_| exr.save(&path).map_err(std::io::Error::other))
-        {
-            eprintln!("warning: cannot write {}: {e}", path.display());
-        }
-        // Which pixels the score counts (white), for a look at where the error lies.
-        let mask = image::GrayImage::from_fn(size, size, |x, y| {
-            image::Luma([if view.scored[(y * size + x) as usize] { 255 } else { 0 }])
-        });
-        let path = path.with_extension("scored.png");
-        if let Err(e) = mask.save(&path) {
-            eprintln!("warning: cannot write {}: {e}", path.display());
-        }
+            .join(format!("plugin_{}_{name}_{lighting}_{method}_{budget}.exr", shape.scene_name()));
+        save_picture(&path, &picture, &view);
     }
     if cli.bevy {
         let (best, transmission, thickness, colour) =
@@ -795,6 +781,24 @@ fn main() {
         if let Some(path) = &cli.chart {
             translucent_accuracy_chart::draw_chart(&out, path).unwrap_or_else(|e| fail(e));
         }
+    }
+}
+
+/// Writes `picture` for a look (linear EXR) at `path`, and beside it (`….scored.png`) the
+/// pixels the score counts (white): where the error lies. A picture not written is a warning.
+fn save_picture(path: &std::path::Path, picture: &[Vec3], view: &ShapeView) {
+    let size = view.size;
+    let exr = image::Rgb32FImage::from_fn(size, size, |x, y| image::Rgb(picture[(y * size + x) as usize].to_array()));
+    let mask = image::GrayImage::from_fn(size, size, |x, y| {
+        image::Luma([if view.scored[(y * size + x) as usize] { 255 } else { 0 }])
+    });
+    let written = path
+        .parent()
+        .map_or(Ok(()), std::fs::create_dir_all)
+        .and_then(|_| exr.save(path).map_err(std::io::Error::other))
+        .and_then(|_| mask.save(path.with_extension("scored.png")).map_err(std::io::Error::other));
+    if let Err(e) = written {
+        eprintln!("warning: cannot write {} or its mask: {e}", path.display());
     }
 }
 
