@@ -42,8 +42,9 @@ impl Hash {
 
 /// Bumped when the same settings come to build a different transport, so that files of the
 /// old one are not found (2: the beam table's walks shared by the colour channels; 3: its
-/// beam walks split far from their entry, `BeamTableSettings::far_splits`).
-const REVISION: u32 = 3;
+/// beam walks split far from their entry, `BeamTableSettings::far_splits`; 4: objects above
+/// `MAX_SHAPE_PATCHES` solved in their shape on clusters of their patches).
+const REVISION: u32 = 4;
 
 /// The cache key of a scene: its objects (world-space positions, indices, surface), the
 /// patch budget, the transport settings, the crate's version and [`REVISION`].
@@ -234,7 +235,7 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
             r.scattering_entries as u32,
             r.rays as u32,
             r.shape_solved_objects as u32,
-            r.shape_too_large_objects as u32,
+            r.shape_clustered_objects as u32,
             r.beam_table_skipped as u32,
         ])?;
         w.f32s(
@@ -386,7 +387,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
             scattering_entries: counts[2] as usize,
             rays: counts[3] as usize,
             shape_solved_objects: counts[4] as usize,
-            shape_too_large_objects: counts[5] as usize,
+            shape_clustered_objects: counts[5] as usize,
             beam_table_skipped: counts[6] as usize,
             dropped_form_factor_mean: figures[0],
             dropped_form_factor_max: figures[1],

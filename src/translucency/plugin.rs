@@ -47,10 +47,8 @@ pub struct Translucent {
     /// 1 cm ball of marble or apple comes out 1.6× too bright with it; `docs/translucent.md`).
     /// It matters only where the object keeps the flat profile
     /// ([`TransportSettings::shape_diffusion`](super::transport::TransportSettings::shape_diffusion)
-    /// off, or an object of more than
-    /// [`MAX_SHAPE_PATCHES`](super::shape_diffusion::MAX_SHAPE_PATCHES) patches): solved in
-    /// its shape, an object takes the oriented flux anyway, with a correction for the light
-    /// its surface lets out on the way (back-lit, skin 0.42 and marble 0.15).
+    /// off): solved in its shape, an object takes the oriented flux anyway, with a correction
+    /// for the light its surface lets out on the way (back-lit, skin 0.42 and marble 0.15).
     pub oriented_dipole: bool,
 }
 

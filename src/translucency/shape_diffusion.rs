@@ -28,16 +28,17 @@
 //! that leaves through each patch, `a_i u_ik/(2A)`.
 //!
 //! One dense `N × N` system an object and channel, solved by LU with partial pivoting for all
-//! `N` entry patches at once: `O(N³)`, so objects above [`MAX_SHAPE_PATCHES`] keep the flat
-//! profile (`TransportSettings::shape_diffusion`).
+//! `N` entry patches at once: `O(N³)`, so an object above [`MAX_SHAPE_PATCHES`] patches is
+//! solved on [`ShapeClusters`] of them, each pair's dipole still its own patches'.
 
 use bevy::math::DVec3;
 use std::f64::consts::PI;
 
 use super::transport::parallel_rows;
 
-/// The most patches an object may have for its diffusion to be solved in its shape: a dense
-/// system of this side per channel (3 × 2 × 32 MB at 2048) and `O(N³)` work.
+/// The most patches an object's shape is solved on: a dense system of this side per channel
+/// (3 × 2 × 32 MB at 2048) and `O(N³)` work; a larger object is solved on as many
+/// [`ShapeClusters`] of its patches.
 pub const MAX_SHAPE_PATCHES: usize = 2048;
 
 /// Where an object solved in its shape puts each dipole's real source, in reduced mean free
@@ -61,6 +62,78 @@ pub struct ShapePatch {
     pub normal: DVec3,
     /// Area, mm².
     pub area: f64,
+}
+
+/// An object's patches gathered into at most `most` clusters, for the solve of an object
+/// larger than [`MAX_SHAPE_PATCHES`]: the correction `ψ` solves the homogeneous diffusion
+/// equation with the dipoles' smooth residual as its boundary data, so it changes over a
+/// diffusion length, not a patch, and collocation at coarser patches gives it back while
+/// each pair's dipole stays the fine patches' own.
+#[derive(Clone, Debug)]
+pub struct ShapeClusters {
+    /// The clusters as collocation patches: the member nearest their area-weighted centre,
+    /// their mean normal, their summed area.
+    pub patches: Vec<ShapePatch>,
+    /// Each fine patch's cluster.
+    pub of: Vec<u32>,
+}
+
+impl ShapeClusters {
+    /// Grid cells of the patches' centres, each cell's patches apart by the way they face
+    /// (the major axis of the normal and its sign: a thin part's two faces never share a
+    /// cluster), the cells grown until at most `most` clusters are left.
+    pub fn new(patches: &[ShapePatch], most: usize) -> Self {
+        let most = most.max(1);
+        let area: f64 = patches.iter().map(|p| p.area).sum();
+        let mut cell = (area / most as f64).sqrt().max(1e-9);
+        loop {
+            let mut index = std::collections::HashMap::new();
+            let of: Vec<u32> = patches
+                .iter()
+                .map(|p| {
+                    let k = (p.centre / cell).floor().as_i64vec3();
+                    let n = p.normal;
+                    let axis = n.abs().max_position();
+                    let facing = (axis as u8) * 2 + u8::from(n[axis] < 0.0);
+                    let next = index.len() as u32;
+                    *index.entry((k.x, k.y, k.z, facing)).or_insert(next)
+                })
+                .collect();
+            if index.len() <= most {
+                return Self::gathered(patches, of, index.len());
+            }
+            cell *= 1.1;
+        }
+    }
+
+    fn gathered(patches: &[ShapePatch], of: Vec<u32>, count: usize) -> Self {
+        let mut sums = vec![(DVec3::ZERO, DVec3::ZERO, 0.0f64); count];
+        for (p, &c) in patches.iter().zip(&of) {
+            let s = &mut sums[c as usize];
+            s.0 += p.centre * p.area;
+            s.1 += p.normal * p.area;
+            s.2 += p.area;
+        }
+        // Each cluster's member nearest its weighted centre: a point on the surface.
+        let mut nearest = vec![(f64::INFINITY, DVec3::ZERO, DVec3::ZERO); count];
+        for (p, &c) in patches.iter().zip(&of) {
+            let (centre, _, area) = sums[c as usize];
+            let d = p.centre.distance_squared(centre / area.max(1e-300));
+            if d < nearest[c as usize].0 {
+                nearest[c as usize] = (d, p.centre, p.normal);
+            }
+        }
+        let patches = sums
+            .iter()
+            .zip(&nearest)
+            .map(|(&(_, normal, area), &(_, centre, member_normal))| ShapePatch {
+                centre,
+                normal: normal.try_normalize().unwrap_or(member_normal),
+                area,
+            })
+            .collect();
+        Self { patches, of }
+    }
 }
 
 /// Jensen's dipole for one colour channel: `α′/2`, `σtr`, and the real and virtual sources'

@@ -245,13 +245,16 @@ pub struct TransportSettings {
     /// ([`shape_diffusion`](super::shape_diffusion): the oriented dipole of each entry patch
     /// plus a boundary-element correction for the light its surface lets out on the way)
     /// instead of taking the flat profile between every pair of patches. Columns keep their
-    /// totals (the slab's, times the object's walks); only where the light leaves moves. For
-    /// objects of up to [`MAX_SHAPE_PATCHES`](super::shape_diffusion::MAX_SHAPE_PATCHES)
-    /// patches with a dipole kernel; larger ones keep the flat profile (one dense system of
-    /// their side per channel, `O(N³)`: 1.4 s at 960 patches on 2 cores). On by default: lit
-    /// from behind, a 1 cm skin ball goes from 0.612 to 0.420 in relative L1 against a
-    /// light-traced reference, marble from 0.277 to 0.153 (with [`deep_exit_law`](Self::deep_exit_law)
-    /// 0.431 and 0.078); from the front both stay within 0.002 (`docs/translucent.md`).
+    /// totals (the slab's, times the object's walks); only where the light leaves moves. One
+    /// dense system per object and channel, `O(N³)` (1.4 s at 960 patches on 2 cores): an
+    /// object of more than [`MAX_SHAPE_PATCHES`](super::shape_diffusion::MAX_SHAPE_PATCHES)
+    /// patches has its correction solved on as many clusters of them
+    /// ([`ShapeClusters`](super::shape_diffusion::ShapeClusters); it used to keep the flat
+    /// profile, and a back-lit marble ball of 3680 patches scored 0.315 instead of 0.077).
+    /// On by default: lit from behind, a 1 cm skin ball goes from 0.612 to 0.420 in relative
+    /// L1 against a light-traced reference, marble from 0.277 to 0.153 (with
+    /// [`deep_exit_law`](Self::deep_exit_law) 0.431 and 0.078); from the front both stay
+    /// within 0.002 (`docs/translucent.md`).
     pub shape_diffusion: bool,
     /// Let the light a translucent patch received from elsewhere leave it in the deep field's
     /// limb-darkened law ([`ExitLaw`], [`deep_exit_law`](super::diffusion::deep_exit_law))
@@ -345,9 +348,11 @@ pub struct TransportReport {
     /// Translucent objects whose diffusion was solved in their shape
     /// ([`TransportSettings::shape_diffusion`]).
     pub shape_solved_objects: usize,
-    /// Translucent objects that kept the flat profile because they have more than
-    /// [`MAX_SHAPE_PATCHES`](super::shape_diffusion::MAX_SHAPE_PATCHES) patches.
-    pub shape_too_large_objects: usize,
+    /// Of those, the objects of more than
+    /// [`MAX_SHAPE_PATCHES`](super::shape_diffusion::MAX_SHAPE_PATCHES) patches, whose
+    /// correction was solved on clusters of their patches
+    /// ([`ShapeClusters`](super::shape_diffusion::ShapeClusters)).
+    pub shape_clustered_objects: usize,
     /// Entries of the beam table (early and late columns; 0 without one).
     pub beam_table_entries: usize,
     /// The scene's translucent patches where a beam table was asked for but not built, since
@@ -474,7 +479,7 @@ impl EnergyTransport {
             diffusion_kept_mean: k.diffusion_kept_mean,
             object_exit_over_slab_mean: k.object_exit_over_slab_mean,
             shape_solved_objects: k.shape_solved_objects,
-            shape_too_large_objects: k.shape_too_large_objects,
+            shape_clustered_objects: k.shape_clustered_objects,
             beam_table_entries: beam_table
                 .as_ref()
                 .map_or(0, |t| t.early.entries() + t.late.entries()),

@@ -12,7 +12,8 @@ use crate::translucency::{
     patches::Patches,
     random_walk,
     shape_diffusion::{
-        DipoleChannel, MAX_SHAPE_PATCHES, SHAPE_SOURCE_DEPTH, ShapePatch, boundary_correction,
+        DipoleChannel, MAX_SHAPE_PATCHES, SHAPE_SOURCE_DEPTH, ShapeClusters, ShapePatch,
+        boundary_correction,
     },
 };
 
@@ -26,8 +27,16 @@ pub(super) struct Scattering {
     /// See [`TransportReport::object_exit_over_slab_mean`](super::TransportReport::object_exit_over_slab_mean).
     pub object_exit_over_slab_mean: Vec3,
     pub shape_solved_objects: usize,
-    pub shape_too_large_objects: usize,
+    pub shape_clustered_objects: usize,
 }
+
+/// An object to solve in its shape: its profile, its channels, the patches (mm) its correction
+/// is collocated at, and above `MAX_SHAPE_PATCHES` each of its patches' cluster among them.
+type ShapeSolve = (DiffusionProfile, [DipoleChannel; 3], Vec<ShapePatch>, Option<Vec<u32>>);
+
+/// A solved object: its profile, the correction per channel (row exit, column entry, over the
+/// collocation patches), and where it was solved on clusters, those and each patch's cluster.
+type ShapeSolution<'a> = (DiffusionProfile, [Vec<f64>; 3], Option<(&'a [ShapePatch], &'a [u32])>);
 
 /// Builds `K` for `patches`; `surfaces[o]` is object `o`'s surface.
 pub(super) fn build(
@@ -64,9 +73,10 @@ pub(super) fn build(
         }
         _ => None,
     };
-    let mut shape_too_large_objects = 0;
-    // Each object to solve: its profile, channels and patches in millimetres.
-    let shapes: Vec<Option<(DiffusionProfile, [DipoleChannel; 3], Vec<ShapePatch>)>> = surfaces
+    let mut shape_clustered_objects = 0;
+    // Each object to solve: its profile, channels, and the patches (mm) the correction is
+    // collocated at — its own, or above `MAX_SHAPE_PATCHES` clusters of them.
+    let shapes: Vec<Option<ShapeSolve>> = surfaces
         .iter()
         .enumerate()
         .map(|(object, s)| {
@@ -77,16 +87,6 @@ pub(super) fn build(
             let profile =
                 DiffusionProfile::with_source_depth(&medium, settings.kernel, SHAPE_SOURCE_DEPTH);
             let channels = profile.dipole_channels()?;
-            let count = members[object].len();
-            if count > MAX_SHAPE_PATCHES {
-                shape_too_large_objects += 1;
-                info!(
-                    "translucency: object {object} has {count} patches, more than the \
-                     {MAX_SHAPE_PATCHES} whose diffusion is solved in their shape; it keeps \
-                     the flat profile"
-                );
-                return None;
-            }
             let mm = 1.0 / units_per_mm;
             let shape: Vec<ShapePatch> = members[object]
                 .iter()
@@ -96,7 +96,19 @@ pub(super) fn build(
                     area: p[i].area as f64 * mm * mm,
                 })
                 .collect();
-            Some((profile, channels, shape))
+            if shape.len() > MAX_SHAPE_PATCHES {
+                shape_clustered_objects += 1;
+                let clusters = ShapeClusters::new(&shape, MAX_SHAPE_PATCHES);
+                info!(
+                    "translucency: object {object} has {} patches, more than the \
+                     {MAX_SHAPE_PATCHES} its shape's solve takes; its correction is solved \
+                     on {} clusters of them",
+                    shape.len(),
+                    clusters.patches.len()
+                );
+                return Some((profile, channels, clusters.patches, Some(clusters.of)));
+            }
+            Some((profile, channels, shape, None))
         })
         .collect();
     // Every object's three channels at once: each solve's LU steps are short and one at a
@@ -105,16 +117,17 @@ pub(super) fn build(
         let (profile_channels_shape, c) = (&shapes[task / 3], task % 3);
         profile_channels_shape
             .as_ref()
-            .and_then(|(_, channels, shape)| boundary_correction(shape, channels[c]))
+            .and_then(|(_, channels, shape, _)| boundary_correction(shape, channels[c]))
     })
     .into_iter();
-    let shape_solutions: Vec<Option<(DiffusionProfile, [Vec<f64>; 3])>> = shapes
+    let shape_solutions: Vec<Option<ShapeSolution>> = shapes
         .iter()
         .enumerate()
         .map(|(object, solve)| {
             let [r, g, b] = [(); 3].map(|_| corrections.next().flatten());
-            let (profile, ..) = solve.as_ref()?;
-            let solved = r.zip(g).zip(b).map(|((r, g), b)| (*profile, [r, g, b]));
+            let (profile, _, collocation, clusters) = solve.as_ref()?;
+            let clusters = clusters.as_deref().map(|of| (collocation.as_slice(), of));
+            let solved = r.zip(g).zip(b).map(|((r, g), b)| (*profile, [r, g, b], clusters));
             if solved.is_none() {
                 warn!(
                     "translucency: object {object}'s diffusion could not be solved in its \
@@ -133,7 +146,7 @@ pub(super) fn build(
         .zip(&shape_solutions)
         .map(|(s, solution)| {
             let (medium, units_per_mm) = valid_medium(s)?;
-            if let Some((profile, _)) = solution {
+            if let Some((profile, ..)) = solution {
                 return Some((*profile, units_per_mm, f64::INFINITY));
             }
             let profile = DiffusionProfile::new(&medium, settings.kernel);
@@ -160,10 +173,9 @@ pub(super) fn build(
                 let mm = 1.0 / units_per_mm;
                 let area_i_mm2 = pi.area as f64 * mm * mm;
                 let t_in = profile.entrance_transmittance;
-                let correction = shape_solutions
-                    .get(pi.object as usize)
-                    .and_then(Option::as_ref)
-                    .map(|(_, correction)| correction);
+                let solution = shape_solutions.get(pi.object as usize).and_then(Option::as_ref);
+                let correction = solution.map(|(_, correction, _)| correction);
+                let clusters = solution.and_then(|(.., clusters)| *clusters);
                 let own = &members[pi.object as usize];
                 let row_start = local_index[i] * own.len();
                 own.iter()
@@ -184,8 +196,17 @@ pub(super) fn build(
                             } else {
                                 [1.0; 3]
                             };
+                            // Solved on clusters: the share leaving by `i`'s cluster, over
+                            // the cluster's area.
+                            let at = match clusters {
+                                Some((collocation, of)) => {
+                                    let (ci, cj) = (of[local_index[i]] as usize, of[lj] as usize);
+                                    (ci * collocation.len() + cj, area_i_mm2 / collocation[ci].area)
+                                }
+                                None => (row_start + lj, 1.0),
+                            };
                             let beyond =
-                                |c: usize| correction.map_or(0.0, |u| u[c][row_start + lj]);
+                                |c: usize| correction.map_or(0.0, |u| u[c][at.0] * at.1);
                             // Exitance is never negative; the correction's collocation
                             // can undershoot where the dipole alone is near zero.
                             let value = Vec3::new(
@@ -332,6 +353,6 @@ pub(super) fn build(
         diffusion_kept_mean: kept_sum / kept_count.max(1) as f32,
         object_exit_over_slab_mean: walked_sum / kept_count.max(1) as f32,
         shape_solved_objects,
-        shape_too_large_objects,
+        shape_clustered_objects,
     }
 }
