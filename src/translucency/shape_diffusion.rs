@@ -92,9 +92,7 @@ impl ShapeClusters {
                 .iter()
                 .map(|p| {
                     let k = (p.centre / cell).floor().as_i64vec3();
-                    let n = p.normal;
-                    let axis = n.abs().max_position();
-                    let facing = (axis as u8) * 2 + u8::from(n[axis] < 0.0);
+                    let facing = super::patches::normal_axis(p.normal.as_vec3());
                     let next = index.len() as u32;
                     *index.entry((k.x, k.y, k.z, facing)).or_insert(next)
                 })
