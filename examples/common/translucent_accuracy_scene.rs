@@ -583,12 +583,12 @@ pub fn plugin_picture(
             law.channels.iter_mut().filter(|c| **c != Vec4::ZERO).for_each(|c| c.w = 1.0);
         }
     }
+    let depths = EnergyTransport::source_depths(&patches, &surfaces);
     if matches!(oracles.exit_axis, ExitAxis::Plugin | ExitAxis::FlowAll | ExitAxis::Lobe) {
-        let depths = EnergyTransport::source_depths(&patches, &surfaces);
         exit_laws = transport.exit_laws_along_flow(&patches, &exit_laws, &direct, &depths);
     }
     if oracles.exit_axis == ExitAxis::Lobe {
-        exit_laws = transport.exit_laws_along_lobes(&patches, &exit_laws, &direct, &solution.exitance);
+        exit_laws = transport.exit_laws_along_lobes(&patches, &exit_laws, &direct, &solution.exitance, &depths);
     }
     let eye = view.shape.eye();
     // With a map: the plugin's own march (`MarchedObject`, in the gather's twin), unshadowed

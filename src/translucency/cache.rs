@@ -43,8 +43,9 @@ impl Hash {
 /// Bumped when the same settings come to build a different transport, so that files of the
 /// old one are not found (2: the beam table's walks shared by the colour channels; 3: its
 /// beam walks split far from their entry, `BeamTableSettings::far_splits`; 4: objects above
-/// `MAX_SHAPE_PATCHES` solved in their shape on clusters of their patches).
-const REVISION: u32 = 4;
+/// `MAX_SHAPE_PATCHES` solved in their shape on clusters of their patches; 5: the far split
+/// and the exit lobes never nearer than two transport mean free paths, `lobe_source_distance`).
+const REVISION: u32 = 5;
 
 /// The cache key of a scene: its objects (world-space positions, indices, surface), the
 /// patch budget, the transport settings, the crate's version and [`REVISION`].

@@ -1865,7 +1865,8 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     };
     // Exit lobes (`translucent_accuracy --exit-axis lobe --walks 1024 --far-splits 1`, an
     // oracle of the CPU path): a table of 1024 unsplit walks a direction keeping the mean direction each entry's light
-    // leaves along, each patch's light from more than two patch sizes away given out by the
+    // leaves along, each patch's light from farther than two patch sizes (and two transport
+    // mean free paths, `lobe_source_distance`) given out by the
     // von Mises–Fisher lobe of its mean; the same table with the plugin's flow law beside it.
     let table_1024 = translucent_accuracy_scene::Oracles {
         scattering: translucent_accuracy_scene::ScatteringSource::BeamTable(
@@ -1891,25 +1892,27 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     // has blue 1.22× with this table's seed, behind the dielectric 1.52×: a few far walks in
     // a channel the reference barely has there. The walks are shared by the channels (hero
     // channels, `random_walk::walk_ends`; 256 beam walks, each split in 4 two patch sizes
-    // from its entry (`BeamTableSettings::far_splits`), and 3072 late walks by default;
+    // (and two transport mean free paths: `lobe_source_distance`; before that floor, skin's
+    // rows were 0.0475 / 0.1107 and 0.0439 / 0.1080 behind the dielectric) from its entry
+    // (`BeamTableSettings::far_splits`), and 3072 late walks by default;
     // before, 384 unsplit: 0.0518, 0.1323, 0.0449, 0.0617 in the first four rows, 0.1214
     // behind the dielectric).
     let (lean, flow) = (true, false);
     let table_cases = [
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0475, [1.029, 1.017, 1.038]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1107, [1.026, 0.997, 1.216]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0453, [1.027, 1.016, 1.037]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1162, [1.030, 1.015, 1.239]),
         ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0453, [1.018, 1.014, 1.022]),
         ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0608, [0.980, 0.983, 1.001]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0439, [0.991, 0.985, 0.986]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.1080, [0.942, 1.062, 1.517]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0473, [0.986, 0.985, 0.986]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.1123, [0.916, 1.038, 1.522]),
         ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0691, [0.987, 0.985, 0.977]),
         ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0760, [1.014, 0.997, 0.990]),
-        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0545, [0.980, 0.960, 0.969]),
-        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2250, [0.809, 0.588, 0.669]),
-        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3051, [0.724, 0.443, 0.641]),
+        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0555, [0.977, 0.959, 0.967]),
+        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2210, [0.812, 0.602, 0.684]),
+        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3008, [0.727, 0.454, 0.656]),
         ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0732, [0.953, 0.954, 0.965]),
-        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1432, [1.020, 1.001, 1.469]),
-        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0383, [0.985, 0.965, 0.969]),
+        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1426, [1.019, 0.998, 1.460]),
+        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0385, [0.986, 0.965, 0.969]),
         ((table_1024, "beam table, 1024 walks, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2271, [0.810, 0.570, 0.645]),
     ];
     for ((oracles, named), exit_lobes, preset, name, lighting, how, eta, rel_l1, ratio) in table_cases {

@@ -6,7 +6,7 @@ use bevy::{platform::collections::HashMap, prelude::*};
 use super::{
     BeamTable, BeamTableSettings, SEED_STRIDE,
     directions::bin_direction,
-    flow::{ExitLean, LeanSums, from_afar, from_source},
+    flow::{ExitLean, LeanSums, from_afar, from_source, lobe_source_distance},
     single_scattering::law_gives_single_scattering,
 };
 use crate::translucency::{
@@ -256,12 +256,12 @@ impl BeamTable {
                     .collect(),
                 last_order: settings.last_order,
                 far_split: FarSplit {
-                    beyond: super::LOBE_SOURCE_DISTANCE * patches.size_of(j),
+                    beyond: lobe_source_distance(patches, &source_depths, j),
                     into: settings.far_splits,
                 },
                 directions: settings.exit_directions,
                 single_to_pixels: settings.single_scattering_to_pixels && marched[p[j].object as usize],
-                source_depth: source_depths.get(j).copied().unwrap_or(Vec3::ZERO),
+                source_depths: &source_depths,
                 seed_offset: settings.seed as u64 * SEED_STRIDE,
             };
             let diffuse_entering =
@@ -408,9 +408,9 @@ struct ColumnWalks<'a> {
     directions: bool,
     /// [`BeamTableSettings::single_scattering_to_pixels`].
     single_to_pixels: bool,
-    /// Where light entering patch `j` acts as a source, per channel
+    /// Where light entering each patch acts as a source, per channel
     /// ([`EnergyTransport::source_depths`](crate::translucency::transport::EnergyTransport::source_depths)).
-    source_depth: Vec3,
+    source_depths: &'a [Vec3],
     /// Added to every walk's seed ([`BeamTableSettings::seed`]).
     seed_offset: u64,
 }
@@ -474,10 +474,11 @@ impl ColumnWalks<'_> {
                             }
                         }
                         let i = i as usize;
-                        if beam && from_afar(self.patches, i, self.j) {
+                        if beam && from_afar(self.patches, self.source_depths, i, self.j) {
                             let n = p[i].normal;
+                            let depth = self.source_depths.get(self.j).copied().unwrap_or(Vec3::ZERO);
                             for c in 0..3 {
-                                let from = from_source(self.patches, i, self.j, self.source_depth[c]);
+                                let from = from_source(self.patches, i, self.j, depth[c]);
                                 let t = from - n * from.dot(n);
                                 lean.along[c] += weight[c] * n.dot(exit.leaving);
                                 lean.walks[c] += weight[c];

@@ -14,10 +14,26 @@ use crate::translucency::patches::Patches;
 /// behind with every front-lit case within 0.08.
 pub const LOBE_SOURCE_DISTANCE: f32 = 2.0;
 
-/// Whether light from patch `j` reaches patch `i` from afar ([`LOBE_SOURCE_DISTANCE`]).
-pub fn from_afar(patches: &Patches, i: usize, j: usize) -> bool {
+/// The least distance light must have come to leave by an exit lobe, in transport mean free
+/// paths of the medium's most translucent channel: with small patches, light from two patch
+/// sizes away has not yet forgotten where it entered, so it leaves as the patch's own law
+/// says, not by the lobe fitted to light from afar (`docs/translucent.md`, "The exit lobes'
+/// threshold in the medium's units").
+pub const LOBE_SOURCE_MEAN_FREE_PATHS: f32 = 2.0;
+
+/// How far light must have come to leave patch `i` by its exit lobe, world units: the larger
+/// of [`LOBE_SOURCE_DISTANCE`] patch sizes and [`LOBE_SOURCE_MEAN_FREE_PATHS`] of its
+/// medium's longest transport mean free path (`source_depths[i]`, per channel: one such path,
+/// [`EnergyTransport::source_depths`](crate::translucency::transport::EnergyTransport::source_depths)).
+pub fn lobe_source_distance(patches: &Patches, source_depths: &[Vec3], i: usize) -> f32 {
+    let mean_free_path = source_depths.get(i).map_or(0.0, |d| d.max_element());
+    (LOBE_SOURCE_DISTANCE * patches.size_of(i)).max(LOBE_SOURCE_MEAN_FREE_PATHS * mean_free_path)
+}
+
+/// Whether light from patch `j` reaches patch `i` from afar ([`lobe_source_distance`]).
+pub fn from_afar(patches: &Patches, source_depths: &[Vec3], i: usize, j: usize) -> bool {
     let p = &patches.patches;
-    p[i].surface_point.distance(p[j].surface_point) > LOBE_SOURCE_DISTANCE * patches.size_of(i)
+    p[i].surface_point.distance(p[j].surface_point) > lobe_source_distance(patches, source_depths, i)
 }
 
 /// The unit direction light travels from patch `j`'s diffusion source, `depth` under its
@@ -121,7 +137,7 @@ impl BeamTable {
                         return;
                     }
                     let depth = source_depths.get(j).copied().unwrap_or(Vec3::ZERO);
-                    let afar = early && from_afar(patches, i, j);
+                    let afar = early && from_afar(patches, source_depths, i, j);
                     for c in 0..3 {
                         let u = from_source(patches, i, j, depth[c]) * given[c];
                         flow[c] += u;

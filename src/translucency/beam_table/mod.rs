@@ -38,7 +38,7 @@ pub mod single_scattering;
 
 pub use build::{ExitPatches, marched_objects};
 pub use directions::{bin_direction, direction_bin, direction_weights};
-pub use flow::{ExitLean, LOBE_SOURCE_DISTANCE, TableFlow, from_afar};
+pub use flow::{ExitLean, LOBE_SOURCE_DISTANCE, LOBE_SOURCE_MEAN_FREE_PATHS, TableFlow, from_afar, lobe_source_distance};
 pub use single_scattering::{entering, law_gives_single_scattering, single_scattering_radiance};
 
 use bevy::prelude::*;
@@ -58,7 +58,7 @@ pub struct BeamTableSettings {
     /// Diffuse walks a patch for the late light's near field (≥ 1), shared by the channels.
     pub late_walks: u32,
     /// How many walks a beam walk becomes once it scatters more than
-    /// [`LOBE_SOURCE_DISTANCE`] of its patch's sizes from where it entered (≥ 1; 1: none;
+    /// [`lobe_source_distance`] from where it entered (≥ 1; 1: none;
     /// [`FarSplit`](super::random_walk::FarSplit)): the far exits, few and blotchy, walked
     /// that many times as often for a fraction of the cost of as many more walks.
     pub far_splits: u32,

@@ -144,7 +144,7 @@ impl FlowFrame {
                     source_depth: source_depths.get(i).copied().unwrap_or(Vec3::ZERO),
                     law: law.channels,
                     lean: law.lean,
-                    afar: super::beam_table::LOBE_SOURCE_DISTANCE * patches.size_of(i),
+                    afar: super::beam_table::lobe_source_distance(patches, source_depths, i),
                 }
             })
             .collect()

@@ -222,7 +222,7 @@ fn a_beam_tables_light_flows_away_from_where_it_entered() {
             round += 1;
         }
         // The early light from afar, and only that, has a far axis: the same way.
-        let far_apart = from_afar(patches, i, top);
+        let far_apart = from_afar(patches, &depths, i, top);
         for c in 0..3 {
             let far_axis = flow.far_axis[c];
             assert_eq!(flow.far[c] > 0.0, far_apart && far_axis != Vec3::ZERO, "patch {i} channel {c}");
@@ -285,7 +285,7 @@ fn a_beam_tables_light_leaves_leaning_away_from_where_it_entered() {
     eprintln!("the cube's lean: along {:.3}, across {:.3}", fitted.along, fitted.across);
     let depths = EnergyTransport::source_depths(&cube.patches, &cube.surfaces);
     let flows = table.flow(&cube.patches, &light, &depths);
-    let measured = table.early_moments(&light, |i, j| from_afar(&cube.patches, i, j));
+    let measured = table.early_moments(&light, |i, j| from_afar(&cube.patches, &depths, i, j));
     let (mut walked, mut modelled, mut far) = ([Vec3::ZERO; 3], [Vec3::ZERO; 3], Vec3::ZERO);
     for (i, (early, moment)) in measured.iter().enumerate().filter(|&(i, _)| i != top && p[i].normal.y > 0.99) {
         let (away, flow) = ((p[i].surface_point - p[top].surface_point).normalize(), &flows[i]);
@@ -517,4 +517,42 @@ fn the_largest_translucent_objects_march_their_single_scattering() {
     // Fewer than that: every good translucent one.
     let few = marched_objects(&patches, &surfaces[..5]);
     assert_eq!(few, vec![true, false, true, false, true]);
+}
+
+/// The exit lobes take the light from farther than two patch sizes, and never from nearer
+/// than two transport mean free paths of the medium's most translucent channel (skin's red,
+/// `1 / (σs′ + σa)` = 1.295 mm): with small patches, light from two patch sizes away has not
+/// forgotten where it entered (the 1 cm ball's skin from the front at 3680 patches 0.085 →
+/// 0.068 in relative L1, `docs/translucent.md`). An opaque patch keeps the two patch sizes.
+#[test]
+fn the_exit_lobes_threshold_is_two_patch_sizes_and_never_under_two_mean_free_paths() {
+    use crate::translucency::beam_table::{LOBE_SOURCE_DISTANCE, LOBE_SOURCE_MEAN_FREE_PATHS, lobe_source_distance};
+    let medium = TranslucentPreset::Skin1.medium();
+    let longest_mm = 1.0 / (medium.reduced_scattering + medium.absorption).min_element();
+    assert!((longest_mm - 1.295).abs() < 0.001, "{longest_mm}");
+    let cube = [mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY)];
+    let views = views_of(&cube);
+    let patches = resample_into_patches(&views, 600);
+    let size = patches.size_of(0);
+    // 0.1 world units a millimetre: patches (~0.2) bigger than the floor (0.26 / 2); 1: the floor
+    // (2.6) above two patch sizes.
+    for (world_units_per_mm, floored) in [(0.1, false), (1.0, true)] {
+        let surfaces = [PatchSurface::Translucent { medium, world_units_per_mm, oriented_dipole: false }];
+        let depths = EnergyTransport::source_depths(&patches, &surfaces);
+        let floor = LOBE_SOURCE_MEAN_FREE_PATHS * longest_mm * world_units_per_mm;
+        assert_eq!(floor > LOBE_SOURCE_DISTANCE * size, floored, "floor {floor}, patch size {size}");
+        let expected = (LOBE_SOURCE_DISTANCE * size).max(floor);
+        let p = &patches.patches;
+        for i in 0..p.len() {
+            let reach = lobe_source_distance(&patches, &depths, i);
+            assert!((reach - expected).abs() <= 1e-5 * expected, "patch {i}: {reach} against {expected}");
+            for j in (0..p.len()).step_by(7) {
+                let apart = p[i].surface_point.distance(p[j].surface_point);
+                assert_eq!(from_afar(&patches, &depths, i, j), apart > reach, "patches {i} and {j}");
+            }
+        }
+    }
+    let opaque = [PatchSurface::Opaque { albedo: Vec3::splat(0.5) }];
+    let depths = EnergyTransport::source_depths(&patches, &opaque);
+    assert_eq!(lobe_source_distance(&patches, &depths, 0), LOBE_SOURCE_DISTANCE * size);
 }

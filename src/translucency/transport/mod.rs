@@ -282,8 +282,8 @@ pub struct TransportSettings {
     /// 1920×1080). Scenes of more than [`max_patches`](super::beam_table::BeamTableSettings::max_patches)
     /// translucent patches keep the profile, with a warning.
     pub beam_table: Option<super::beam_table::BeamTableSettings>,
-    /// With a beam table, give the light a translucent patch receives from more than
-    /// [`LOBE_SOURCE_DISTANCE`](super::beam_table::LOBE_SOURCE_DISTANCE) patch sizes away out
+    /// With a beam table, give the light a translucent patch receives from farther than
+    /// [`lobe_source_distance`](super::beam_table::lobe_source_distance) out
     /// by a lobe leaning the way it travelled ([`ExitLean`], fitted to the table's own walks)
     /// instead of the deep law: light that crossed an object leaves leaning the way it was
     /// going. On by default (per frame; the table's build is the same): lit from behind, a
@@ -603,8 +603,9 @@ impl EnergyTransport {
     /// `exit_laws` with each tabled patch's light given out by the lobe fitted to the mean
     /// direction it leaves along ([`ExitLaw::set_leaving`]; needs
     /// [`BeamTableSettings::exit_directions`](super::beam_table::BeamTableSettings::exit_directions)):
-    /// the table's early light from patches more than [`LOBE_SOURCE_DISTANCE`](super::beam_table::LOBE_SOURCE_DISTANCE) patch sizes
-    /// away along its walks' own directions
+    /// the table's early light from patches farther than
+    /// [`lobe_source_distance`](super::beam_table::lobe_source_distance) (`source_depths`)
+    /// along its walks' own directions
     /// ([`BeamTable::early_moments`](super::beam_table::BeamTable::early_moments) of
     /// `direct.beam_light`), the mean's length taken back by its noise (`E|m̂|² = R² + v(1 −
     /// R²)`); the rest of `exitance` (nearer light, the late light, the bounces) in the mean
@@ -616,6 +617,7 @@ impl EnergyTransport {
         exit_laws: &[ExitLaw],
         direct: &DirectLight,
         exitance: &[Vec3],
+        source_depths: &[Vec3],
     ) -> Vec<ExitLaw> {
         let mut laws = exit_laws.to_vec();
         let Some(table) = self.beam_table.as_ref().filter(|t| !t.early_leaving.is_empty()) else {
@@ -624,7 +626,7 @@ impl EnergyTransport {
         let p = &patches.patches;
         // Light from nearby leaves in the patch's own (limb-darkened) law: as lobes of their
         // mean, the ball's skin lit from the front went 0.058 → 0.088 in relative L1.
-        let moments = table.early_moments(&direct.beam_light, |i, j| from_afar(patches, i, j));
+        let moments = table.early_moments(&direct.beam_light, |i, j| from_afar(patches, source_depths, i, j));
         for (i, (law, (early, moment))) in laws.iter_mut().zip(moments).enumerate() {
             if table.slots.get(i).is_none_or(|&s| s == u32::MAX) {
                 continue;
