@@ -103,6 +103,11 @@ struct Cli {
     /// default)
     #[arg(long, default_value_t = TransportSettings::default().diffusion_energy_kept)]
     energy_kept: f32,
+    /// The share of a shape-solved column's energy its lightest entries may hold and be
+    /// dropped (`TransportSettings::shape_energy_dropped`, 0 – 0.01; method suffix
+    /// `_shapedropped<value>` when not the default)
+    #[arg(long, default_value_t = TransportSettings::default().shape_energy_dropped)]
+    shape_energy_dropped: f32,
     /// Weight each beam by its incidence (`TransportSettings::beam_incidence`; method suffix
     /// `_diffuse` when off)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
@@ -558,6 +563,7 @@ fn main() {
         deep_exit_law: cli.deep_exit_law,
         exit_lobes: cli.exit_lobes,
         diffusion_energy_kept: cli.energy_kept,
+        shape_energy_dropped: cli.shape_energy_dropped,
         ..default()
     };
     let (gather, gather_name) = match cli.gather {
@@ -573,6 +579,11 @@ fn main() {
         String::new()
     } else {
         format!("_kept{}", cli.energy_kept)
+    };
+    let kept = if cli.shape_energy_dropped == TransportSettings::default().shape_energy_dropped {
+        kept
+    } else {
+        format!("{kept}_shapedropped{}", cli.shape_energy_dropped)
     };
     // The oracles' walks (256 and 1024 unless given); the table's default to the plugin's.
     let (walks, late_walks) = (cli.walks.unwrap_or(256), cli.late_walks.unwrap_or(1024));

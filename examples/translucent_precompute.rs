@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo run --example translucent_precompute -- [--budgets 1000,5000] [--kernel scaled-dipole|burley|dipole]
-//!     [--cutoff 1e-5] [--out docs/translucent-precompute.csv]
+//!     [--cutoff 1e-5] [--shape-energy-dropped 1e-5] [--out docs/translucent-precompute.csv]
 //! ```
 //!
 //! CSV header: `patches,budget,precompute_s,memory_mb,form_factor_entries,scattering_entries,
@@ -52,6 +52,10 @@ struct Cli {
     /// Form factors below this are dropped (before visibility)
     #[arg(long, default_value_t = 1e-5)]
     cutoff: f32,
+    /// Share of each shape-solved column's energy its lightest entries may hold and be
+    /// dropped (`TransportSettings::shape_energy_dropped`, 0 – 0.01; 0: every pair kept)
+    #[arg(long, default_value_t = TransportSettings::default().shape_energy_dropped)]
+    shape_energy_dropped: f32,
     /// CSV to write (stdout as well)
     #[arg(long)]
     out: Option<PathBuf>,
@@ -86,6 +90,10 @@ fn main() {
         eprintln!("error: --cutoff must be a finite number ≥ 0");
         std::process::exit(2);
     }
+    if !(0.0..=0.01).contains(&cli.shape_energy_dropped) {
+        eprintln!("error: --shape-energy-dropped must be a number from 0 to 0.01");
+        std::process::exit(2);
+    }
     let scene = translucent_scene::translucent_room(&meshes::asset_path("meshes/bunny.obj"));
     let views: Vec<PatchObject> = scene.iter().map(|o| o.view()).collect();
     let surfaces: Vec<_> = scene.iter().map(|o| o.surface).collect();
@@ -96,6 +104,7 @@ fn main() {
             Kernel::ScaledDipole => DiffusionKernel::ScaledDipole,
         },
         form_factor_cutoff: cli.cutoff,
+        shape_energy_dropped: cli.shape_energy_dropped,
         // Built and timed on its own below (`--beam-table`).
         beam_table: None,
         ..default()

@@ -66,6 +66,7 @@ pub fn scene_key(
             settings.cluster_size as f32,
             settings.object_exit_share as u32 as f32,
             settings.shape_diffusion as u32 as f32,
+            settings.shape_energy_dropped,
         ])
         .bytes(format!("{:?}", settings.beam_table).as_bytes());
     for (positions, indices, surface) in objects {

@@ -105,6 +105,14 @@ pub(crate) fn run_precompute(
         });
         settings.patch_budget = capped;
     }
+    let dropped = settings.transport.shape_energy_dropped;
+    if !(0.0..=0.01).contains(&dropped) {
+        let fallback = if dropped.is_nan() { TransportSettings::default().shape_energy_dropped } else { dropped.clamp(0.0, 0.01) };
+        warned.warn("translucency-shape-energy-dropped", || {
+            format!("translucency: a shape_energy_dropped of {dropped} is outside 0 – 0.01; using {fallback}")
+        });
+        settings.transport.shape_energy_dropped = fallback;
+    }
     if let Some(table) = settings.transport.beam_table.as_mut() {
         // The exit directions are the CPU oracle's (translucent_accuracy --exit-axis lobe): the
         // GPU gather does not take the lobes fitted to them, and each early entry would cost
@@ -131,6 +139,7 @@ pub(crate) fn run_precompute(
             settings.transport.kernel as u32 as f32,
             settings.transport.object_exit_share as u32 as f32,
             settings.transport.shape_diffusion as u32 as f32,
+            settings.transport.shape_energy_dropped,
             settings.transport.deep_exit_law as u32 as f32,
             settings.transport.exit_lobes as u32 as f32,
         ]),

@@ -1237,6 +1237,8 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         max_patches: 1,
         ..default()
     });
+    // And a NaN share of a solved column's energy to drop.
+    settings.transport.shape_energy_dropped = f32::NAN;
     app.insert_resource(settings);
     sun(&mut app, Vec3::new(-1.0, -1.0, -1.0), 2000.0);
     let ball = mesh(&mut app, Sphere::new(0.05).mesh().ico(2).unwrap());
@@ -1307,6 +1309,7 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
         "translucency-units-",
         "translucency-msaa",
         "translucency-exit-directions",
+        "translucency-shape-energy-dropped",
     ] {
         assert!(
             causes.iter().any(|c| c.starts_with(key)),
@@ -1316,6 +1319,10 @@ fn bad_translucency_input_warns_once_and_falls_back_to_bevys_shading() {
     assert_eq!(
         app.world().resource::<TranslucencySettings>().patch_budget,
         16
+    );
+    assert_eq!(
+        app.world().resource::<TranslucencySettings>().transport.shape_energy_dropped,
+        bevy_mesostructure::translucency::TransportSettings::default().shape_energy_dropped
     );
     assert_eq!(
         app.world().resource::<TranslucencySettings>().transport.beam_table.map(|t| (t.exit_directions, t.single_scattering_to_pixels)),

@@ -26,6 +26,8 @@
 
 mod form_factors;
 mod scattering;
+#[cfg(test)]
+pub(crate) use scattering::drop_lightest_of_columns;
 mod solve;
 
 pub use solve::{
@@ -256,6 +258,16 @@ pub struct TransportSettings {
     /// [`deep_exit_law`](Self::deep_exit_law) 0.431 and 0.078); from the front both stay
     /// within 0.002 (`docs/translucent.md`).
     pub shape_diffusion: bool,
+    /// Solved in its shape, an object has every pair of its patches (the correction has no
+    /// radius: `O(N²)`); each of its columns drops its lightest entries while they hold at
+    /// most this share of the column's energy, in every channel (0 – 0.01; 0: all kept). The
+    /// columns keep their totals. 1e-6 by default: the `translucent` example's room at a
+    /// 20 k budget keeps 579 k of its 789 k entries of `K` (61.2 → 57.0 MB), a 1 cm marble
+    /// ball lit from behind moves by 0.0002 in relative L1 at 3680 patches and not at all at
+    /// 960; at 1e-5 the room kept 451 k and that ball lost 0.002, at 1e-3 (the flat profile's
+    /// tail) 159 k and the light crossing the ball at 960 patches (0.061 → 0.162;
+    /// `docs/translucent.md`).
+    pub shape_energy_dropped: f32,
     /// Let the light a translucent patch received from elsewhere leave it in the deep field's
     /// limb-darkened law ([`ExitLaw`], [`deep_exit_law`](super::diffusion::deep_exit_law))
     /// instead of Lambert's: light that crossed an object comes out brighter facing the
@@ -314,6 +326,7 @@ impl Default for TransportSettings {
             object_exit_share: true,
             beam_incidence: true,
             shape_diffusion: true,
+            shape_energy_dropped: 1e-6,
             deep_exit_law: true,
             beam_table: Some(super::beam_table::BeamTableSettings::default()),
             exit_lobes: true,
