@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo run --example translucent_precompute -- [--budgets 1000,5000] [--kernel scaled-dipole|burley|dipole]
-//!     [--cutoff 1e-5] [--shape-energy-dropped 1e-5] [--out docs/translucent-precompute.csv]
+//!     [--cutoff 1e-5] [--shape-energy-dropped 1e-6] [--out docs/translucent-precompute.csv]
 //! ```
 //!
 //! CSV header: `patches,budget,precompute_s,memory_mb,form_factor_entries,scattering_entries,
@@ -32,7 +32,7 @@ use std::{io::Write, path::PathBuf, time::Instant};
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     beam_table::{BeamTable, BeamTableSettings},
-    DiffusionKernel, DirectLight, EnergyTransport, PatchLight, PatchObject, Patches, SceneRays,
+    DiffusionKernel, DirectLight, EnergyTransport, MAX_SHAPE_ENERGY_DROPPED, PatchLight, PatchObject, Patches, SceneRays,
     TranslucencySettings, TransportSettings, TransportSolution, direct_irradiance,
     resample_into_patches_with_caps, translucent_patch_cap,
     transport::{settle_frames, warm_iterations},
@@ -90,8 +90,8 @@ fn main() {
         eprintln!("error: --cutoff must be a finite number ≥ 0");
         std::process::exit(2);
     }
-    if !(0.0..=0.01).contains(&cli.shape_energy_dropped) {
-        eprintln!("error: --shape-energy-dropped must be a number from 0 to 0.01");
+    if !(0.0..=MAX_SHAPE_ENERGY_DROPPED).contains(&cli.shape_energy_dropped) {
+        eprintln!("error: --shape-energy-dropped must be a number from 0 to {MAX_SHAPE_ENERGY_DROPPED}");
         std::process::exit(2);
     }
     let scene = translucent_scene::translucent_room(&meshes::asset_path("meshes/bunny.obj"));

@@ -150,7 +150,7 @@ pub use patches::{
     Patch, PatchObject, Patches, resample_into_patches, resample_into_patches_with_caps,
 };
 pub use transport::{
-    DirectLight, EnergyTransport, ExitLaw, PatchLight, PatchSurface, SceneRays, SparseMatrix,
+    DirectLight, EnergyTransport, ExitLaw, MAX_SHAPE_ENERGY_DROPPED, PatchLight, PatchSurface, SceneRays, SparseMatrix,
     TransportReport, TransportSettings, TransportSolution, direct_irradiance, direct_light,
     patch_albedos,
 };

@@ -18,7 +18,7 @@ use super::{
         TranslucentMaterials,
     },
     translucent_shadow_map::MarchedMedium,
-    transport::{EnergyTransport, PatchSurface, SceneRays, TransportSettings},
+    transport::{EnergyTransport, MAX_SHAPE_ENERGY_DROPPED, PatchSurface, SceneRays, TransportSettings},
 };
 use crate::warn_once::WarnedOnce;
 
@@ -106,10 +106,14 @@ pub(crate) fn run_precompute(
         settings.patch_budget = capped;
     }
     let dropped = settings.transport.shape_energy_dropped;
-    if !(0.0..=0.01).contains(&dropped) {
-        let fallback = if dropped.is_nan() { TransportSettings::default().shape_energy_dropped } else { dropped.clamp(0.0, 0.01) };
+    if !(0.0..=MAX_SHAPE_ENERGY_DROPPED).contains(&dropped) {
+        let fallback = if dropped.is_nan() {
+            TransportSettings::default().shape_energy_dropped
+        } else {
+            dropped.clamp(0.0, MAX_SHAPE_ENERGY_DROPPED)
+        };
         warned.warn("translucency-shape-energy-dropped", || {
-            format!("translucency: a shape_energy_dropped of {dropped} is outside 0 – 0.01; using {fallback}")
+            format!("translucency: a shape_energy_dropped of {dropped} is outside 0 – {MAX_SHAPE_ENERGY_DROPPED}; using {fallback}")
         });
         settings.transport.shape_energy_dropped = fallback;
     }

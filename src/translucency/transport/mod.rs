@@ -210,6 +210,10 @@ impl ExitLaw {
     }
 }
 
+/// The most [`TransportSettings::shape_energy_dropped`] takes: beyond it a back-lit object
+/// loses the light crossing it (`docs/translucent.md`).
+pub const MAX_SHAPE_ENERGY_DROPPED: f32 = 0.01;
+
 /// How the transport is built.
 #[derive(Clone, Copy, Debug, PartialEq, Reflect)]
 pub struct TransportSettings {

@@ -374,7 +374,7 @@ pub(crate) fn drop_lightest_of_columns(
     dropped: f32,
 ) -> Vec<Vec<(u32, Vec3)>> {
     let n = rows.len();
-    let budget = if dropped.is_finite() { f64::from(dropped.clamp(0.0, 0.01)) } else { 0.0 };
+    let budget = if dropped.is_finite() { f64::from(dropped.clamp(0.0, super::MAX_SHAPE_ENERGY_DROPPED)) } else { 0.0 };
     if budget <= 0.0 || !(0..n).any(&solved) {
         return rows;
     }
