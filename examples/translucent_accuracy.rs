@@ -132,7 +132,7 @@ struct Cli {
     #[arg(long, value_enum, default_value_t = Axis::Plugin)]
     exit_axis: Axis,
     /// With the beam table, give each patch's light from afar out by a lobe leaning the way
-    /// it travelled (`TransportSettings::exit_lobes`; method suffix `_exitlean_afar2mfp` on the
+    /// it travelled (`TransportSettings::exit_lobes`; method suffix `_exitlean_afar2mfp_raysback` on the
     /// plugin's axis, `_exitflow` when off)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     exit_lobes: bool,
@@ -668,7 +668,9 @@ fn main() {
     let table = cli.scattering == Scattering::BeamTable;
     let (exit_axis, exit_name) = match cli.exit_axis {
         Axis::Plugin => (ExitAxis::Plugin, match (table, cli.exit_lobes) {
-            (true, true) => "_exitlean_afar2mfp",
+            // `_raysback`: every ray started `rays::MIN_BACK_OFF` behind its origin (rows
+            // before it lack it: their walks slipped out on flights under 0.1 mm).
+            (true, true) => "_exitlean_afar2mfp_raysback",
             (true, false) => "_exitflow",
             (false, _) => "",
         }),

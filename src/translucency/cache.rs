@@ -44,8 +44,10 @@ impl Hash {
 /// old one are not found (2: the beam table's walks shared by the colour channels; 3: its
 /// beam walks split far from their entry, `BeamTableSettings::far_splits`; 4: objects above
 /// `MAX_SHAPE_PATCHES` solved in their shape on clusters of their patches; 5: the far split
-/// and the exit lobes never nearer than two transport mean free paths, `lobe_source_distance`).
-const REVISION: u32 = 5;
+/// and the exit lobes never nearer than two transport mean free paths, `lobe_source_distance`;
+/// 6: every ray started at least `rays::MIN_BACK_OFF` behind its origin, so that walks no
+/// longer slip out through a surface on flights under 0.1 mm in a scene in metres).
+const REVISION: u32 = 6;
 
 /// The cache key of a scene: its objects (world-space positions, indices, surface), the
 /// patch budget, the transport settings, the crate's version and [`REVISION`].

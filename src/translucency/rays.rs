@@ -16,10 +16,21 @@ use super::patches::PatchObject;
 pub struct SceneRays {
     bvh: CwBvh,
     triangles: Vec<Triangle>,
-    /// How far [`SceneRays::first_hit_within`] starts its ray behind its origin: 1e-4 of the
-    /// scene's bounding diagonal.
+    /// How far every query starts its BVH ray behind its origin (hits behind the origin left
+    /// out): 1e-4 of the scene's bounding diagonal, and never under [`MIN_BACK_OFF`].
     back_off: f32,
 }
+
+/// The least [`SceneRays::back_off`], in world units. `obvhs`'s compressed wide BVH clamps
+/// the distance at which a ray enters each box to at least 1e-4 world units
+/// (`cwbvh::node::EPSILON`, an absolute figure), so a ray shorter than that meets nothing,
+/// and a box it leaves within that distance of its start is skipped. In a scene in metres
+/// that is 0.1 mm: in a scene under ~1 unit across (whose back-off of 1e-4 of its diagonal
+/// fell short of the clamp), a random walk's free flight that short (a fifth of marble's
+/// flights) went through the object's surface unseen, scattered on outside and came back as
+/// late light or as an exit elsewhere. Starting every ray twice that far back keeps all it
+/// is asked about past the clamp.
+pub const MIN_BACK_OFF: f32 = 2e-4;
 
 fn to_a(v: Vec3) -> Vec3A {
     Vec3A::new(v.x, v.y, v.z)
@@ -59,7 +70,7 @@ impl SceneRays {
             },
         );
         let diagonal = (high - low).length();
-        let back_off = if diagonal.is_finite() { 1e-4 * diagonal } else { 0.0 };
+        let back_off = if diagonal.is_finite() { (1e-4 * diagonal).max(MIN_BACK_OFF) } else { MIN_BACK_OFF };
         Self { bvh, triangles, back_off }
     }
 
@@ -68,7 +79,7 @@ impl SceneRays {
         if self.triangles.is_empty() {
             return true;
         }
-        let ray = ray(origin, direction, t_max);
+        let ray = self.backed_off(origin, direction, t_max);
         self.bvh.ray_traverse_miss(ray, |r, id| {
             self.triangles[self.bvh.primitive_indices[id] as usize].intersect(r)
         })
@@ -80,15 +91,16 @@ impl SceneRays {
         if self.triangles.is_empty() {
             return None;
         }
-        self.nearest(ray(origin, direction, f32::INFINITY))
+        self.nearest(self.backed_off(origin, direction, f32::INFINITY))
     }
 
     /// [`first_hit`](Self::first_hit) over `[0, t_max]` only: `None` where nothing is that
     /// close (the traversal prunes everything further, which a random walk's short free
-    /// flights make cheap). The ray starts 1e-4 of the scene's size behind `origin` (hits
-    /// behind `origin` left out): from within ~1e-5 of a face of a 2-unit cube `first_hit`
-    /// misses that face every time (measured: all of 2000 rays from 1e-6 deep, 1908 from
-    /// 1e-5, none from 1e-4), where a random walk's collisions near the surface start.
+    /// flights make cheap). Like every query its ray starts [`back_off`](Self::back_off)
+    /// behind `origin`: from a start within ~1e-4 world units of a face the BVH misses that
+    /// face (a ray started at the origin from 1e-6 / 1e-5 / 1e-4 under a face of a 2-unit
+    /// cube missed it 2000 / 1908 / 0 times in 2000), and a flight shorter than that meets
+    /// nothing at all ([`MIN_BACK_OFF`]).
     pub fn first_hit_within(
         &self,
         origin: Vec3,
@@ -98,13 +110,21 @@ impl SceneRays {
         if self.triangles.is_empty() {
             return None;
         }
+        self.nearest(self.backed_off(origin, direction, t_max))
+    }
+
+    /// The BVH's ray for `[0, t_max]` from `origin` along the unit `direction`: started
+    /// [`back_off`](Self::back_off) behind `origin`, with hits behind `origin` left out (what
+    /// [`nearest`](Self::nearest) takes off again).
+    fn backed_off(&self, origin: Vec3, direction: Vec3, t_max: f32) -> Ray {
         let back = self.back_off;
         let mut ray = ray(origin - direction * back, direction, t_max + back);
         ray.tmin = back;
-        self.nearest(ray).map(|(t, n)| (t - back, n))
+        ray
     }
 
-    /// The nearest triangle along `ray`: its distance and unit normal (either side).
+    /// The nearest triangle along a [`backed_off`](Self::backed_off) ray: its distance from
+    /// the query's origin (the ray's less the back-off) and unit normal (either side).
     fn nearest(&self, ray: Ray) -> Option<(f32, Vec3)> {
         let mut hit = RayHit::none();
         let found = self.bvh.ray_traverse(ray, &mut hit, |r, id| {
@@ -113,7 +133,7 @@ impl SceneRays {
         found.then(|| {
             let t = &self.triangles[self.bvh.primitive_indices[hit.primitive_id as usize] as usize];
             let n = (t.v1 - t.v0).cross(t.v2 - t.v0).normalize_or_zero();
-            (hit.t, Vec3::new(n.x, n.y, n.z))
+            (hit.t - self.back_off, Vec3::new(n.x, n.y, n.z))
         })
     }
 

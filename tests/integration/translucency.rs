@@ -1794,35 +1794,35 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     // dipole, relative L1, mean ratio r/g/b): measured.
     let cases = [
         (TranslucentPreset::Skin1, "skin1", "front", front, 1.0, true, true, false, 0.0757, [0.974, 0.981, 0.983]),
-        (TranslucentPreset::Marble, "marble", "front", front, 1.0, true, true, false, 0.0445, [0.984, 0.975, 0.981]),
+        (TranslucentPreset::Marble, "marble", "front", front, 1.0, true, true, false, 0.0446, [0.983, 0.975, 0.981]),
         // Lit from behind skin gives too little still: near the terminator the light enters
         // at a grazing angle and goes on towards the camera before it scatters, which sources
         // under the entry point do not carry.
         (TranslucentPreset::Skin1, "skin1", "back", back, 1.0, true, true, false, 0.4313, [0.598, 0.252, 0.215]),
-        (TranslucentPreset::Marble, "marble", "back", back, 1.0, true, true, false, 0.0775, [1.050, 1.061, 1.096]),
+        (TranslucentPreset::Marble, "marble", "back", back, 1.0, true, true, false, 0.0772, [1.049, 1.061, 1.096]),
         // Each step from the defaults before: solved in the shape with Lambert's exit, and
         // the flat profile with it (the defaults before), alone and with the oriented dipole.
         (TranslucentPreset::Skin1, "skin1", "back", back, 1.0, true, false, false, 0.4198, [0.613, 0.278, 0.217]),
-        (TranslucentPreset::Marble, "marble", "back", back, 1.0, true, false, false, 0.1533, [1.057, 1.076, 1.126]),
+        (TranslucentPreset::Marble, "marble", "back", back, 1.0, true, false, false, 0.1532, [1.056, 1.076, 1.126]),
         (TranslucentPreset::Skin1, "skin1", "back", back, 1.0, false, false, false, 0.6119, [0.400, 0.254, 0.254]),
-        (TranslucentPreset::Marble, "marble", "back", back, 1.0, false, false, false, 0.2774, [0.870, 0.733, 0.678]),
+        (TranslucentPreset::Marble, "marble", "back", back, 1.0, false, false, false, 0.2775, [0.869, 0.733, 0.678]),
         (TranslucentPreset::Skin1, "skin1", "back", back, 1.0, false, false, true, 0.3083, [0.765, 0.348, 0.290]),
-        (TranslucentPreset::Marble, "marble", "back", back, 1.0, false, false, true, 0.6323, [1.699, 1.582, 1.504]),
+        (TranslucentPreset::Marble, "marble", "back", back, 1.0, false, false, true, 0.6316, [1.698, 1.582, 1.504]),
         // Behind the presets' dielectric boundary, in Bevy's ambient light: the walks carry
         // the boundary's internal reflection (1.28–1.70× too bright before).
-        (TranslucentPreset::Skin1, "skin1", "uniform_eta1.3", uniform, 1.3, true, true, false, 0.0277, [0.980, 1.000, 0.995]),
-        (TranslucentPreset::Marble, "marble", "uniform_eta1.3", uniform, 1.3, true, true, false, 0.0565, [1.008, 0.992, 0.989]),
+        (TranslucentPreset::Skin1, "skin1", "uniform_eta1.3", uniform, 1.3, true, true, false, 0.0287, [0.978, 1.000, 0.994]),
+        (TranslucentPreset::Marble, "marble", "uniform_eta1.3", uniform, 1.3, true, true, false, 0.0557, [1.006, 0.988, 0.990]),
         // Behind the dielectric boundary under the directional light (the light tracer's
         // refracted connection to the eye; marble's connected at a share of its collisions,
         // noise 0.050 front, 0.057 back): the exit law with the boundary's Fresnel and
         // internal reflection; marble from behind, solved with Lambert's exit and the
         // defaults before.
-        (TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, true, true, false, 0.0741, [0.957, 0.972, 0.975]),
-        (TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, true, true, false, 0.4725, [0.541, 0.200, 0.149]),
-        (TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, true, true, false, 0.0746, [0.962, 0.961, 0.954]),
-        (TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, true, true, false, 0.0828, [0.967, 0.955, 0.953]),
-        (TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, true, false, false, 0.0882, [0.954, 0.945, 0.949]),
-        (TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, false, false, false, 0.3563, [0.715, 0.586, 0.515]),
+        (TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, true, true, false, 0.0744, [0.955, 0.972, 0.973]),
+        (TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, true, true, false, 0.4736, [0.540, 0.200, 0.149]),
+        (TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, true, true, false, 0.0751, [0.961, 0.957, 0.955]),
+        (TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, true, true, false, 0.0834, [0.966, 0.951, 0.954]),
+        (TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, true, false, false, 0.0890, [0.952, 0.941, 0.949]),
+        (TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, false, false, false, 0.3576, [0.714, 0.584, 0.516]),
     ];
     for (preset, name, lighting, how, eta, shape_diffusion, deep_exit_law, oriented_dipole, rel_l1, ratio) in cases {
         let medium = bevy_mesostructure::translucency::TranslucentMedium {
@@ -1896,7 +1896,7 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     // directions about it (`direction_weights`). Single scattering that a grazing beam sends
     // out past the terminator, by a face turned from the light, stays in the table
     // (`law_gives_single_scattering`: the gather's law gives none there). Skin from behind
-    // has blue 1.22× with this table's seed, behind the dielectric 1.52×: a few far walks in
+    // has blue 1.25× with this table's seed, behind the dielectric 1.51×: a few far walks in
     // a channel the reference barely has there. The walks are shared by the channels (hero
     // channels, `random_walk::walk_ends`; 256 beam walks, each split in 4 two patch sizes
     // (and two transport mean free paths: `lobe_source_distance`; before that floor, skin's
@@ -1906,21 +1906,21 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     // behind the dielectric).
     let (lean, flow) = (true, false);
     let table_cases = [
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0453, [1.027, 1.016, 1.037]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1162, [1.030, 1.015, 1.239]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0453, [1.018, 1.014, 1.022]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0608, [0.980, 0.983, 1.001]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0473, [0.986, 0.985, 0.986]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.1123, [0.916, 1.038, 1.522]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0691, [0.987, 0.985, 0.977]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0760, [1.014, 0.997, 0.990]),
-        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0555, [0.977, 0.959, 0.967]),
-        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2210, [0.812, 0.602, 0.684]),
-        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3008, [0.727, 0.454, 0.656]),
-        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0732, [0.953, 0.954, 0.965]),
-        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1426, [1.019, 0.998, 1.460]),
-        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0385, [0.986, 0.965, 0.969]),
-        ((table_1024, "beam table, 1024 walks, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2271, [0.810, 0.570, 0.645]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0466, [1.031, 1.014, 1.033]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1003, [1.006, 1.016, 1.252]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0450, [1.007, 1.002, 1.008]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0631, [0.973, 0.970, 0.976]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0460, [0.985, 0.988, 0.988]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.1105, [0.911, 1.007, 1.513]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0691, [0.981, 0.975, 0.971]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0768, [1.015, 0.996, 0.993]),
+        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0561, [0.978, 0.957, 0.963]),
+        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2250, [0.801, 0.601, 0.702]),
+        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3071, [0.716, 0.453, 0.674]),
+        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0778, [0.949, 0.944, 0.945]),
+        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1434, [1.013, 0.963, 1.402]),
+        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0391, [0.991, 0.966, 0.967]),
+        ((table_1024, "beam table, 1024 walks, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2328, [0.805, 0.566, 0.651]),
     ];
     for ((oracles, named), exit_lobes, preset, name, lighting, how, eta, rel_l1, ratio) in table_cases {
         let medium = bevy_mesostructure::translucency::TranslucentMedium {
@@ -2052,11 +2052,11 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         (TranslucentPreset::Marble, "marble", "front", front, true, own, 0.0885, [1.018, 1.007, 0.997]),
         (TranslucentPreset::Skin1, "skin1", "front", front, false, own, 0.1183, [0.926, 0.946, 0.966]),
         (TranslucentPreset::Skin1, "skin1", "back", back, false, own, 0.4066, [0.771, 0.688, 0.711]),
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, walks, 0.1540, [1.115, 1.124, 1.127]),
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks, 0.1086, [1.037, 1.056, 1.076]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_walks, 0.2845, [0.791, 0.843, 0.872]),
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks_and_law, 0.0816, [1.000, 1.004, 1.007]),
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table_and_law, 0.0837, [0.996, 1.004, 1.006]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, walks, 0.1540, [1.115, 1.128, 1.135]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks, 0.1094, [1.039, 1.061, 1.085]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_walks, 0.2954, [0.777, 0.835, 0.871]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks_and_law, 0.0807, [1.002, 1.009, 1.016]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table_and_law, 0.0829, [1.002, 1.011, 1.015]),
         // With its exit lobes (`TransportSettings::exit_lobes`) and each beam spread over the
         // four table directions about it (`direction_weights`; the nearest direction and the
         // flow's law alone: 0.0802, 0.2581, 0.0763), single scattering past the terminator
@@ -2066,11 +2066,11 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         // last order (before: 0.0758, 0.2171, 0.0755; the ears gave out up to 10⁴× what they
         // held). 256 beam walks split in 4 far from their entry (before, 384 unsplit: 0.0535,
         // 0.1582, 0.0753).
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0600, [1.007, 1.003, 0.993]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1555, [0.957, 0.903, 0.897]),
-        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0742, [0.987, 0.984, 0.980]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0603, [1.008, 1.006, 0.994]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1574, [0.959, 0.901, 0.889]),
+        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0737, [0.979, 0.975, 0.968]),
         // The table with the deep law about the normal, as before the flow.
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2734, [0.849, 0.806, 0.792]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2751, [0.854, 0.809, 0.790]),
     ];
     for (preset, name, lighting, how, object_exit_share, oracles, rel_l1, ratio) in cases {
         let label = format!(
@@ -2135,15 +2135,15 @@ fn a_translucent_torus_matches_mitsuba_as_documented() {
     let table = Oracles { scattering: ScatteringSource::BeamTable(default()), ..Oracles::NONE };
     // (medium, lighting, how, relative L1, mean ratio r/g/b): measured.
     let cases = [
-        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0592, [0.959, 0.977, 0.990]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, 0.0955, [0.997, 0.967, 0.921]),
-        (TranslucentPreset::Marble, "marble", "front", front, 0.0553, [1.009, 1.009, 1.009]),
-        (TranslucentPreset::Marble, "marble", "back", back, 0.1318, [0.917, 0.903, 0.905]),
-        (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0595, [0.972, 0.984, 0.991]),
-        (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.1057, [0.988, 0.956, 0.901]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0595, [0.959, 0.978, 0.989]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, 0.0954, [0.991, 0.964, 0.921]),
+        (TranslucentPreset::Marble, "marble", "front", front, 0.0549, [0.995, 0.989, 0.987]),
+        (TranslucentPreset::Marble, "marble", "back", back, 0.1489, [0.891, 0.873, 0.871]),
+        (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0617, [0.967, 0.981, 0.989]),
+        (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.1061, [0.983, 0.955, 0.901]),
         // A point light in the hole, 3 mm above the middle (inside the bounds: a cube of
         // maps; 0.325 with the one orthographic map before).
-        (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.1003, [0.919, 0.934, 0.954]),
+        (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.0989, [0.922, 0.937, 0.959]),
     ];
     for (preset, name, lighting, how, rel_l1, ratio) in cases {
         let reference = reference_picture(&format!("torus_{name}"), lighting);
