@@ -67,6 +67,10 @@ struct Cli {
     /// stderr (the CSV's `precompute_s` and `memory_mb` are the transport's without it)
     #[arg(long)]
     beam_table: bool,
+    /// With `--beam-table`: beam walks a direction (`BeamTableSettings::walks`; default the
+    /// plugin's)
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    walks: Option<u32>,
     /// Also turn the spot this many frames by 0.75° each about the vertical through the
     /// objects (the `translucent` example's swing at 60 frames a second) and report on stderr
     /// each frame's products and distance from the converged exitance, warm-started from the
@@ -164,7 +168,7 @@ iterations,solve_ms,threads,shadow_ray_injection_ms";
                 &surfaces,
                 &rays,
                 &transport.scattering,
-                BeamTableSettings::default(),
+                BeamTableSettings { walks: cli.walks.unwrap_or(BeamTableSettings::default().walks), ..default() },
                 None,
             );
             let entries = table.early.entries() + table.late.entries();
