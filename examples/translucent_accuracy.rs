@@ -132,8 +132,8 @@ struct Cli {
     #[arg(long, value_enum, default_value_t = Axis::Plugin)]
     exit_axis: Axis,
     /// With the beam table, give each patch's light from afar out by a lobe leaning the way
-    /// it travelled (`TransportSettings::exit_lobes`; method suffix `_exitlean_afar2mfp_raysback` on the
-    /// plugin's axis, `_exitflow` when off)
+    /// it travelled (`TransportSettings::exit_lobes`; method suffix
+    /// `_exitlean_afar2mfp_raysback_latepermfp` on the plugin's axis, `_exitflow` when off)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     exit_lobes: bool,
     /// Walks from each patch (shared by the channels) for `--scattering walks|beam-walks`
@@ -669,8 +669,10 @@ fn main() {
     let (exit_axis, exit_name) = match cli.exit_axis {
         Axis::Plugin => (ExitAxis::Plugin, match (table, cli.exit_lobes) {
             // `_raysback`: every ray started `rays::MIN_BACK_OFF` behind its origin (rows
-            // before it lack it: their walks slipped out on flights under 0.1 mm).
-            (true, true) => "_exitlean_afar2mfp_raysback",
+            // before it lack it: their walks slipped out on flights under 0.1 mm);
+            // `_latepermfp`: the late walks held per square transport mean free path of patch
+            // (`beam_table::late_walks_for`; `late3072` is then the least a patch takes).
+            (true, true) => "_exitlean_afar2mfp_raysback_latepermfp",
             (true, false) => "_exitflow",
             (false, _) => "",
         }),

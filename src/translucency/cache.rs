@@ -46,8 +46,10 @@ impl Hash {
 /// `MAX_SHAPE_PATCHES` solved in their shape on clusters of their patches; 5: the far split
 /// and the exit lobes never nearer than two transport mean free paths, `lobe_source_distance`;
 /// 6: every ray started at least `rays::MIN_BACK_OFF` behind its origin, so that walks no
-/// longer slip out through a surface on flights under 0.1 mm in a scene in metres).
-const REVISION: u32 = 6;
+/// longer slip out through a surface on flights under 0.1 mm in a scene in metres; 7: the
+/// late light's walks held per square transport mean free path of patch,
+/// `beam_table::build::late_walks_for`).
+const REVISION: u32 = 7;
 
 /// The cache key of a scene: its objects (world-space positions, indices, surface), the
 /// patch budget, the transport settings, the crate's version and [`REVISION`].

@@ -18,10 +18,11 @@
 //! - **the late light**: the walks still inside after `last_order` scatterings leave as the
 //!   late part of diffuse light entering the patch does — the profile's column (`K`'s, the
 //!   object's shape and totals included) with its near field, the patches that `late_walks`
-//!   diffuse walks leave by within the same orders, scaled down by those early exits' share of
-//!   it — per unit of the diffuse walks' own remainder. Stopping the walks there bounds their
-//!   cost (marble's albedo 0.999 would take hundreds of scatterings) and puts the light that
-//!   crosses an object where the profile, not a few hundred walks' noise, says.
+//!   diffuse walks (more on patches narrower than a transport mean free path) leave by within
+//!   the same orders, scaled down by those early exits' share of it — per unit of the
+//!   diffuse walks' own remainder. Stopping the walks there bounds their cost (marble's
+//!   albedo 0.999 would take hundreds of scatterings) and puts the light that crosses an
+//!   object where the profile, not a few hundred walks' noise, says.
 //!
 //! Columns are per unit of light that got in: a frame weights each beam by the boundary's
 //! Fresnel transmittance at its own incidence.
@@ -36,7 +37,7 @@ pub mod directions;
 pub mod flow;
 pub mod single_scattering;
 
-pub use build::{ExitPatches, marched_objects};
+pub use build::{ExitPatches, MAX_LATE_WALK_SCALE, late_walks_for, marched_objects};
 pub use directions::{bin_direction, direction_bin, direction_weights};
 pub use flow::{ExitLean, LOBE_SOURCE_DISTANCE, LOBE_SOURCE_MEAN_FREE_PATHS, TableFlow, from_afar, lobe_source_distance};
 pub use single_scattering::{entering, law_gives_single_scattering, single_scattering_radiance};
@@ -55,7 +56,9 @@ pub struct BeamTableSettings {
     /// Beam walks a direction (≥ 1), each shared by the three channels (hero channels:
     /// [`walk_ends`](super::random_walk::walk_ends)).
     pub walks: u32,
-    /// Diffuse walks a patch for the late light's near field (≥ 1), shared by the channels.
+    /// Diffuse walks a patch for the late light's near field (≥ 1), shared by the channels:
+    /// for each square of the medium's longest transport mean free path the patch spans, at
+    /// least this many and at most 4× ([`late_walks_for`]).
     pub late_walks: u32,
     /// How many walks a beam walk becomes once it scatters more than
     /// [`lobe_source_distance`] from where it entered (≥ 1; 1: none;

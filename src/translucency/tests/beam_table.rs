@@ -556,3 +556,21 @@ fn the_exit_lobes_threshold_is_two_patch_sizes_and_never_under_two_mean_free_pat
     let depths = EnergyTransport::source_depths(&patches, &opaque);
     assert_eq!(lobe_source_distance(&patches, &depths, 0), LOBE_SOURCE_DISTANCE * size);
 }
+
+/// The late light's diffuse walks are held per square transport mean free path of patch
+/// (`late_walks_for`): `late_walks` for a patch as wide as the medium's longest transport mean
+/// free path or wider, four times as many at half that width, never more than
+/// `MAX_LATE_WALK_SCALE` times, and `late_walks` for a size or a path that is not a number.
+#[test]
+fn the_late_lights_walks_are_held_per_square_mean_free_path() {
+    use crate::translucency::beam_table::{MAX_LATE_WALK_SCALE, late_walks_for};
+    let l = 1.3e-3;
+    assert_eq!(late_walks_for(3072, l, l), 3072);
+    assert_eq!(late_walks_for(3072, 3.0 * l, l), 3072);
+    assert_eq!(late_walks_for(3072, l / 2.0f32.sqrt(), l), 6144);
+    assert_eq!(late_walks_for(3072, l / 2.0, l), 12288);
+    assert_eq!(late_walks_for(3072, l / 10.0, l), (3072.0 * MAX_LATE_WALK_SCALE) as u32);
+    for (h, l) in [(f32::NAN, l), (l, f32::NAN), (0.0, l), (l, 0.0), (f32::INFINITY, l)] {
+        assert_eq!(late_walks_for(3072, h, l), 3072, "h {h}, ℓ {l}");
+    }
+}
