@@ -670,7 +670,7 @@ fn main() {
         Axis::Plugin => (ExitAxis::Plugin, match (table, cli.exit_lobes) {
             // `_raysback`: every ray started `rays::MIN_BACK_OFF` behind its origin (rows
             // before it lack it: their walks slipped out on flights under 0.1 mm);
-            // `_latepermfp`: the late walks held per square transport mean free path of patch
+            // `_latepermfp`: the late walks scaled by `(ℓ/h)²`, the patches in a square mean free path
             // (`beam_table::late_walks_for`; `late3072` is then the least a patch takes).
             (true, true) => "_exitlean_afar2mfp_raysback_latepermfp",
             (true, false) => "_exitflow",

@@ -47,7 +47,7 @@ impl Hash {
 /// and the exit lobes never nearer than two transport mean free paths, `lobe_source_distance`;
 /// 6: every ray started at least `rays::MIN_BACK_OFF` behind its origin, so that walks no
 /// longer slip out through a surface on flights under 0.1 mm in a scene in metres; 7: the
-/// late light's walks held per square transport mean free path of patch,
+/// late light's walks scaled by `(ℓ/h)²`, patches per square transport mean free path,
 /// `beam_table::build::late_walks_for`).
 const REVISION: u32 = 7;
 

@@ -354,15 +354,15 @@ impl BeamTable {
 /// the near field shrinks again with the patches, and the build's cost grows as `1/h²`.
 pub const MAX_LATE_WALK_SCALE: f32 = 4.0;
 
-/// Diffuse walks for a patch's late light: `late_walks` for each square of the medium's
-/// longest transport mean free path `ℓ` a patch of size `h` spans, at least `late_walks`
-/// and at most [`MAX_LATE_WALK_SCALE`] times it. The near field is the set of patches the
-/// walks leave by, so with a fixed count it shrank as patches got smaller: per patch fewer
-/// walks land, and a patch in the early exits' tail is touched less often. The ball's skin
-/// lit from behind darkened from 0.1046 at 960 patches to 0.164 at 3680. Holding the walks
-/// per `ℓ²` of surface holds the set's reach in the medium's own units. Patches wider than
-/// `ℓ` (marble's 0.46 mm at any budget of the suite, the example's room) keep
-/// `late_walks`.
+/// Diffuse walks for a patch's late light: `late_walks · (ℓ/h)²`, `ℓ` the medium's longest
+/// transport mean free path and `h` the patch size (the patches in a square of side `ℓ`), at
+/// least `late_walks` and at most [`MAX_LATE_WALK_SCALE`] times it. The near field is the set
+/// of patches the walks leave by, so with a fixed count it shrank as patches got smaller: per
+/// patch fewer walks land, and a patch in the early exits' tail is touched less often. The
+/// ball's skin lit from behind darkened from 0.1046 at 960 patches to 0.164 at 3680. Walks
+/// that grow as `1/h²` give each patch as many exits whatever its size, which holds the set's
+/// reach in the medium's own units. Patches wider than `ℓ` (marble's 0.46 mm at any budget of
+/// the suite, the example's room) keep `late_walks`.
 pub fn late_walks_for(late_walks: u32, patch_size: f32, transport_mean_free_path: f32) -> u32 {
     let squares = (transport_mean_free_path / patch_size).powi(2);
     let scale = if squares.is_finite() { squares.clamp(1.0, MAX_LATE_WALK_SCALE) } else { 1.0 };

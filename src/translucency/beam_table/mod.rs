@@ -56,9 +56,9 @@ pub struct BeamTableSettings {
     /// Beam walks a direction (≥ 1), each shared by the three channels (hero channels:
     /// [`walk_ends`](super::random_walk::walk_ends)).
     pub walks: u32,
-    /// Diffuse walks a patch for the late light's near field (≥ 1), shared by the channels:
-    /// for each square of the medium's longest transport mean free path the patch spans, at
-    /// least this many and at most 4× ([`late_walks_for`]).
+    /// Diffuse walks a patch for the late light's near field (≥ 1), shared by the channels;
+    /// times `(ℓ/h)²` on patches narrower than the medium's longest transport mean free path
+    /// `ℓ`, at most 4× ([`late_walks_for`]).
     pub late_walks: u32,
     /// How many walks a beam walk becomes once it scatters more than
     /// [`lobe_source_distance`] from where it entered (≥ 1; 1: none;

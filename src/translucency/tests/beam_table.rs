@@ -557,12 +557,12 @@ fn the_exit_lobes_threshold_is_two_patch_sizes_and_never_under_two_mean_free_pat
     assert_eq!(lobe_source_distance(&patches, &depths, 0), LOBE_SOURCE_DISTANCE * size);
 }
 
-/// The late light's diffuse walks are held per square transport mean free path of patch
-/// (`late_walks_for`): `late_walks` for a patch as wide as the medium's longest transport mean
+/// The late light's diffuse walks scale with the patches in a square transport mean free
+/// path (`late_walks_for`): `late_walks` for a patch as wide as the medium's longest transport mean
 /// free path or wider, four times as many at half that width, never more than
 /// `MAX_LATE_WALK_SCALE` times, and `late_walks` for a size or a path that is not a number.
 #[test]
-fn the_late_lights_walks_are_held_per_square_mean_free_path() {
+fn the_late_lights_walks_scale_with_the_patches_in_a_square_mean_free_path() {
     use crate::translucency::beam_table::{MAX_LATE_WALK_SCALE, late_walks_for};
     let l = 1.3e-3;
     assert_eq!(late_walks_for(3072, l, l), 3072);
