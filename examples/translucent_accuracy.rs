@@ -136,6 +136,11 @@ struct Cli {
     /// `_exitlean_afar2mfp_raysback_latepermfp` on the plugin's axis, `_exitflow` when off)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     exit_lobes: bool,
+    /// With the beam table on the plugin's axis, all the light from elsewhere leaves by the
+    /// law about its flow, not only the share `g` in the diffusion mode
+    /// (`TransportSettings::flow_law_takes_all`; method suffix `_flowall` when on)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    flow_law_takes_all: bool,
     /// Walks from each patch (shared by the channels) for `--scattering walks|beam-walks`
     /// (default 256), or a direction for `--scattering beam-table` (default the plugin's,
     /// `BeamTableSettings::default().walks`)
@@ -562,6 +567,7 @@ fn main() {
         shape_diffusion: cli.shape_diffusion,
         deep_exit_law: cli.deep_exit_law,
         exit_lobes: cli.exit_lobes,
+        flow_law_takes_all: cli.flow_law_takes_all,
         diffusion_energy_kept: cli.energy_kept,
         shape_energy_dropped: cli.shape_energy_dropped,
         ..default()
@@ -681,8 +687,9 @@ fn main() {
         Axis::FlowAll => (ExitAxis::FlowAll, "_exitflowall"),
         Axis::Lobe => (ExitAxis::Lobe, "_exitlobe"),
     };
+    let flow_all = if table && cli.flow_law_takes_all && cli.exit_axis == Axis::Plugin { "_flowall" } else { "" };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{}",
         cli.kernel,
         if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" }
     )

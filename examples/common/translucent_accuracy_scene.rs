@@ -576,7 +576,12 @@ pub fn plugin_picture(
     }
     let solution = transport.solve_with(&direct, 1e-4, 256);
     let albedo = vec![Vec3::ZERO; patches.patches.len()];
-    let mut exit_laws = transport.exit_laws(&patches, &surfaces, settings);
+    // The oracles of other axes keep the share `g` in the mode, as they were measured.
+    let law_settings = TransportSettings {
+        flow_law_takes_all: settings.flow_law_takes_all && matches!(oracles.exit_axis, ExitAxis::Plugin | ExitAxis::FlowAll),
+        ..*settings
+    };
+    let mut exit_laws = transport.exit_laws(&patches, &surfaces, &law_settings);
     if matches!(oracles.exit_axis, ExitAxis::NormalAll | ExitAxis::FlowAll) {
         // All light from elsewhere takes the law, not the share `g` in the mode.
         for law in &mut exit_laws {

@@ -1896,8 +1896,11 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     // directions about it (`direction_weights`). Single scattering that a grazing beam sends
     // out past the terminator, by a face turned from the light, stays in the table
     // (`law_gives_single_scattering`: the gather's law gives none there). Skin from behind
-    // has blue 1.25× with this table's seed, behind the dielectric 1.51×: a few far walks in
-    // a channel the reference barely has there. The walks are shared by the channels (hero
+    // has blue 1.39× with this table's seed, behind the dielectric 1.58×: a few far walks in
+    // a channel the reference barely has there. All the light from elsewhere leaves by the
+    // flow's law (`TransportSettings::flow_law_takes_all`; with the mode's share `g` alone,
+    // skin 0.0466 / 0.1003, marble 0.0631 from behind, behind the dielectric skin 0.0460 /
+    // 0.1105, marble 0.0768 from behind). The walks are shared by the channels (hero
     // channels, `random_walk::walk_ends`; 256 beam walks, each split in 4 two patch sizes
     // (and two transport mean free paths: `lobe_source_distance`; before that floor, skin's
     // rows were 0.0475 / 0.1107 and 0.0439 / 0.1080 behind the dielectric) from its entry
@@ -1906,14 +1909,14 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     // behind the dielectric).
     let (lean, flow) = (true, false);
     let table_cases = [
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0466, [1.031, 1.014, 1.033]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1003, [1.006, 1.016, 1.252]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0456, [1.028, 1.012, 1.031]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.0941, [1.025, 1.046, 1.391]),
         ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0450, [1.007, 1.002, 1.008]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0631, [0.973, 0.970, 0.976]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0460, [0.985, 0.988, 0.988]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.1105, [0.911, 1.007, 1.513]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0619, [0.974, 0.971, 0.977]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0461, [0.982, 0.986, 0.987]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.1008, [0.925, 1.029, 1.582]),
         ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0691, [0.981, 0.975, 0.971]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0768, [1.015, 0.996, 0.993]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0778, [1.016, 0.997, 0.995]),
         ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0561, [0.978, 0.957, 0.963]),
         ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2250, [0.801, 0.601, 0.702]),
         ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3071, [0.716, 0.453, 0.674]),
@@ -1929,7 +1932,9 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
         };
         let reference = reference_picture(name, lighting);
         let label = format!("{name} ({named})");
-        let settings = TransportSettings { exit_lobes, ..default() };
+        // The rows without the lobes are the flow's law as it was measured, with only the
+        // mode's share `g` of the light from elsewhere in it.
+        let settings = TransportSettings { exit_lobes, flow_law_takes_all: exit_lobes, ..default() };
         holds_as_documented(&view, &label, lighting, medium, false, &settings, how, oracles, &reference, rel_l1, ratio);
     }
 }
@@ -2066,8 +2071,8 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         // last order (before: 0.0758, 0.2171, 0.0755; the ears gave out up to 10⁴× what they
         // held). 256 beam walks split in 4 far from their entry (before, 384 unsplit: 0.0535,
         // 0.1582, 0.0753).
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0603, [1.008, 1.006, 0.994]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1574, [0.959, 0.901, 0.889]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0602, [1.008, 1.004, 0.993]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1571, [0.982, 0.963, 1.007]),
         (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0737, [0.979, 0.975, 0.968]),
         // The table with the deep law about the normal, as before the flow.
         (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2751, [0.854, 0.809, 0.790]),
@@ -2135,15 +2140,15 @@ fn a_translucent_torus_matches_mitsuba_as_documented() {
     let table = Oracles { scattering: ScatteringSource::BeamTable(default()), ..Oracles::NONE };
     // (medium, lighting, how, relative L1, mean ratio r/g/b): measured.
     let cases = [
-        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0595, [0.959, 0.978, 0.989]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, 0.0954, [0.991, 0.964, 0.921]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0602, [0.958, 0.974, 0.985]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, 0.0930, [0.994, 0.982, 0.960]),
         (TranslucentPreset::Marble, "marble", "front", front, 0.0549, [0.995, 0.989, 0.987]),
-        (TranslucentPreset::Marble, "marble", "back", back, 0.1489, [0.891, 0.873, 0.871]),
-        (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0617, [0.967, 0.981, 0.989]),
-        (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.1061, [0.983, 0.955, 0.901]),
+        (TranslucentPreset::Marble, "marble", "back", back, 0.1480, [0.892, 0.874, 0.872]),
+        (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0621, [0.966, 0.977, 0.984]),
+        (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.1027, [0.987, 0.975, 0.953]),
         // A point light in the hole, 3 mm above the middle (inside the bounds: a cube of
         // maps; 0.325 with the one orthographic map before).
-        (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.0989, [0.922, 0.937, 0.959]),
+        (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.0959, [0.922, 0.938, 0.964]),
     ];
     for (preset, name, lighting, how, rel_l1, ratio) in cases {
         let reference = reference_picture(&format!("torus_{name}"), lighting);
@@ -2203,10 +2208,10 @@ fn single_scattering_marched_per_pixel_holds_as_documented() {
     let marched = Oracles { shadow_map: None, ..mapped };
     let medium = bevy_mesostructure::translucency::TranslucentMedium { index_of_refraction: 1.0, ..TranslucentPreset::Skin1.medium() };
     for (oracles, label, lighting, how, rel_l1, ratio) in [
-        (marched, "rays", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0560, [0.964, 0.985, 1.002]),
-        (marched, "rays", "back", SceneLighting::Directional(travel), 0.0933, [0.995, 0.975, 0.942]),
-        (mapped, "a 256² map", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0595, [0.959, 0.978, 0.993]),
-        (mapped, "a 256² map", "back", SceneLighting::Directional(travel), 0.0972, [0.994, 0.969, 0.924]),
+        (marched, "rays", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0563, [0.962, 0.980, 0.993]),
+        (marched, "rays", "back", SceneLighting::Directional(travel), 0.0900, [0.996, 0.988, 0.977]),
+        (mapped, "a 256² map", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0602, [0.958, 0.974, 0.985]),
+        (mapped, "a 256² map", "back", SceneLighting::Directional(travel), 0.0930, [0.994, 0.982, 0.960]),
     ] {
         let reference = reference_picture("torus_skin1", lighting);
         let label = format!("torus skin1 (the table, single scattering marched against {label})");
