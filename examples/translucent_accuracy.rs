@@ -687,7 +687,9 @@ fn main() {
         Axis::FlowAll => (ExitAxis::FlowAll, "_exitflowall"),
         Axis::Lobe => (ExitAxis::Lobe, "_exitlobe"),
     };
-    let flow_all = if table && cli.flow_law_takes_all && cli.exit_axis == Axis::Plugin { "_flowall" } else { "" };
+    // `_centroid`: objects above 2048 patches solved on clusters collocated at their
+    // area-weighted centres (before: at the member nearest it; the same below 2048).
+    let flow_all = if table && cli.flow_law_takes_all && cli.exit_axis == Axis::Plugin { "_flowall_centroid" } else { "" };
     let method = format!(
         "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{}",
         cli.kernel,

@@ -48,8 +48,9 @@ impl Hash {
 /// 6: every ray started at least `rays::MIN_BACK_OFF` behind its origin, so that walks no
 /// longer slip out through a surface on flights under 0.1 mm in a scene in metres; 7: the
 /// late light's walks scaled by `(ℓ/h)²`, patches per square transport mean free path,
-/// `beam_table::build::late_walks_for`).
-const REVISION: u32 = 7;
+/// `beam_table::build::late_walks_for`; 8: a clustered shape solve collocated at each
+/// cluster's area-weighted centre).
+const REVISION: u32 = 8;
 
 /// The cache key of a scene: its objects (world-space positions, indices, surface), the
 /// patch budget, the transport settings, the crate's version and [`REVISION`].

@@ -71,8 +71,8 @@ pub struct ShapePatch {
 /// each pair's dipole stays the fine patches' own.
 #[derive(Clone, Debug)]
 pub struct ShapeClusters {
-    /// The clusters as collocation patches: the member nearest their area-weighted centre,
-    /// their mean normal, their summed area.
+    /// The clusters as collocation patches: their area-weighted centre, their mean normal,
+    /// their summed area.
     pub patches: Vec<ShapePatch>,
     /// Each fine patch's cluster.
     pub of: Vec<u32>,
@@ -105,27 +105,26 @@ impl ShapeClusters {
     }
 
     fn gathered(patches: &[ShapePatch], of: Vec<u32>, count: usize) -> Self {
-        let mut sums = vec![(DVec3::ZERO, DVec3::ZERO, 0.0f64); count];
+        // Per cluster: area-weighted centre and normal, area, and a member's normal (where
+        // the mean cancels).
+        let mut sums = vec![(DVec3::ZERO, DVec3::ZERO, 0.0f64, DVec3::ZERO); count];
         for (p, &c) in patches.iter().zip(&of) {
             let s = &mut sums[c as usize];
             s.0 += p.centre * p.area;
             s.1 += p.normal * p.area;
             s.2 += p.area;
-        }
-        // Each cluster's member nearest its weighted centre: a point on the surface.
-        let mut nearest = vec![(f64::INFINITY, DVec3::ZERO, DVec3::ZERO); count];
-        for (p, &c) in patches.iter().zip(&of) {
-            let (centre, _, area) = sums[c as usize];
-            let d = p.centre.distance_squared(centre / area.max(1e-300));
-            if d < nearest[c as usize].0 {
-                nearest[c as usize] = (d, p.centre, p.normal);
+            if s.3 == DVec3::ZERO {
+                s.3 = p.normal;
             }
         }
+        // Collocated at the area-weighted centre, the midpoint rule of the cluster's own
+        // integral: at the member nearest it (a point on the surface, but up to half a patch
+        // off the middle), a back-lit marble ball of 3680 patches on 2048 clusters scored
+        // 0.083 instead of 0.076 (`docs/translucent.md`).
         let patches = sums
             .iter()
-            .zip(&nearest)
-            .map(|(&(_, normal, area), &(_, centre, member_normal))| ShapePatch {
-                centre,
+            .map(|&(weighted, normal, area, member_normal)| ShapePatch {
+                centre: weighted / area.max(1e-300),
                 normal: normal.try_normalize().unwrap_or(member_normal),
                 area,
             })

@@ -705,8 +705,10 @@ fn an_exit_lobe_has_the_mean_it_was_fitted_to_and_keeps_its_exitance() {
 /// the light leaving through the far hemisphere (what a back-lit object shows; the oriented
 /// dipole's flux plus the correction), and the exits' pattern over the whole ball (its L1
 /// over its total: a cluster gives its share out evenly over its patches). Measured, the worst
-/// of 9 entries: the far light within 1.4 % (skin's red) and 2.0 % (marble's red) of the full
-/// solve, the pattern 6.3 % / 9.1 % apart; held within 3 % and 11 %.
+/// of 9 entries, with each cluster collocated at its area-weighted centre: the far light
+/// within 1.35 % (skin's red) and 3.7 % (marble's red) of the full solve, the pattern 3.5 % /
+/// 4.5 % apart; held within 4.5 % and 6 %. (Collocated at the member nearest that centre,
+/// as before: 1.4 % / 2.0 % and 6.3 % / 9.1 %.)
 #[test]
 fn a_correction_solved_on_clusters_carries_the_full_solves_light_across_a_ball() {
     use crate::translucency::shape_diffusion::{
@@ -764,7 +766,7 @@ fn a_correction_solved_on_clusters_carries_the_full_solves_light_across_a_ball()
         }
         let figures = format!("far light within {worst_far:.4}, pattern {worst_pattern:.4} apart");
         eprintln!("{preset:?} channel {c}: {figures} ({m} clusters)");
-        assert!(worst_far < 0.03 && worst_pattern < 0.11, "{preset:?}: {figures}");
+        assert!(worst_far < 0.045 && worst_pattern < 0.06, "{preset:?}: {figures}");
     }
 }
 
