@@ -687,11 +687,13 @@ fn main() {
         Axis::FlowAll => (ExitAxis::FlowAll, "_exitflowall"),
         Axis::Lobe => (ExitAxis::Lobe, "_exitlobe"),
     };
+    let flow_all = if table && cli.flow_law_takes_all && cli.exit_axis == Axis::Plugin { "_flowall" } else { "" };
     // `_centroid`: objects above 2048 patches solved on clusters collocated at their
-    // area-weighted centres (before: at the member nearest it; the same below 2048).
-    let flow_all = if table && cli.flow_law_takes_all && cli.exit_axis == Axis::Plugin { "_flowall_centroid" } else { "" };
+    // area-weighted centres (before: at the member nearest it; the same below 2048), whatever
+    // the exit law.
+    let centroid = if table && cli.exit_axis == Axis::Plugin { "_centroid" } else { "" };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{}",
         cli.kernel,
         if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" }
     )
