@@ -626,9 +626,11 @@ fn main() {
                     match (table.single_scattering_to_pixels, cli.marched_single_scattering) {
                         (false, _) => String::new(),
                         (true, true) => "_ssmarched".into(),
-                        // `_d<depths>`: the plugin's depths a channel (rows without it: 64).
+                        // `_d<depths>`: the plugin's depths a channel (rows without it: 64);
+                        // `_tangentbound`: the path under a lit surface at most its tangent
+                        // plane's (`LightMaps::half_space_bound`; rows before it lack it).
                         (true, false) => format!(
-                            "_ssmarched_tsm{}_d{PLUGIN_DEPTHS}",
+                            "_ssmarched_tsm{}_d{PLUGIN_DEPTHS}_tangentbound",
                             cli.translucent_shadow_map.unwrap_or(PLUGIN_RESOLUTION)
                         ),
                     }

@@ -31,9 +31,11 @@ const MAX_SPLAT_TEXELS: f32 = 64.0;
 /// The finest map [`TranslucentShadowMap::splat`] makes (4096², 128 MiB).
 pub const MAX_RESOLUTION: u32 = 4096;
 
-/// The plugin's maps' resolution: 0.18 mm texels on the 4 cm bunny, where the march scores
+/// The plugin's maps' resolution: 0.18 mm texels on the 4 cm bunny, where the march scored
 /// 0.054 / 0.157 (skin, front / behind) against 0.052 / 0.145 at 512² and 0.048 / 0.129 with
-/// rays (`docs/translucent.md`, "Single scattering marched per pixel").
+/// rays (`docs/translucent.md`, "Single scattering marched per pixel"); with today's table
+/// and the tangent plane bounding the path under a lit surface, 0.144 from behind against
+/// rays' 0.127 ("Single scattering under a grazing light").
 pub const PLUGIN_RESOLUTION: u32 = 256;
 
 /// The plugin's depths a channel (`MARCHED_DEPTHS` in `marched.wgsl`). On the bunny and the
@@ -300,6 +302,12 @@ impl TranslucentShadowMap {
 
     /// [`path_inside`](Self::path_inside) and the light of `x`'s own texel.
     pub fn lit_path_inside(&self, x: Vec3) -> Option<(f32, Vec4)> {
+        self.lit_path_inside_with(x, 0.0).map(|(path, light)| (path.max(0.0), light))
+    }
+
+    /// [`lit_path_inside`](Self::lit_path_inside), `x` taken as inside up to `before_entry`
+    /// texel widths in front of where the light enters, the path signed (negative in front).
+    fn lit_path_inside_with(&self, x: Vec3, before_entry: f32) -> Option<(f32, Vec4)> {
         let (at, depth) = self.frame.place(x, self.resolution);
         if !depth.is_finite() {
             return None;
@@ -309,21 +317,35 @@ impl TranslucentShadowMap {
         let (s, t) = (f.x - x0 as f32, f.y - y0 as f32);
         let corners = [self.depths(x0, y0).0, self.depths(x0 + 1, y0).0, self.depths(x0, y0 + 1).0, self.depths(x0 + 1, y0 + 1).0];
         let own = self.index(at.x.floor() as i64, at.y.floor() as i64);
+        // A texel inside the object's outline that no sample covered: the nearest covered of
+        // the four about `x`, so that the march does not stop in the object's middle.
+        let own = if self.near[own].is_finite() {
+            own
+        } else {
+            [(x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1)]
+                .into_iter()
+                .map(|(a, b)| (self.index(a, b), Vec2::new(a as f32, b as f32) + 0.5))
+                .filter(|&(k, _)| self.near[k].is_finite())
+                .min_by(|a, b| a.1.distance_squared(at).total_cmp(&b.1.distance_squared(at)))
+                .map_or(own, |(k, _)| k)
+        };
         let (own_near, far) = (self.near[own], self.far[own]);
         let near = if corners.iter().all(|c| c.is_finite()) {
             (corners[0] * (1.0 - s) + corners[1] * s) * (1.0 - t) + (corners[2] * (1.0 - s) + corners[3] * s) * t
         } else {
             own_near
         };
-        // A texel's width of slack either side: the pixels marched from lie on the surface the
-        // map's texels and planes only approach.
+        // A texel's width of slack past where the light leaves: the pixels marched from lie on
+        // the surface the map's texels and planes only approach. In front of where it enters,
+        // `before_entry` texels (`marched_single_scattering` takes none below a surface that
+        // does not face the light, and any below one that does, with the tangent plane's path).
         let texel = self.texel_width_at(depth);
-        (near.is_finite() && depth >= near - texel && depth <= far + texel).then(|| {
+        (near.is_finite() && depth >= near - before_entry * texel && depth <= far + texel).then(|| {
             // From a point, the light spreads on inside as outside (index-matched): its
             // irradiance at the entry times (entry distance / distance)².
             let spread = if self.frame.perspective && depth > near { (near / depth).powi(2) } else { 1.0 };
             let light = self.light[own];
-            ((depth - near).max(0.0), (light.truncate() * spread).extend(light.w))
+            (depth - near, (light.truncate() * spread).extend(light.w))
         })
     }
 
@@ -397,12 +419,37 @@ impl From<TranslucentShadowMap> for LightMaps {
 }
 
 impl LightMaps {
+    /// Under a surface that faces the light, the light's path inside per unit length marched
+    /// from its point `x` along `into`: `μ/μ₀` under its tangent plane (`μ = −into·n`, `μ₀`
+    /// the light's cosine on it, `n` the unit outward `normal`). Near where light enters at a
+    /// grazing angle a texel's entry depth is off by its width over `tan θ₀` (0.17 mm texels
+    /// on the bunny: up to a millimetre), where the tangent plane is exact at the surface and
+    /// an upper bound below a convex one. `None` where the surface faces away or the map does
+    /// not see `x` lit through the object's first stretch (beyond its first exit): light that
+    /// crossed another part of the object first, an ear's shadow on the head.
+    pub fn half_space_bound(&self, x: Vec3, normal: Vec3, into: Vec3) -> Option<f32> {
+        let face = self.face_of(x)?;
+        let travel = if face.frame.perspective { (x - face.frame.origin).try_normalize()? } else { face.frame.travel };
+        let (mu0, mu) = (normal.dot(-travel), -into.dot(normal));
+        (mu0 > 1e-3 && mu > 0.0 && face.lit_path_inside_with(x, f32::INFINITY).is_some()).then(|| mu / mu0)
+    }
+
     /// [`TranslucentShadowMap::lit_path_inside`] in the map that sees `x`: the one, or the
     /// cube face `x` lies in from the light.
     pub fn lit_path_inside(&self, x: Vec3) -> Option<(f32, Vec4)> {
+        self.lit_path_inside_with(x, 0.0).map(|(path, light)| (path.max(0.0), light))
+    }
+
+    /// [`TranslucentShadowMap::lit_path_inside_with`] in the map that sees `x`.
+    fn lit_path_inside_with(&self, x: Vec3, before_entry: f32) -> Option<(f32, Vec4)> {
+        self.face_of(x)?.lit_path_inside_with(x, before_entry)
+    }
+
+    /// The map that sees `x`: the one, or the cube face `x` lies in from the light.
+    fn face_of(&self, x: Vec3) -> Option<&TranslucentShadowMap> {
         match self.faces.as_slice() {
-            [one] => one.lit_path_inside(x),
-            faces @ [first, ..] if faces.len() == 6 => faces[cube_face(x - first.frame.origin)].lit_path_inside(x),
+            [one] => Some(one),
+            faces @ [first, ..] if faces.len() == 6 => Some(&faces[cube_face(x - first.frame.origin)]),
             _ => None,
         }
     }
@@ -441,7 +488,9 @@ pub fn optical_depth_quantile(k: u32, depths: u32) -> f32 {
 /// unit direction it travels into the object), lit by the light `map` is of:
 /// `α/(4π) ∫ e^{−τ} E e^{−σt s ℓ(τ)} dτ` over the optical depth `τ` along the ray where it is
 /// inside the object as `map` sees it, `ℓ` the light's path inside
-/// ([`LightMaps::lit_path_inside`]), `E` and `s` its texel's light and path scale
+/// ([`LightMaps::lit_path_inside`]; under a surface of unit outward `normal` that faces the
+/// light, at most the tangent plane's, [`LightMaps::half_space_bound`]), `E` and `s` its
+/// texel's light and path scale
 /// (1 until [`TranslucentShadowMap::light_texels`]: unit irradiance, index-matched). `depths` depths a channel
 /// ([`optical_depth_quantile`]); `alpha` the single-scattering albedo and `sigma_t` the extinction per world unit.
 pub fn marched_single_scattering(
@@ -449,6 +498,7 @@ pub fn marched_single_scattering(
     alpha: Vec3,
     sigma_t: Vec3,
     x: Vec3,
+    normal: Vec3,
     into: Vec3,
     depths: u32,
 ) -> Vec3 {
@@ -456,6 +506,12 @@ pub fn marched_single_scattering(
     if depths == 0 || into == Vec3::ZERO {
         return Vec3::ZERO;
     }
+    let bound = map.half_space_bound(x, normal, into);
+    // Under a lit surface a point in front of the map's entry takes the tangent plane's path
+    // (the entry of a texel at a grazing angle lies up to millimetres deep); elsewhere it is
+    // outside: taken as inside, with the light unattenuated, it was a bright speck (a texel's
+    // slack there: the bunny's skin lit from behind 0.1436 → 0.1514, `docs/translucent.md`).
+    let before_entry = if bound.is_some() { f32::INFINITY } else { 0.0 };
     Vec3::from_array(std::array::from_fn(|c| {
         if !(sigma_t[c] > 0.0) {
             return 0.0;
@@ -465,8 +521,14 @@ pub fn marched_single_scattering(
             let t = optical_depth_quantile(k, depths) / sigma_t[c];
             // Once the ray has left the object, nothing further along it scatters: what lies
             // beyond may be air between two parts in one of the light's columns.
-            match map.lit_path_inside(x + into * t) {
+            match map.lit_path_inside_with(x + into * t, before_entry) {
                 Some((path, light)) => {
+                    // In front of the map's entry under a lit surface: the tangent plane's.
+                    let path = match bound {
+                        Some(per_length) if path < 0.0 => t * per_length,
+                        Some(per_length) => path.min(t * per_length),
+                        None => path.max(0.0),
+                    };
                     sum += light[c] * (-sigma_t[c] * path * light.w).exp();
                     entered = true;
                 }
@@ -583,7 +645,7 @@ impl MarchedObject {
         let exit = (1.0 - super::diffusion::fresnel_reflectance(mu as f64, eta as f64) as f32) / (eta * eta);
         self.maps
             .iter()
-            .map(|map| marched_single_scattering(map, alpha, sigma_t, x, into, PLUGIN_DEPTHS))
+            .map(|map| marched_single_scattering(map, alpha, sigma_t, x, n, into, PLUGIN_DEPTHS))
             .sum::<Vec3>()
             * exit
     }

@@ -18,9 +18,11 @@
 // through the boundary, T(μ)/η².
 const MARCHED_DEPTHS: u32 = 16u;
 
-// `TranslucentShadowMap::lit_path_inside`: the light's path inside to `p` in map `m` and
-// its own texel's light (the path's scale in w); `inside` false before the entry or beyond
-// the first exit by more than a texel, or off the object.
+// `TranslucentShadowMap::lit_path_inside_with`: the light's path inside to `p` in map `m`
+// (negative in front of the entry) and its own texel's light (the path's scale in w);
+// `inside` false more than `before_entry` texels in front of the entry or beyond the first
+// exit by more than a texel, or off the object. An uncovered own texel takes the nearest
+// covered of the four about `p`.
 struct LitPath {
     inside: bool,
     path: f32,
@@ -31,7 +33,7 @@ fn map_entry(h: TranslucentMaps, m: u32, x: i32, y: i32) -> f32 {
     return translucent_map_depth(translucent_depths[2u * u32(translucent_texel(h, m, x, y, true))]);
 }
 
-fn lit_path_inside(h: TranslucentMaps, m: u32, f: TranslucentFrame, p: vec3<f32>) -> LitPath {
+fn lit_path_inside(h: TranslucentMaps, m: u32, f: TranslucentFrame, p: vec3<f32>, before_entry: f32) -> LitPath {
     var lit: LitPath;
     let place = translucent_place(f, p, h.resolution);
     if !place.on {
@@ -43,15 +45,27 @@ fn lit_path_inside(h: TranslucentMaps, m: u32, f: TranslucentFrame, p: vec3<f32>
     let t = place.at - 0.5 - floor(place.at - 0.5);
     let corners = vec4(map_entry(h, m, c.x, c.y), map_entry(h, m, c.x + 1, c.y),
                        map_entry(h, m, c.x, c.y + 1), map_entry(h, m, c.x + 1, c.y + 1));
-    let own = vec2<i32>(floor(place.at));
+    var own = vec2<i32>(floor(place.at));
+    if !(translucent_map_depth(translucent_depths[2u * u32(translucent_texel(h, m, own.x, own.y, true))]) < 3.0e38) {
+        // The nearest covered corner, first of equals in the CPU twin's order.
+        var best = 3.0e38;
+        for (var j = 0; j < 4; j++) {
+            let corner = c + vec2(j & 1, j >> 1u);
+            let d = distance(vec2<f32>(corner) + 0.5, place.at);
+            if corners[j] < 3.0e38 && d * d < best {
+                best = d * d;
+                own = corner;
+            }
+        }
+    }
     let k = u32(translucent_texel(h, m, own.x, own.y, true));
     var near = translucent_map_depth(translucent_depths[2u * k]);
     let far = translucent_map_depth(translucent_depths[2u * k + 1u]);
     if all(corners < vec4(3.0e38)) {
         near = mix(mix(corners.x, corners.y, t.x), mix(corners.z, corners.w, t.x), t.y);
     }
-    lit.inside = near < 3.0e38 && place.depth >= near - texel && place.depth <= far + texel;
-    lit.path = max(place.depth - near, 0.0);
+    lit.inside = near < 3.0e38 && place.depth >= near - before_entry * texel && place.depth <= far + texel;
+    lit.path = place.depth - near;
     lit.light = translucent_maps[translucent_texel_light(h, k)];
     // From a point, the light spreads on inside as outside (index-matched): its irradiance at
     // the entry times (entry distance / distance)².
@@ -95,6 +109,27 @@ fn marched_single_scattering(object: i32, x: vec3<f32>, n: vec3<f32>, towards: v
             continue;
         }
         let first_frame = map_frame(h, first);
+        // `LightMaps::half_space_bound`: under a surface facing the light, the path per unit
+        // length marched is at most μ/μ₀, the tangent plane's.
+        var m0 = first;
+        var f0 = first_frame;
+        if faces == 6u {
+            m0 = first + cube_face(x - first_frame.origin);
+            f0 = map_frame(h, m0);
+        }
+        var travel = f0.travel;
+        if f0.perspective {
+            travel = normalize(x - f0.origin);
+        }
+        let mu0 = dot(n, -travel);
+        let mu_in = -dot(into, n);
+        var bound = -1.0;
+        if mu0 > 1e-3 && mu_in > 0.0 && lit_path_inside(h, m0, f0, x, 1.0e30).inside {
+            bound = mu_in / mu0;
+        }
+        // Under a lit surface a point in front of the map's entry takes the tangent plane's
+        // path; elsewhere it is outside.
+        let before_entry = select(0.0, 1.0e30, bound >= 0.0);
         for (var c = 0u; c < 3u; c++) {
             if !(sigma_t[c] > 0.0) {
                 continue;
@@ -111,9 +146,13 @@ fn marched_single_scattering(object: i32, x: vec3<f32>, n: vec3<f32>, towards: v
                     m = first + cube_face(p - first_frame.origin);
                     f = map_frame(h, m);
                 }
-                let lit = lit_path_inside(h, m, f, p);
+                let lit = lit_path_inside(h, m, f, p, before_entry);
                 if lit.inside {
-                    sum += lit.light[c] * exp(-sigma_t[c] * lit.path * lit.light.w);
+                    var path = max(lit.path, 0.0);
+                    if bound >= 0.0 {
+                        path = select(min(lit.path, depth * bound), depth * bound, lit.path < 0.0);
+                    }
+                    sum += lit.light[c] * exp(-sigma_t[c] * path * lit.light.w);
                     entered = true;
                 } else if entered {
                     // Once the ray has left the object, what lies beyond may be air.
