@@ -3,7 +3,8 @@
 //! factors' reciprocity, energy in a closed box and the iteration against a dense solve
 //! ([`energy`]), media and the random walks ([`media`]), the cache and the gather's grid
 //! ([`cache_and_gather`]), the beam table ([`beam_table`]), the translucent shadow map and
-//! single scattering marched against it ([`shadow_map`]).
+//! single scattering marched against it ([`shadow_map`]), the solve in an object's shape and
+//! the laws light leaves a patch by ([`shape_and_exits`]).
 
 mod beam_table;
 mod cache_and_gather;
@@ -13,6 +14,7 @@ mod media;
 mod patches;
 mod profiles;
 mod shadow_map;
+mod shape_and_exits;
 
 use bevy::prelude::*;
 use std::f64::consts::PI;
