@@ -45,8 +45,10 @@ fn lit_path_inside(h: TranslucentMaps, m: u32, f: TranslucentFrame, p: vec3<f32>
     let t = place.at - 0.5 - floor(place.at - 0.5);
     let corners = vec4(map_entry(h, m, c.x, c.y), map_entry(h, m, c.x + 1, c.y),
                        map_entry(h, m, c.x, c.y + 1), map_entry(h, m, c.x + 1, c.y + 1));
-    var own = vec2<i32>(floor(place.at));
-    if !(translucent_map_depth(translucent_depths[2u * u32(translucent_texel(h, m, own.x, own.y, true))]) < 3.0e38) {
+    let own = vec2<i32>(floor(place.at));
+    var k = u32(translucent_texel(h, m, own.x, own.y, true));
+    var near = translucent_map_depth(translucent_depths[2u * k]);
+    if !(near < 3.0e38) {
         // The nearest covered corner, first of equals in the CPU twin's order.
         var best = 3.0e38;
         for (var j = 0; j < 4; j++) {
@@ -54,12 +56,11 @@ fn lit_path_inside(h: TranslucentMaps, m: u32, f: TranslucentFrame, p: vec3<f32>
             let d = distance(vec2<f32>(corner) + 0.5, place.at);
             if corners[j] < 3.0e38 && d * d < best {
                 best = d * d;
-                own = corner;
+                k = u32(translucent_texel(h, m, corner.x, corner.y, true));
+                near = corners[j];
             }
         }
     }
-    let k = u32(translucent_texel(h, m, own.x, own.y, true));
-    var near = translucent_map_depth(translucent_depths[2u * k]);
     let far = translucent_map_depth(translucent_depths[2u * k + 1u]);
     if all(corners < vec4(3.0e38)) {
         near = mix(mix(corners.x, corners.y, t.x), mix(corners.z, corners.w, t.x), t.y);
@@ -79,6 +80,21 @@ fn map_frame(h: TranslucentMaps, m: u32) -> TranslucentFrame {
     let at = translucent_frame_at(h, m);
     return translucent_frame_of(translucent_maps[at], translucent_maps[at + 1u], translucent_maps[at + 2u],
                                 translucent_maps[at + 3u]);
+}
+
+// A light's map that sees `p`: its one, or the cube face `p` lies in from the light
+// (`LightMaps::face_of`).
+struct MapFace {
+    m: u32,
+    f: TranslucentFrame,
+}
+
+fn map_face(h: TranslucentMaps, first: u32, first_frame: TranslucentFrame, faces: u32, p: vec3<f32>) -> MapFace {
+    if faces == 6u {
+        let m = first + cube_face(p - first_frame.origin);
+        return MapFace(m, map_frame(h, m));
+    }
+    return MapFace(first, first_frame);
 }
 
 // At the pixel's world point `x` of unit normal `n`, seen along the unit `towards` at exit
@@ -111,20 +127,15 @@ fn marched_single_scattering(object: i32, x: vec3<f32>, n: vec3<f32>, towards: v
         let first_frame = map_frame(h, first);
         // `LightMaps::half_space_bound`: under a surface facing the light, the path per unit
         // length marched is at most μ/μ₀, the tangent plane's.
-        var m0 = first;
-        var f0 = first_frame;
-        if faces == 6u {
-            m0 = first + cube_face(x - first_frame.origin);
-            f0 = map_frame(h, m0);
-        }
-        var travel = f0.travel;
-        if f0.perspective {
-            travel = normalize(x - f0.origin);
+        let at_x = map_face(h, first, first_frame, faces, x);
+        var travel = at_x.f.travel;
+        if at_x.f.perspective {
+            travel = normalize(x - at_x.f.origin);
         }
         let mu0 = dot(n, -travel);
         let mu_in = -dot(into, n);
         var bound = -1.0;
-        if mu0 > 1e-3 && mu_in > 0.0 && lit_path_inside(h, m0, f0, x, 1.0e30).inside {
+        if mu0 > 1e-3 && mu_in > 0.0 && lit_path_inside(h, at_x.m, at_x.f, x, 1.0e30).inside {
             bound = mu_in / mu0;
         }
         // Under a lit surface a point in front of the map's entry takes the tangent plane's
@@ -140,13 +151,8 @@ fn marched_single_scattering(object: i32, x: vec3<f32>, n: vec3<f32>, towards: v
                 // `optical_depth_quantile`.
                 let depth = -log(1.0 - (f32(k) + 0.5) / f32(MARCHED_DEPTHS)) / sigma_t[c];
                 let p = x + into * depth;
-                var m = first;
-                var f = first_frame;
-                if faces == 6u {
-                    m = first + cube_face(p - first_frame.origin);
-                    f = map_frame(h, m);
-                }
-                let lit = lit_path_inside(h, m, f, p, before_entry);
+                let at_p = map_face(h, first, first_frame, faces, p);
+                let lit = lit_path_inside(h, at_p.m, at_p.f, p, before_entry);
                 if lit.inside {
                     var path = max(lit.path, 0.0);
                     if bound >= 0.0 {
