@@ -320,7 +320,8 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
                 walks: cli.walks.unwrap_or(BeamTableSettings::default().walks),
                 late_walks: cli.late_walks.unwrap_or(BeamTableSettings::default().late_walks),
                 far_splits: cli.far_splits.unwrap_or(BeamTableSettings::default().far_splits),
-                last_order: cli.beam_orders.map_or(16, |(_, last)| last),
+                last_order: cli.beam_orders.map_or(BeamTableSettings::default().last_order, |(_, last)| last),
+                max_last_order: cli.max_last_order.unwrap_or(BeamTableSettings::default().max_last_order),
                 exit_directions: cli.exit_axis == Axis::Lobe,
                 single_scattering_to_pixels: !cli.single_scattering_in_table,
                 seed: cli.table_seed,
@@ -333,11 +334,18 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
                     // the table (`law_gives_single_scattering`; rows before it lack it);
                     // `_lateheld`: the late light held to the light still inside (rows
                     // before it lack it).
-                    "_beamtable{cosines}x{azimuths}_bilinear_pastterminator_lateheld_walks{}{}_late{}_orders{}{}{}",
+                    "_beamtable{cosines}x{azimuths}_bilinear_pastterminator_lateheld_walks{}{}_late{}_orders{}{}{}{}",
                     table.walks,
                     if table.far_splits > 1 { format!("_far{}", table.far_splits) } else { String::new() },
                     table.late_walks,
                     table.last_order,
+                    // `upto<most>`: walks in a barely absorbing medium go on past the last
+                    // order (`BeamTableSettings::max_last_order`; rows before it lack it).
+                    if table.max_last_order > table.last_order {
+                        format!("upto{}", table.max_last_order)
+                    } else {
+                        String::new()
+                    },
                     if table.seed == 0 { String::new() } else { format!("_seed{}", table.seed) },
                     match (table.single_scattering_to_pixels, cli.marched_single_scattering) {
                         (false, _) => String::new(),

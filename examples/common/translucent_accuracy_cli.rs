@@ -107,6 +107,13 @@ pub struct Cli {
     /// default the plugin's; 1: none). Method suffix `_far<n>` when above 1
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub far_splits: Option<u32>,
+    /// With `--scattering beam-table`: the most scatterings a walk takes in a medium that
+    /// loses less than half its light to absorption within the last order (16, or LAST of
+    /// `--beam-orders`): it walks on until half would be lost
+    /// (`BeamTableSettings::max_last_order`; default the plugin's; the last order: every
+    /// medium stops there). Method suffix `_orders<last>upto<most>` when above the last order
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub max_last_order: Option<u32>,
     /// With `--scattering beam-table`: offset its walks' seeds (`BeamTableSettings::seed`; 0
     /// the documented tables). Runs over a few seeds show what a variant must beat: one seed
     /// moves the figures by ~±0.005 from the front. Method suffix `_seed<n>` when not 0

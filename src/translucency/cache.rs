@@ -17,7 +17,8 @@ use super::{
     transport::{EnergyTransport, PatchSurface, SparseMatrix, TransportReport, TransportSettings},
 };
 
-const MAGIC: &[u8; 8] = b"BMSTRN08";
+/// The file format's tag (09: the beam table's settings hold `max_last_order`).
+const MAGIC: &[u8; 8] = b"BMSTRN09";
 
 /// FNV-1a, 64 bits: the cache's key and the plugin's change signatures.
 #[derive(Clone, Copy)]
@@ -49,8 +50,9 @@ impl Hash {
 /// longer slip out through a surface on flights under 0.1 mm in a scene in metres; 7: the
 /// late light's walks scaled by `(ℓ/h)²`, patches per square transport mean free path,
 /// `beam_table::build::late_walks_for`; 8: a clustered shape solve collocated at each
-/// cluster's area-weighted centre).
-const REVISION: u32 = 8;
+/// cluster's area-weighted centre; 9: walks in a medium that barely absorbs go on past
+/// `last_order`, `BeamTableSettings::max_last_order`).
+const REVISION: u32 = 9;
 
 /// The cache key of a scene: its objects (world-space positions, indices, surface), the
 /// patch budget, the transport settings, the crate's version and [`REVISION`].
@@ -268,7 +270,7 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
                 // The two flags share one word (bit 0 the exit directions, bit 1 single
                 // scattering left to the pixels): files written before bit 1 read as before.
                 let flags = u32::from(s.exit_directions) | u32::from(s.single_scattering_to_pixels) << 1;
-                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order, flags, s.seed, s.far_splits])?;
+                w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order, flags, s.seed, s.far_splits, s.max_last_order])?;
                 w.u32s(&t.slots)?;
                 w.f32s(t.media.iter().flat_map(|m| m.to_array()).collect::<Vec<_>>().into_iter())?;
                 w.f32s(t.late_share.iter().flat_map(|v| v.to_array()).collect::<Vec<_>>().into_iter())?;
@@ -413,7 +415,7 @@ pub fn load(path: &Path) -> io::Result<(Patches, EnergyTransport)> {
 /// The beam table [`save`] wrote after the transport, checked against `n` patches.
 fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<BeamTable>> {
     let settings = r.u32s()?;
-    let [cosines, azimuths, walks, late_walks, last_order, flags, seed, far_splits] = settings[..] else {
+    let [cosines, azimuths, walks, late_walks, last_order, flags, seed, far_splits, max_last_order] = settings[..] else {
         return if settings.is_empty() { Ok(None) } else { Err(invalid("beam table settings")) };
     };
     let settings = BeamTableSettings {
@@ -423,6 +425,7 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
         late_walks,
         far_splits,
         last_order,
+        max_last_order,
         exit_directions: flags & 1 != 0,
         single_scattering_to_pixels: flags & 2 != 0,
         seed,

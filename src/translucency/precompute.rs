@@ -149,8 +149,8 @@ pub(crate) fn run_precompute(
             settings.transport.flow_law_takes_all as u32 as f32,
         ]),
         // The beam table's settings (none: all zero).
-        hash_f32s(settings.transport.beam_table.map_or([0.0; 9], |t| {
-            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order, t.seed, t.max_patches, marches(&settings, &t) as u32, t.far_splits]
+        hash_f32s(settings.transport.beam_table.map_or([0.0; 10], |t| {
+            [t.cosines, t.azimuths, t.walks, t.late_walks, t.last_order, t.seed, t.max_patches, marches(&settings, &t) as u32, t.far_splits, t.max_last_order]
                 .map(|v| v as f32)
         })),
     ];

@@ -254,7 +254,7 @@ impl BeamTable {
                     .iter()
                     .map(|s| EntryPoint { position: s.position, normal: s.normal, area: s.area })
                     .collect(),
-                last_order: settings.last_order,
+                last_order: settings.last_order_for(&medium),
                 far_split: FarSplit {
                     beyond: lobe_source_distance(patches, &source_depths, j),
                     into: settings.far_splits,

@@ -574,3 +574,32 @@ fn the_late_lights_walks_scale_with_the_patches_in_a_square_mean_free_path() {
         assert_eq!(late_walks_for(3072, h, l), 3072, "h {h}, ℓ {l}");
     }
 }
+
+/// Walks go on past `last_order` in a medium that barely absorbs (`last_order_for`): until
+/// half the light would be absorbed at the highest single-scattering albedo, held within
+/// `last_order` – `max_last_order`. Skin's red halves in 16 scatterings (α 0.9585), so skin
+/// keeps the 16 its figures were measured at; marble, skin2 and a medium that does not absorb
+/// (Spectralon) take the most; ketchup, which halves sooner, the least; a `max_last_order`
+/// below `last_order` is `last_order`.
+#[test]
+fn walks_in_a_barely_absorbing_medium_go_on_until_half_their_light_is_absorbed() {
+    use crate::translucency::TranslucentPreset as P;
+    let settings = BeamTableSettings::default();
+    assert_eq!((settings.last_order, settings.max_last_order), (16, 32));
+    let order = |preset: P| settings.last_order_for(&preset.medium());
+    assert_eq!(order(P::Skin1), 16);
+    assert_eq!(order(P::Ketchup), 16);
+    for preset in [P::Marble, P::Skin2, P::Spectralon, P::Wholemilk] {
+        assert_eq!(order(preset), 32, "{preset:?}");
+    }
+    // α 0.98 halves in 34.3 scatterings: 34 under a cap of 64.
+    let medium = crate::translucency::TranslucentMedium {
+        absorption: Vec3::splat(0.02),
+        reduced_scattering: Vec3::splat(0.98),
+        ..P::Marble.medium()
+    };
+    assert_eq!(BeamTableSettings { max_last_order: 64, ..settings }.last_order_for(&medium), 34);
+    assert_eq!(settings.last_order_for(&medium), 32);
+    let capped_below = BeamTableSettings { max_last_order: 4, ..settings };
+    assert_eq!(capped_below.last_order_for(&P::Marble.medium()), 16);
+}
