@@ -71,6 +71,10 @@ struct Cli {
     /// plugin's)
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
     walks: Option<u32>,
+    /// With `--beam-table`: how many walks each beam walk becomes far from its entry
+    /// (`BeamTableSettings::far_splits`; default the plugin's)
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
+    far_splits: Option<u32>,
     /// Also turn the spot this many frames by 0.75° each about the vertical through the
     /// objects (the `translucent` example's swing at 60 frames a second) and report on stderr
     /// each frame's products and distance from the converged exitance, warm-started from the
@@ -168,7 +172,11 @@ iterations,solve_ms,threads,shadow_ray_injection_ms";
                 &surfaces,
                 &rays,
                 &transport.scattering,
-                BeamTableSettings { walks: cli.walks.unwrap_or(BeamTableSettings::default().walks), ..default() },
+                BeamTableSettings {
+                    walks: cli.walks.unwrap_or(BeamTableSettings::default().walks),
+                    far_splits: cli.far_splits.unwrap_or(BeamTableSettings::default().far_splits),
+                    ..default()
+                },
                 None,
             );
             let entries = table.early.entries() + table.late.entries();

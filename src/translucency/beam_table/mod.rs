@@ -112,18 +112,20 @@ impl Default for BeamTableSettings {
     /// 4 × 8 directions (measured as close as 6 × 12 on the bunny and the ball; with each
     /// beam spread over four of them, 3 × 6 took the bunny's skin past 0.08 in relative L1
     /// with one seed of three: `docs/translucent.md`), 256 walks shared by the channels, each
-    /// split in 4 once two patch sizes from its entry, and 3072 late walks (against 384
-    /// unsplit walks before: the back-lit skin ball 0.141 → 0.112 in relative L1 over three
-    /// seeds, the bunny's 0.160 → 0.152, the rest within their noise, the 20 k room's table
-    /// built 30 % faster), the 17th scattering on (from the 9th the back-lit bunny's skin
-    /// went 0.286 → 0.316).
+    /// split in 16 once two patch sizes from its entry (in 4, the back-lit skin ball scored
+    /// 0.098 in relative L1 over three seeds at 1000 patches, 0.075 in 16; the rest moved
+    /// within ±0.003; the ball's precompute at 4000 patches 1.15× as long, the 20 k room's
+    /// table, whose patches few walks outgrow, about as long), and 3072 late walks (against
+    /// 384 unsplit walks before: the back-lit skin ball 0.141 → 0.112, the bunny's 0.160 →
+    /// 0.152, the 20 k room's table built 30 % faster), the 17th scattering on (from the 9th
+    /// the back-lit bunny's skin went 0.286 → 0.316).
     fn default() -> Self {
         Self {
             cosines: 4,
             azimuths: 8,
             walks: 256,
             late_walks: 3072,
-            far_splits: 4,
+            far_splits: 16,
             last_order: 16,
             // Skin's red halves in 16 scatterings, marble's (0.999) in ~700: 32 took the
             // marble torus from behind 0.0979 → 0.0798 at 4000 patches (seed 0, against one
