@@ -158,14 +158,12 @@ impl BeamTableSettings {
     pub fn last_order_for(&self, medium: &super::medium::TranslucentMedium) -> u32 {
         let most = self.max_last_order.max(self.last_order);
         let albedo = medium.single_scattering_albedo().into_iter().fold(0.0f64, f64::max);
-        let halving = 0.5f64.ln() / albedo.ln();
-        if halving.is_finite() && halving > 0.0 {
-            (halving.round().min(most as f64) as u32).clamp(self.last_order, most)
-        } else if albedo >= 1.0 {
-            most
-        } else {
-            self.last_order
+        if albedo >= 1.0 {
+            return most;
         }
+        // `as` saturates: a huge count takes `most`, and the −0 of no scattering (or a NaN)
+        // the least.
+        ((0.5f64.ln() / albedo.ln()).round() as u32).clamp(self.last_order, most)
     }
 
     /// Why these settings cannot build a table, if they cannot.

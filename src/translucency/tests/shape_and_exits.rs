@@ -4,6 +4,15 @@
 
 use super::*;
 use super::profiles::h_by_iteration;
+use crate::translucency::shape_diffusion::{DipoleChannel, SHAPE_SOURCE_DEPTH};
+
+/// An object's profile as its shape's solve takes it (the scaled dipole, sources at
+/// `SHAPE_SOURCE_DEPTH`), and its dipole in channel `c`.
+fn shape_profile(medium: &TranslucentMedium, c: usize) -> (DiffusionProfile, DipoleChannel) {
+    let profile = DiffusionProfile::with_source_depth(medium, DiffusionKernel::ScaledDipole, SHAPE_SOURCE_DEPTH);
+    let channel = profile.dipole_channels().unwrap()[c];
+    (profile, channel)
+}
 
 /// Solved in its shape (`shape_diffusion`), a plate of the medium splits the light entering
 /// its top face between the top and the bottom as random walks through the slab do: a box
@@ -18,9 +27,7 @@ use super::profiles::h_by_iteration;
 #[test]
 fn solved_in_its_shape_a_plate_splits_light_as_walks_through_the_slab_do() {
     use crate::translucency::random_walk::slab_exits;
-    use crate::translucency::shape_diffusion::{
-        SHAPE_SOURCE_DEPTH, ShapePatch, boundary_correction,
-    };
+    use crate::translucency::shape_diffusion::{ShapePatch, boundary_correction};
     use bevy::math::DVec3;
     // (medium, thickness mm, channel, solved ÷ walks, oriented dipole alone ÷ walks), measured.
     let cases = [
@@ -72,12 +79,7 @@ fn solved_in_its_shape_a_plate_splits_light_as_walks_through_the_slab_do() {
                 }
             }
         }
-        let profile = DiffusionProfile::with_source_depth(
-            &medium,
-            DiffusionKernel::ScaledDipole,
-            SHAPE_SOURCE_DEPTH,
-        );
-        let channel = profile.dipole_channels().unwrap()[c];
+        let (profile, channel) = shape_profile(&medium, c);
         let correction = boundary_correction(&patches, channel).unwrap();
         let n = patches.len();
         // The entry: the top patch nearest the centre.
@@ -311,9 +313,7 @@ fn an_exit_lobe_has_the_mean_it_was_fitted_to_and_keeps_its_exitance() {
 /// as before: 1.4 % / 2.0 % and 6.3 % / 9.1 %.)
 #[test]
 fn a_correction_solved_on_clusters_carries_the_full_solves_light_across_a_ball() {
-    use crate::translucency::shape_diffusion::{
-        SHAPE_SOURCE_DEPTH, ShapeClusters, ShapePatch, boundary_correction,
-    };
+    use crate::translucency::shape_diffusion::{ShapeClusters, ShapePatch, boundary_correction};
     use bevy::math::DVec3;
     let (n, radius) = (800usize, 10.0f64);
     let golden = PI * (3.0 - 5f64.sqrt());
@@ -332,12 +332,7 @@ fn a_correction_solved_on_clusters_carries_the_full_solves_light_across_a_ball()
     assert!((200..=400).contains(&m), "{m} clusters");
     for (preset, c) in [(TranslucentPreset::Skin1, 0), (TranslucentPreset::Marble, 0)] {
         let medium = TranslucentMedium { index_of_refraction: 1.0, ..preset.medium() };
-        let profile = DiffusionProfile::with_source_depth(
-            &medium,
-            DiffusionKernel::ScaledDipole,
-            SHAPE_SOURCE_DEPTH,
-        );
-        let channel = profile.dipole_channels().unwrap()[c];
+        let (_, channel) = shape_profile(&medium, c);
         let full = boundary_correction(&patches, channel).unwrap();
         let coarse = boundary_correction(&clusters.patches, channel).unwrap();
         let (mut worst_far, mut worst_pattern) = (0.0f64, 0.0f64);
