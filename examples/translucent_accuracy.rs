@@ -352,9 +352,11 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
                         (true, true) => "_ssmarched".into(),
                         // `_d<depths>`: the plugin's depths a channel (rows without it: 64);
                         // `_tangentbound`: the path under a lit surface at most its tangent
-                        // plane's (`LightMaps::half_space_bound`; rows before it lack it).
+                        // plane's (`LightMaps::half_space_bound`; rows before it lack it);
+                        // `_fitted`: each map fitted to its object's extent
+                        // (`MapFrame::fitted_to`; rows before it took the bounding sphere).
                         (true, false) => format!(
-                            "_ssmarched_tsm{}_d{PLUGIN_DEPTHS}_tangentbound",
+                            "_ssmarched_tsm{}_d{PLUGIN_DEPTHS}_tangentbound_fitted",
                             cli.translucent_shadow_map.unwrap_or(PLUGIN_RESOLUTION)
                         ),
                     }

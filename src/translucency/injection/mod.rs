@@ -29,7 +29,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{
     diffusion::{IncidenceWeight, diffuse_single_scattering_shape, single_scattering_shape},
-    translucent_shadow_map::{MapFrame, MarchedMedium, PLUGIN_RESOLUTION, object_bounds},
+    translucent_shadow_map::{MapFit, MapFrame, MarchedMedium, PLUGIN_RESOLUTION, object_bounds},
     gather::{TranslucencyCamera, TranslucencyGpu},
     iteration::{GpuTransport, compute_pipeline, packed_buffers_layout, specialized_compute_pipeline},
     patches::Patches,
@@ -175,6 +175,8 @@ struct TranslucentMaps {
     head: Vec<[f32; 4]>,
     /// Per slot (object with maps), its object and the sphere its maps see.
     slots: Vec<(u32, Vec3, f32)>,
+    /// Per slot, what its maps are fitted to ([`MapFrame::fitted_to`]).
+    fits: Vec<MapFit>,
     /// The most samples a slot's range holds: the splats' workgroups.
     most_slot_samples: u32,
     /// The maps the lights written last have (one a light and slot, six for a cube).
@@ -202,6 +204,7 @@ impl TranslucentMaps {
         let objects = marched.len();
         let mut head = vec![[0.0f32; 4]; 2 + 2 * objects];
         let mut slots = Vec::new();
+        let mut fits = Vec::new();
         // Each marched object's samples, and the range of the scene's samples that holds them
         // (the patches are grouped by object: the range is theirs alone), in one pass.
         let mut samples = vec![Vec::new(); objects];
@@ -225,6 +228,7 @@ impl TranslucentMaps {
             head[2 + 2 * object] = medium.sigma_t.extend(slots.len() as f32).to_array();
             head[3 + 2 * object] = medium.alpha.extend(medium.eta).to_array();
             slots.push((object as u32, bounds.0, bounds.1));
+            fits.push(MapFit::of(&samples[object]));
         }
         head[0] = [objects as f32, slots.len() as f32, PLUGIN_RESOLUTION as f32, 0.0];
         // Sample indices as floats: exact below 2²⁴, and the budget's 200 000 patches have
@@ -246,7 +250,7 @@ impl TranslucentMaps {
         let capacity = (head.len() as u64, 0);
         let (maps, depths) = Self::buffers(device, capacity);
         let bind_group = Self::bind_group(device, &layout, &maps, &depths);
-        Self { head, slots, most_slot_samples, maps_written: 0, cubes: (0, 0), capacity, maps, depths, bind_group, layout }
+        Self { head, slots, fits, most_slot_samples, maps_written: 0, cubes: (0, 0), capacity, maps, depths, bind_group, layout }
     }
 
     /// The maps' buffers for `vec4s` of `translucent_maps` and `maps` maps' depths.
@@ -285,11 +289,11 @@ impl TranslucentMaps {
         let mut frames: Vec<[f32; 4]> = Vec::new();
         let (mut cubes, mut beyond) = (0, 0);
         for (l, light) in lights[..taken].iter().enumerate() {
-            for &(object, centre, radius) in &self.slots {
-                let mut faces = MapFrame::frames_towards(light, centre, radius);
+            for (&(object, centre, radius), fit) in self.slots.iter().zip(&self.fits) {
+                let mut faces = MapFrame::frames_fitted(light, centre, radius, fit);
                 if faces.len() > 1 {
                     if cubes == MAX_CUBE_MAPS {
-                        faces = MapFrame::towards(light, centre, radius).into_iter().collect();
+                        faces = MapFrame::towards(light, centre, radius).map(|f| f.fitted_to(fit)).into_iter().collect();
                         beyond += 1;
                     } else {
                         cubes += 1;

@@ -279,3 +279,112 @@ fn a_maps_frame_follows_its_light() {
     // Behind a perspective map's light: off the map.
     assert_eq!(f.place(Vec3::new(0.0, 5.0, 0.0), 256).1, f32::INFINITY);
 }
+
+/// An object's maps fitted to its own extent across the light (`MapFrame::fitted_to`): a
+/// cube's samples (their mean at its centre, so its bounding sphere's radius is `√3/2` of
+/// its side) seen along a face's normal fill a square of half its side: the fitted
+/// orthographic map is 0.5 + the splats' reach wide against the sphere's 0.88 (measured
+/// 0.61 of it), its centre moved to the middle of the cube's outline (here where it was)
+/// and for a cube shifted off the samples' mean (a lump on one side) as far as the outline
+/// moved; a point light's map in perspective narrows to the cube's widest point about its
+/// axis. Every sample's splat lands inside the fitted map, for a fit of the samples and of
+/// the grid cells standing in for more than 32 768 of them. A ball's fit is its sphere's
+/// (never wider); a cube of six maps is left as it is; no points, or a point behind a
+/// perspective map's light, keep the sphere's frame.
+#[test]
+fn a_maps_frame_is_fitted_to_its_objects_extent() {
+    use crate::translucency::{
+        PatchLight,
+        patches::PatchSample,
+        translucent_shadow_map::{MapFit, MapFrame, object_bounds},
+    };
+    // Samples over a unit cube's faces (plus an optional lump of them at one corner), `n` a
+    // side a face, each a square piece's area.
+    let cube = |n: usize, lump: bool| -> Vec<PatchSample> {
+        let mut samples = Vec::new();
+        let area = 1.0 / (n * n) as f32;
+        for axis in 0..3 {
+            for side in [-0.5f32, 0.5] {
+                for i in 0..n {
+                    for j in 0..n {
+                        let (a, b) = ((i as f32 + 0.5) / n as f32 - 0.5, (j as f32 + 0.5) / n as f32 - 0.5);
+                        let mut p = [a, b, a];
+                        p[axis] = side;
+                        p[(axis + 1) % 3] = a;
+                        p[(axis + 2) % 3] = b;
+                        let mut normal = Vec3::ZERO;
+                        normal[axis] = side.signum();
+                        samples.push(PatchSample { position: Vec3::from_array(p), normal, area });
+                    }
+                }
+            }
+        }
+        if lump {
+            // Many samples near one corner pull the mean (the sphere's centre) off the cube's.
+            samples.extend((0..4000).map(|k| PatchSample {
+                position: Vec3::new(0.5, 0.5 - 0.2 * (k % 40) as f32 / 40.0, 0.5 - 0.2 * (k / 40) as f32 / 100.0),
+                normal: Vec3::X,
+                area: 1e-5,
+            }));
+        }
+        samples
+    };
+    let directional = PatchLight::Directional { direction: Vec3::NEG_Y, illuminance: Vec3::ONE };
+    let point = PatchLight::Point { position: Vec3::new(0.0, 6.0, 0.0), intensity: Vec3::ONE, range: 100.0 };
+    let covers = |frame: &MapFrame, samples: &[PatchSample]| {
+        samples.iter().all(|s| {
+            let reach = 1.5 * (s.area / std::f32::consts::PI).sqrt() * 0.999;
+            let (at, _) = frame.place(s.position, 256);
+            let texel = 2.0 * frame.width / 256.0 * if frame.perspective { (s.position - frame.origin).length() } else { 1.0 };
+            let r = reach / texel;
+            at.x - r >= 0.0 && at.y - r >= 0.0 && at.x + r <= 256.0 && at.y + r <= 256.0
+        })
+    };
+    for (n, lump) in [(24, false), (80, false), (24, true)] {
+        let samples = cube(n, lump);
+        let fit = MapFit::of(&samples);
+        assert_eq!(fit.points().len() < samples.len(), samples.len() > 32_768, "{n}: a grid past 32 768 samples");
+        let (centre, radius) = object_bounds(&samples).expect("bounds");
+        let sphere = MapFrame::towards(&directional, centre, radius).expect("a frame");
+        let fitted = sphere.fitted_to(&fit);
+        let splat = 1.5 * (1.0 / (n * n) as f32 / std::f32::consts::PI).sqrt();
+        eprintln!("{n} a side{}: fitted {} against the sphere's {} ({:.3})", if lump { ", a lump" } else { "" }, fitted.width, sphere.width, fitted.width / sphere.width);
+        assert!(fitted.width <= sphere.width && fitted.width >= 0.5 * 1.02, "{fitted:?}");
+        if !lump && n < 80 {
+            assert!((fitted.width - (0.5 + splat) * 1.02).abs() < 1e-4, "{fitted:?}");
+        }
+        // Depth is along the light from the same plane; across, the outline's middle (within
+        // a cell's half-diagonal across where cells stand in for the samples: 1/48 of a side).
+        let moved = fitted.origin - centre;
+        let off = if fit.points().len() < samples.len() { 0.75 / 48.0 } else { 2e-3 };
+        assert!(moved.dot(fitted.travel).abs() < 1e-5 && Vec2::new(fitted.origin.x, fitted.origin.z).length() < off, "{fitted:?} about {centre}");
+        assert!(covers(&fitted, &samples), "{n}: a splat off the fitted map");
+        let perspective = MapFrame::towards(&point, centre, radius).expect("a frame");
+        let narrowed = perspective.fitted_to(&fit);
+        assert!(narrowed.perspective && narrowed.width < 0.8 * perspective.width && narrowed.origin == perspective.origin, "{narrowed:?}");
+        assert!(covers(&narrowed, &samples), "{n}: a splat off the fitted perspective map");
+        assert_eq!(MapFrame::frames_fitted(&directional, centre, radius, &fit), vec![fitted]);
+    }
+    // A ball: the square about its outline is its sphere's disc and more, so the sphere holds.
+    let ball: Vec<PatchSample> = (0..2000)
+        .map(|k| {
+            let z = 1.0 - 2.0 * (k as f32 + 0.5) / 2000.0;
+            let phi = k as f32 * 2.399_963;
+            let p = Vec3::new((1.0 - z * z).sqrt() * phi.cos(), z, (1.0 - z * z).sqrt() * phi.sin());
+            PatchSample { position: p, normal: p, area: 4.0 * std::f32::consts::PI / 2000.0 }
+        })
+        .collect();
+    let (centre, radius) = object_bounds(&ball).expect("bounds");
+    let sphere = MapFrame::towards(&directional, centre, radius).expect("a frame");
+    assert_eq!(sphere.fitted_to(&MapFit::of(&ball)), sphere);
+    // A cube of maps about a light inside the bounds, no points, a point behind the light.
+    let inside = PatchLight::Point { position: Vec3::new(0.1, 0.0, 0.0), intensity: Vec3::ONE, range: 10.0 };
+    let samples = cube(24, false);
+    let fit = MapFit::of(&samples);
+    assert_eq!(MapFrame::frames_fitted(&inside, Vec3::ZERO, 0.9, &fit), MapFrame::frames_towards(&inside, Vec3::ZERO, 0.9));
+    assert_eq!(sphere.fitted_to(&MapFit::of(&[])), sphere);
+    let behind = MapFrame::towards(&PatchLight::Point { position: Vec3::new(0.0, 0.2, 0.0), intensity: Vec3::ONE, range: 10.0 }, Vec3::new(0.0, -2.0, 0.0), 1.0)
+        .expect("a frame");
+    assert!(behind.perspective);
+    assert_eq!(behind.fitted_to(&fit), behind, "points beside the light");
+}
