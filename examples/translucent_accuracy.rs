@@ -114,9 +114,14 @@ fn main() {
     let (settings, gather, method, oracles) = method_of(&cli, shape);
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
+    // The plugin's pixels at `pixel_samples`² points a pixel: the centres of a finer view's.
+    let points = cli.pixel_samples;
+    let fine = (points > 1).then(|| {
+        if cli.pixels_on_mesh { ShapeView::on_mesh(shape, size * points) } else { ShapeView::new(shape, size * points) }
+    });
     for &budget in &cli.budgets {
-        let result = plugin_picture(
-            &view,
+        let mut result = plugin_picture(
+            fine.as_ref().unwrap_or(&view),
             medium,
             cli.oriented_dipole,
             &settings,
@@ -129,6 +134,9 @@ fn main() {
             },
             oracles,
         );
+        if points > 1 {
+            result.pixels = box_filtered(&result.pixels, size, points);
+        }
         let picture = &result.pixels;
         let scores = score(picture, &reference, &view);
         let rel_l1 = scores.rel_l1;
@@ -173,6 +181,21 @@ fn main() {
             translucent_accuracy_chart::draw_chart(&out, path).unwrap_or_else(|e| fail(e));
         }
     }
+}
+
+/// A `size`² picture from one of `size · points` a side: each pixel the mean of its
+/// `points`² (a box filter, as the references' film).
+fn box_filtered(fine: &[Vec3], size: u32, points: u32) -> Vec<Vec3> {
+    let side = size * points;
+    (0..size * size)
+        .map(|i| {
+            let (x, y) = (i % size, i / size);
+            let sum: Vec3 = (0..points * points)
+                .map(|k| fine[((y * points + k / points) * side + x * points + k % points) as usize])
+                .sum();
+            sum / (points * points) as f32
+        })
+        .collect()
 }
 
 /// The reference `cli` names, or else the path tracer's picture of the scene, rendered into
@@ -421,9 +444,10 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
     // the exit law.
     let centroid = if table && cli.exit_axis == Axis::Plugin { "_centroid" } else { "" };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{}{}",
         cli.kernel,
-        if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" }
+        if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" },
+        if cli.pixel_samples > 1 { format!("_px{}", cli.pixel_samples) } else { String::new() }
     )
     .to_lowercase();
     let oracles = Oracles {

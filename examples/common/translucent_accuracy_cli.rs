@@ -187,6 +187,11 @@ pub struct Cli {
     /// Picture width = height
     #[arg(long, default_value_t = 96, value_parser = clap::value_parser!(u32).range(8..=1024))]
     pub size: u32,
+    /// The plugin's picture averaged over N × N points a pixel (1: its centre), as the
+    /// references' box filter averages each pixel's area; which pixels are scored stays by
+    /// their centres. The documented figures take 1. Method suffix `_px<N>` above 1
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=8))]
+    pub pixel_samples: u32,
     /// Which renderer makes the reference (when rendered here): the light tracer (converged
     /// lit from any side) or Mitsuba's volumetric path tracer (fireflies lit from behind)
     #[arg(long, value_enum, default_value_t = Tracer::Light)]
