@@ -24,6 +24,11 @@ use super::{lights::PatchLight, medium::TranslucentMedium, patches::PatchSample,
 /// `inject.wgsl`: samples of ≤ h/2 sides do not tile as discs).
 const SPLAT_COVER: f32 = 1.5;
 
+/// How far from a sample its splat reaches (world units): [`SPLAT_COVER`] disc radii.
+fn splat_cover(s: &PatchSample) -> f32 {
+    SPLAT_COVER * (s.area.max(0.0) / std::f32::consts::PI).sqrt()
+}
+
 /// The widest splat in texels: a sample wider than this leaves gaps between its neighbours'
 /// splats (a map far finer than the patches; at 512² over the bunny a sample is ~8 texels).
 const MAX_SPLAT_TEXELS: f32 = 64.0;
@@ -307,7 +312,7 @@ impl TranslucentShadowMap {
     /// into `far` where deeper than `near`.
     fn splat_one(&mut self, s: &PatchSample, at: Vec2, depth: f32, entering: bool) {
         let res = self.resolution as usize;
-        let cover = SPLAT_COVER * (s.area.max(0.0) / std::f32::consts::PI).sqrt();
+        let cover = splat_cover(s);
         let reach = (cover / self.texel_width_at(depth)).min(MAX_SPLAT_TEXELS);
         let own = (at.x.floor() as i64, at.y.floor() as i64);
         let (lo, hi) = ((at - reach).floor(), (at + reach).floor());
@@ -673,7 +678,7 @@ impl MapFit {
     pub fn of(samples: &[PatchSample]) -> Self {
         let splat = samples
             .iter()
-            .map(|s| SPLAT_COVER * (s.area.max(0.0) / std::f32::consts::PI).sqrt())
+            .map(splat_cover)
             .filter(|r| r.is_finite())
             .fold(0.0, f32::max);
         let positions = samples.iter().map(|s| s.position).filter(|p| p.is_finite());
@@ -699,11 +704,6 @@ impl MapFit {
     /// The points a frame is fitted to.
     pub fn points(&self) -> &[Vec3] {
         &self.points
-    }
-
-    /// How far past [`points`](Self::points) the object's splats reach.
-    pub fn margin(&self) -> f32 {
-        self.margin
     }
 }
 
