@@ -73,7 +73,7 @@ use bevy_mesostructure::translucency::{
 };
 use translucent_accuracy_cli::{Axis, Cli, Gather, Kernel, Late, Medium, Scattering, ShapeArg, Tracer, check_combinations, fail};
 use translucent_accuracy_scene::{
-    ExitAxis, FOV_Y, FRONT_LIGHT, LateLight, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
+    ExitAxis, FOV_Y, FRONT_LIGHT, Floor, LateLight, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
     ShapeView, plugin_picture, score,
 };
 
@@ -105,13 +105,16 @@ fn main() {
         format!("back{eta_suffix}")
     } else {
         format!("front{eta_suffix}")
-    } + &cli.point_light.map_or(String::new(), |d| format!("_point{d}"));
+    } + &cli.point_light.map_or(String::new(), |d| format!("_point{d}"))
+        + &cli.floor.map_or(String::new(), |a| format!("_floor{}", cli.floor_albedo_in_reference.unwrap_or(a)));
     let name = format!("{:?}", cli.medium).to_lowercase();
     let size = cli.size;
     let view = if cli.pixels_on_mesh { ShapeView::on_mesh(shape, size) } else { ShapeView::new(shape, size) };
     let reference = reference_picture(&cli, shape, &view, medium, light, &lighting, &name);
 
     let (settings, gather, method, oracles) = method_of(&cli, shape);
+    // A floor the plugin leaves black under the reference's grey one: what the bounce is worth.
+    let method = if cli.floor == Some(0.0) { method + "_floorblack" } else { method };
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
     // The plugin's pixels at `pixel_samples`² points a pixel: the centres of a finer view's.
@@ -133,6 +136,7 @@ fn main() {
                 None => SceneLighting::Directional(light),
             },
             oracles,
+            cli.floor,
         );
         if points > 1 {
             result.pixels = box_filtered(&result.pixels, size, points);
@@ -140,16 +144,23 @@ fn main() {
         let picture = &result.pixels;
         let scores = score(picture, &reference, &view);
         let rel_l1 = scores.rel_l1;
-        let flip = flip_mean(picture, &reference, size);
+        // Over the whole picture: with a floor the reference draws it and the harness does
+        // not, so FLIP is left out there.
+        let flip = (cli.floor.is_none()).then(|| flip_mean(picture, &reference, size));
+        let flip_text = flip.map_or(String::new(), |f| format!("{f:.4}"));
         let n = result.patches;
         let bytes = result.memory_bytes;
         let precompute = result.precompute_s;
+        if result.object_patches != n {
+            eprintln!("  {} of the {n} patches on the object", result.object_patches);
+        }
         eprintln!(
-            "{name} {budget}: {n} patches, rel L1 {rel_l1:.4}, FLIP {flip:.4}, mean ratio r {:.3} g {:.3} b {:.3}, {} iterations",
+            "{name} {budget}: {n} patches, rel L1 {rel_l1:.4}, FLIP {}, mean ratio r {:.3} g {:.3} b {:.3}, {} iterations",
+            if flip_text.is_empty() { "-" } else { &flip_text },
             scores.ratio[0], scores.ratio[1], scores.ratio[2], result.iterations
         );
         rows.push(format!(
-            "{}_{name}_{}_{lighting},{method},{budget},{n},{size},{size},,{precompute:.3},{:.3},{rel_l1:.4},{flip:.4},cpu oracle of the GPU passes",
+            "{}_{name}_{}_{lighting},{method},{budget},{n},{size},{size},,{precompute:.3},{:.3},{rel_l1:.4},{flip_text},cpu oracle of the GPU passes",
             shape.scene_name(),
             shape.size_name(),
             bytes as f32 / 1e6
@@ -217,7 +228,8 @@ fn reference_picture(
         // The light tracer takes a directional or a point light: a uniform environment is
         // Mitsuba's. It traces the ball (the sphere) only.
         let on_sphere = shape == Shape::Ball && !cli.pixels_on_mesh;
-        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && on_sphere;
+        // Nor a floor.
+        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && on_sphere && cli.floor.is_none();
         // Named by renderer and version: the first Mitsuba references (in metres, `volpath`)
         // were dark by Mitsuba's ray offsets (tools/translucent_reference.py says why).
         let (tool, renderer, samples) = if light_traced {
@@ -234,7 +246,11 @@ fn reference_picture(
             },
             samples.trim_start_matches("--spp=").trim_start_matches("--photons="),
             if cli.light.is_some() && !cli.uniform { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() },
-            if cli.uniform || cli.eta != 1.0 || cli.point_light.is_some() { format!("_{lighting}") } else { String::new() },
+            if cli.uniform || cli.eta != 1.0 || cli.point_light.is_some() || cli.floor.is_some() {
+                format!("_{lighting}")
+            } else {
+                String::new()
+            },
         ));
         if !path.exists() {
             let list = |v: Vec3| format!("{},{},{}", v.x, v.y, v.z);
@@ -267,6 +283,12 @@ fn reference_picture(
             }
             if let Some(distance) = cli.point_light {
                 command.arg(format!("--point-light={distance}"));
+            }
+            if let Some(albedo) = cli.floor {
+                let floor = Floor::under(&view.positions);
+                let c = floor.centre;
+                let albedo = cli.floor_albedo_in_reference.unwrap_or(albedo);
+                command.arg(format!("--floor={},{},{},{},{albedo}", c.x, c.y, c.z, floor.half));
             }
             eprintln!("rendering the reference: {command:?}");
             let start = Instant::now();
@@ -443,8 +465,11 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
     // area-weighted centres (before: at the member nearest it; the same below 2048), whatever
     // the exit law.
     let centroid = if table && cli.exit_axis == Axis::Plugin { "_centroid" } else { "" };
+    // `_bouncedown`: the exit law takes a patch's bounced light as its own, as its direct
+    // light (rows before it, and `--bounced-as-own false`, gave it out as light from elsewhere).
+    let bounced = if cli.bounced_as_own { "_bouncedown" } else { "" };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{}{}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{}{}",
         cli.kernel,
         if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" },
         if cli.pixel_samples > 1 { format!("_px{}", cli.pixel_samples) } else { String::new() }
@@ -455,6 +480,7 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
         single_scattering_law: cli.single_scattering_oracle,
         exit_axis,
         shadow_map: if cli.marched_single_scattering { None } else { Some(cli.translucent_shadow_map.unwrap_or(PLUGIN_RESOLUTION)) },
+        bounced_as_own: cli.bounced_as_own,
     };
     (settings, gather, method, oracles)
 }

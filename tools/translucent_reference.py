@@ -70,6 +70,9 @@ def main():
                         help="a uniform environment of radiance 1 instead of the light")
     parser.add_argument("--max-depth", type=int, default=-1,
                         help="longest path (2: single scattering alone; -1: unbounded)")
+    parser.add_argument("--floor", default=None, metavar="X,Y,Z,HALF,ALBEDO",
+                        help="a level square Lambertian floor centred at X,Y,Z (metres), HALF its "
+                             "half-side, of grey ALBEDO, facing up (the accuracy example's --floor)")
     parser.add_argument("--seed", type=int, default=0,
                         help="the sampler's seed (two renders of different seeds give the noise)")
     args = parser.parse_args()
@@ -85,6 +88,17 @@ def main():
         parser.error("--radius, --size and --spp must be positive")
     if args.point_light is not None and (not args.point_light > 0 or args.uniform):
         parser.error("--point-light takes a positive distance, and not with --uniform")
+
+    floor = None
+    if args.floor is not None:
+        try:
+            floor = [float(v) for v in args.floor.split(",")]
+        except ValueError:
+            floor = []
+        if len(floor) != 5 or not floor[3] > 0 or not 0 <= floor[4] <= 1:
+            parser.error("--floor takes X,Y,Z,HALF,ALBEDO: a positive half-side and an albedo in 0 - 1")
+        if args.uniform:
+            parser.error("--floor takes the directional or point light, not --uniform")
 
     import mitsuba as mi
 
@@ -122,6 +136,14 @@ def main():
                 "phase": {"type": "isotropic"},
             },
         },
+        **({"floor": {
+            "type": "rectangle",
+            # Mitsuba's rectangle spans [-1, 1]² in z = 0 facing +z: turned to face +y.
+            "to_world": mi.ScalarTransform4f().translate([mm * v for v in floor[:3]])
+            @ mi.ScalarTransform4f().rotate([1, 0, 0], -90)
+            @ mi.ScalarTransform4f().scale([mm * floor[3]] * 3),
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [floor[4]] * 3}},
+        }} if floor is not None else {}),
         **({"environment": {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}
            if args.uniform else
            {"sun": {"type": "directional", "direction": args.light,

@@ -149,6 +149,24 @@ pub struct Cli {
     /// `_point<distance>`
     #[arg(long, value_name = "DISTANCE")]
     pub point_light: Option<f32>,
+    /// A grey Lambertian floor of this albedo (0 – 1) under the object, 2 mm below its lowest
+    /// point, square, twice the object's widest extent across: light that leaves the object,
+    /// lights the floor and comes back, and the floor's light from the lamp, both carried by
+    /// the form factors (the object's pixels are scored; the floor's are not). `0`: the floor
+    /// is there for the reference but black in the plugin (what the bounce is worth). The
+    /// reference is Mitsuba's (`--tracer mitsuba`). Lighting suffix `_floor<albedo>` (and
+    /// method suffix `_floorblack` for `0`), with `--floor-albedo-in-reference`
+    #[arg(long, value_name = "ALBEDO")]
+    pub floor: Option<f32>,
+    /// The gather's exit law takes each translucent patch's irradiance direct and bounced as
+    /// its own light (the plugin's); `false`: its direct light alone, as before 2026-11-29,
+    /// when light bounced onto a patch left by the law of the table's flow. Method suffix
+    /// `_bouncedown` when on (rows without it were measured before)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub bounced_as_own: bool,
+    /// With `--floor 0`: the floor's albedo in the reference (the plugin's floor stays black)
+    #[arg(long, value_name = "ALBEDO")]
+    pub floor_albedo_in_reference: Option<f32>,
     /// The ball's pixels on its triangles (as the GPU's depth prepass puts them), not on the
     /// sphere its references are of: the march's maps are of the triangles too. Method suffix
     /// `_onmesh`
@@ -378,6 +396,22 @@ pub fn check_combinations(cli: &Cli, shape: Shape) {
     }
     if cli.uniform && cli.bevy {
         fail("--bevy fits Bevy's material under the directional light only (drop --uniform)".into());
+    }
+    for (option, albedo) in [("--floor", cli.floor), ("--floor-albedo-in-reference", cli.floor_albedo_in_reference)] {
+        if albedo.is_some_and(|a| !(0.0..=1.0).contains(&a)) {
+            fail(format!("{option} takes an albedo in 0 – 1, not {}", albedo.unwrap_or_default()));
+        }
+    }
+    if cli.floor_albedo_in_reference.is_some() && cli.floor != Some(0.0) {
+        fail("--floor-albedo-in-reference gives a floor the plugin leaves black: it needs --floor 0".into());
+    }
+    if cli.floor.is_some() {
+        if cli.uniform || cli.eta != 1.0 || cli.point_light.is_some() || cli.bevy || cli.pixel_samples > 1 {
+            fail("--floor takes the directional light on an index-matched object (drop --uniform, --eta, --point-light, --bevy, --pixel-samples)".into());
+        }
+        if !matches!(cli.scattering, Scattering::BeamTable | Scattering::Profile) || cli.marched_single_scattering {
+            fail("--floor takes --scattering beam-table or profile, marched against the plugin's maps".into());
+        }
     }
     if let Some(distance) = cli.point_light {
         if !(distance > 0.0 && distance.is_finite()) {

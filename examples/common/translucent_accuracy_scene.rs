@@ -329,7 +329,10 @@ fn interpolated_normals(hits: Vec<Option<PixelHit>>, positions: &[Vec3], indices
 pub struct ShapePicture {
     /// Linear radiance per pixel, row by row.
     pub pixels: Vec<Vec3>,
+    /// The scene's patches (the object's and the floor's).
     pub patches: usize,
+    /// The object's own.
+    pub object_patches: usize,
     /// Patches and transport, seconds.
     pub precompute_s: f32,
     /// The sparse matrices' bytes.
@@ -449,6 +452,11 @@ pub struct Oracles {
     /// map of this many texels a side (`MarchedObject`, the twin of the GPU's); `None`: by
     /// rays, the oracle.
     pub shadow_map: Option<u32>,
+    /// The gather's exit law takes each patch's irradiance direct and bounced as its own
+    /// light (the plugin's, since 2026-11-29); `false`: its direct light alone, so that light
+    /// bounced onto a translucent patch leaves by the law of light from elsewhere in the
+    /// object (the plugin before).
+    pub bounced_as_own: bool,
 }
 
 impl Oracles {
@@ -458,6 +466,7 @@ impl Oracles {
         single_scattering_law: false,
         exit_axis: ExitAxis::Plugin,
         shadow_map: Some(PLUGIN_RESOLUTION),
+        bounced_as_own: true,
     };
 }
 
@@ -480,8 +489,46 @@ pub enum ExitAxis {
     Lobe,
 }
 
+/// A square floor under an object (`--floor`): level, [`Floor::GAP`] below the object's
+/// lowest point, centred under its box, twice its widest extent across.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Floor {
+    /// Its centre (world units).
+    pub centre: Vec3,
+    /// Half its side.
+    pub half: f32,
+}
+
+impl Floor {
+    /// Between the object's lowest point and the floor: 2 mm, more than the gather's reach
+    /// from a patch of the object, so that no pixel of the object takes the floor's light.
+    pub const GAP: f32 = 0.002;
+
+    /// The floor under the object of `positions`.
+    pub fn under(positions: &[Vec3]) -> Self {
+        let (lo, hi) = positions
+            .iter()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let mid = (lo + hi) / 2.0;
+        Self {
+            centre: Vec3::new(mid.x, lo.y - Self::GAP, mid.z),
+            half: (hi - lo).max_element(),
+        }
+    }
+
+    /// Its two triangles, facing up.
+    pub fn triangles(&self) -> (Vec<Vec3>, Vec<u32>) {
+        let h = self.half;
+        let corners = [(-h, -h), (h, -h), (h, h), (-h, h)];
+        let positions = corners.iter().map(|&(x, z)| self.centre + Vec3::new(x, 0.0, z)).collect();
+        (positions, vec![0, 2, 1, 0, 3, 2])
+    }
+}
+
 /// The plugin's picture of `view`'s shape of `medium` lit by `lighting`, at `budget`
-/// patches, with `oracles` in place of its own stages.
+/// patches, with `oracles` in place of its own stages; over a Lambertian floor of albedo
+/// `floor` ([`Floor::under`] the shape) where given: patches of their own, the form factors
+/// carrying light between it and the object both ways.
 #[allow(clippy::too_many_arguments)]
 pub fn plugin_picture(
     view: &ShapeView,
@@ -492,16 +539,30 @@ pub fn plugin_picture(
     budget: u32,
     lighting: SceneLighting,
     oracles: Oracles,
+    floor: Option<f32>,
 ) -> ShapePicture {
-    let views = [PatchObject {
+    let (floor_positions, floor_indices) = Floor::under(&view.positions).triangles();
+    let mut views = vec![PatchObject {
         positions: &view.positions,
         indices: &view.indices,
     }];
-    let surfaces = [PatchSurface::Translucent {
+    let mut surfaces = vec![PatchSurface::Translucent {
         medium,
         world_units_per_mm: WORLD_UNITS_PER_MM,
         oriented_dipole,
     }];
+    if let Some(albedo) = floor {
+        views.push(PatchObject {
+            positions: &floor_positions,
+            indices: &floor_indices,
+        });
+        surfaces.push(PatchSurface::Opaque { albedo: Vec3::splat(albedo) });
+    }
+    // The object's patches and samples come first (patches are grouped by object).
+    let surface_albedo = |q: &bevy_mesostructure::translucency::Patch| match surfaces[q.object as usize] {
+        PatchSurface::Opaque { albedo } => albedo,
+        PatchSurface::Translucent { .. } => Vec3::ZERO,
+    };
     let (lights, ambient) = match lighting {
         SceneLighting::Directional(direction) => (
             vec![PatchLight::Directional {
@@ -604,6 +665,10 @@ pub fn plugin_picture(
                 .patches
                 .iter()
                 .map(|q| {
+                    // The floor's patches are opaque: the table walks the object's only.
+                    if q.object != 0 {
+                        return Vec::new();
+                    }
                     let Some(travel) = beam_of(q) else { return Vec::new() };
                     let weights = direction_weights(travel, q.normal, table_settings.cosines, table_settings.azimuths);
                     let mut bins: Vec<u32> = weights.into_iter().flatten().filter(|&(_, w)| w > 0.0).map(|(b, _)| b).collect();
@@ -645,7 +710,7 @@ pub fn plugin_picture(
         *e += ambient;
     }
     let solution = transport.solve_with(&direct, 1e-4, 256);
-    let albedo = vec![Vec3::ZERO; patches.patches.len()];
+    let albedo: Vec<Vec3> = patches.patches.iter().map(surface_albedo).collect();
     // The oracles of other axes keep the share `g` in the mode, as they were measured.
     let law_settings = TransportSettings {
         flow_law_takes_all: settings.flow_law_takes_all && matches!(oracles.exit_axis, ExitAxis::Plugin | ExitAxis::FlowAll),
@@ -669,7 +734,9 @@ pub fn plugin_picture(
     // With a map: the plugin's own march (`MarchedObject`, in the gather's twin), unshadowed
     // (one object).
     let marched_objects: Option<Vec<Option<MarchedObject>>> = marched.zip(oracles.shadow_map).map(|(_, resolution)| {
-        vec![Some(MarchedObject::new(&patches.samples, MarchedMedium::new(&medium, WORLD_UNITS_PER_MM), &lights, resolution, |_, _| 1.0))]
+        let object_patches = patches.patches.iter().take_while(|q| q.object == 0).count();
+        let object_samples = &patches.samples[..patches.sample_offsets[object_patches] as usize];
+        vec![Some(MarchedObject::new(object_samples, MarchedMedium::new(&medium, WORLD_UNITS_PER_MM), &lights, resolution, |_, _| 1.0))]
     });
     let pixels: Vec<Vec3> = view
         .hits
@@ -682,6 +749,7 @@ pub fn plugin_picture(
                     &albedo,
                     &exit_laws,
                     &direct.irradiance,
+                    if oracles.bounced_as_own { &solution.irradiance } else { &direct.irradiance },
                     &solution.exitance,
                     single.as_ref(),
                     marched_objects.as_deref(),
@@ -723,6 +791,7 @@ pub fn plugin_picture(
     ShapePicture {
         pixels,
         patches: n,
+        object_patches: patches.patches.iter().filter(|q| q.object == 0).count(),
         precompute_s,
         memory_bytes: 8 * (2 * (n + 1))
             + 8 * transport.form_factors.entries()

@@ -36,7 +36,8 @@ struct GatherParams {
     // the norms, the light from afar that leaves by them); `has_lobes` 0: none.
     lobes: u32,
     has_lobes: u32,
-    padding_x: u32,
+    // Per patch, its irradiance direct and bounced (the iteration's E): the exit law's own light.
+    irradiance: u32,
     padding_y: u32,
 }
 
@@ -110,11 +111,12 @@ fn single_scattering_radiance(alpha: vec3<f32>, eta_in: f32, e: vec3<f32>, mu0: 
 
 // `ExitLaw::factor_towards` (transport.rs) in one channel: the share `lobe_exitance / B`
 // leaves by the channel's exit lobe (`lobe`: axis and κ; `ExitLobe::factor`), the rest
-// `B' = B − lobe_exitance` by 1 + D (s − 1), D = g·clamp(1 − A E⁰/B'), s the deep law about
+// `B' = B − lobe_exitance` by 1 + D (s − 1), D = g·clamp(1 − A E/B'), E the patch's
+// irradiance direct and bounced (light bounced onto it enters as its direct light does), s the deep law about
 // the channel's `flow` where it has one (axis, 1/N), else about the normal
 // (`shape_about_normal`, `deep_exit_shape` at the pixel's exit cosine).
 fn exit_factor(law: vec4<f32>, flow: vec4<f32>, lobe: vec4<f32>, lobe_norm: f32, lobe_exitance: f32,
-               local_albedo: f32, eta: f32, b: f32, e0: f32, n: vec3<f32>, towards: vec3<f32>,
+               local_albedo: f32, eta: f32, b: f32, e: f32, n: vec3<f32>, towards: vec3<f32>,
                shape_about_normal: f32) -> f32 {
     var share = 0.0;
     if lobe_norm > 0.0 && b > 0.0 {
@@ -125,7 +127,7 @@ fn exit_factor(law: vec4<f32>, flow: vec4<f32>, lobe: vec4<f32>, lobe_norm: f32,
     if law.w <= 0.0 || rest <= 0.0 {
         return lobed + (1.0 - share);
     }
-    let deep = law.w * clamp(1.0 - local_albedo * e0 / rest, 0.0, 1.0);
+    let deep = law.w * clamp(1.0 - local_albedo * e / rest, 0.0, 1.0);
     var shape = shape_about_normal;
     if any(flow != vec4(0.0)) {
         shape = deep_exit_shape_about(law, eta, n, flow.xyz, towards) * flow.w;
@@ -227,6 +229,7 @@ fn add_patch(i: u32, s: Surface, acc: ptr<function, Gathered>) {
     }
     let b_i = vectors[params.exitance + i].rgb;
     let e0 = vectors[params.direct + i].rgb;
+    let received = vectors[params.irradiance + i].rgb;
     let eta = record.local_albedo.w;
     if any(vec3(record.law_r.w, record.law_g.w, record.law_b.w) > vec3(0.0))
         && !(all(record.law_r == (*acc).shape_key_r) && all(record.law_g == (*acc).shape_key_g)
@@ -246,11 +249,11 @@ fn add_patch(i: u32, s: Surface, acc: ptr<function, Gathered>) {
     let afar = patch_lobes(i, 4u);
     let law = vec3(
         exit_factor(record.law_r, patch_flow(i, 0u), patch_lobes(i, 0u), norms.r, afar.r,
-                    record.local_albedo.r, eta, b_i.r, e0.r, s.n, s.towards, shape.r),
+                    record.local_albedo.r, eta, b_i.r, received.r, s.n, s.towards, shape.r),
         exit_factor(record.law_g, patch_flow(i, 1u), patch_lobes(i, 1u), norms.g, afar.g,
-                    record.local_albedo.g, eta, b_i.g, e0.g, s.n, s.towards, shape.g),
+                    record.local_albedo.g, eta, b_i.g, received.g, s.n, s.towards, shape.g),
         exit_factor(record.law_b, patch_flow(i, 2u), patch_lobes(i, 2u), norms.b, afar.b,
-                    record.local_albedo.b, eta, b_i.b, e0.b, s.n, s.towards, shape.b),
+                    record.local_albedo.b, eta, b_i.b, received.b, s.n, s.towards, shape.b),
     );
     (*acc).sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) * law / 3.14159265358979;
     // Single scattering by the lit face (`BeamSingleScattering::radiance`): the patch's beams

@@ -46,8 +46,8 @@ struct GatherParams {
     has_flow: u32,
     lobes: u32,
     has_lobes: u32,
+    irradiance: u32,
     // A uniform's size is a multiple of 16 bytes.
-    padding_x: u32,
     padding_y: u32,
 }
 
@@ -283,7 +283,7 @@ fn gather_buffers(
         has_flow: u32::from(transport.flow_offset().is_some()),
         lobes: transport.lobes_offset().unwrap_or(0),
         has_lobes: u32::from(transport.lobes_offset().is_some()),
-        padding_x: 0,
+        irradiance: transport.irradiance_offset(),
         padding_y: 0,
     };
     let patch_buffer = device.create_buffer_with_data(&BufferInitDescriptor {

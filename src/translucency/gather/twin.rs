@@ -98,7 +98,8 @@ pub const MAX_GRID_LEVELS: usize = 8;
 /// The radiance the gather gives a point `x` with normal `n` (before the view's exposure) by
 /// `method` ([`GatherMethod`]): the patches within their reach `R`, weighted by
 /// `(1 − d²/R²)²` and by `smoothstep(0.3, 0.9, n·n_i)`, each giving `(B_i − ρ_i E⁰_i) / π`
-/// times its [`ExitLaw`] at the cosine towards `eye` —
+/// times its [`ExitLaw`] at the cosine towards `eye` for the light the patch `received` (its
+/// irradiance direct and bounced, [`TransportSolution::irradiance`](crate::translucency::transport::TransportSolution::irradiance)) —
 /// interpolated, or as photons of that exitance times the patch's area under a kernel of
 /// unit integral; `None` where no patch is near. With `marched` (per object; `None` on those
 /// without), the single scattering marched per pixel of the translucent object whose patch
@@ -111,6 +112,7 @@ pub fn gathered_radiance(
     albedo: &[Vec3],
     exit_laws: &[ExitLaw],
     direct: &[Vec3],
+    received: &[Vec3],
     exitance: &[Vec3],
     single: Option<&BeamSingleScattering>,
     marched: Option<&[Option<MarchedObject>]>,
@@ -138,8 +140,11 @@ pub fn gathered_radiance(
                 w *= 3.0 / (std::f32::consts::PI * r2) * p.area;
             }
             let law = exit_laws.get(i).copied().unwrap_or_default();
+            // Light bounced onto a translucent patch enters it as its direct light does: it
+            // leaves about where it entered, not by the law of the light that flowed from
+            // elsewhere in the object (a skin ball over a white floor: `docs/translucent.md`).
             let leaving = (exitance[i] - albedo[i] * direct[i]).max(Vec3::ZERO)
-                * law.factor_towards(exitance[i], direct[i], n, towards);
+                * law.factor_towards(exitance[i], received.get(i).copied().unwrap_or(direct[i]), n, towards);
             sum += w * leaving / std::f32::consts::PI;
             if let Some(single) = single {
                 sum += w * single.radiance(i, n, mu);

@@ -712,6 +712,13 @@ impl GpuTransport {
         (self.layout.direct, self.layout.exitance)
     }
 
+    /// Where each patch's irradiance `E` (direct and bounced, as the iteration leaves it)
+    /// starts in the vectors buffer (in `vec4<f32>`s): the gather's exit law takes it as the
+    /// patch's own light.
+    pub fn irradiance_offset(&self) -> u32 {
+        self.layout.irradiance
+    }
+
     /// Where the direct light's irradiance `E⁰` and exitance `S⁰` start in the vectors buffer
     /// (in `vec4<f32>`s): what the light injection writes.
     pub fn direct_offsets(&self) -> (u32, u32) {

@@ -103,9 +103,11 @@ pub struct ExitLaw {
 
 impl ExitLaw {
     /// The exit radiance over the Lambertian `B/π` at exit cosine `mu`, per channel, for
-    /// exitance `b` and direct irradiance `e0`: `1 + D (s(μ) − 1)`, with
-    /// `D = g · clamp(1 − A E⁰/B, 0, 1)` the share of `B` that came from elsewhere in the deep
-    /// field's mode (the same arithmetic as `gathered.wgsl`).
+    /// exitance `b` and irradiance `e0`: `1 + D (s(μ) − 1)`, with
+    /// `D = g · clamp(1 − A E/B, 0, 1)` the share of `B` that came from elsewhere in the deep
+    /// field's mode (the same arithmetic as `gathered.wgsl`). The gather passes the patch's
+    /// irradiance direct and bounced: light bounced onto a patch enters as its direct light
+    /// does, and leaves about where it entered.
     pub fn factor(&self, b: Vec3, e0: Vec3, mu: f32) -> Vec3 {
         Vec3::from_array(std::array::from_fn(|c| {
             self.channel_factor(c, b[c], e0[c], |law| super::diffusion::deep_exit_shape(law, self.eta, mu))
