@@ -166,7 +166,7 @@ fn main() {
             bytes as f32 / 1e6
         ));
         let path = PathBuf::from("out/translucent_accuracy")
-            .join(format!("plugin_{}_{name}_{lighting}_{method}_{budget}.exr", shape.scene_name()));
+            .join(picture_file_name(&format!("plugin_{}_{name}_{lighting}_{method}_{budget}", shape.scene_name())));
         save_picture(&path, &picture, &view);
     }
     if cli.bevy {
@@ -538,6 +538,19 @@ fn append_rows(out: &std::path::Path, header: &str, rows: &[String]) {
     if let Err(e) = written {
         fail(format!("cannot write {}: {e}", out.display()));
     }
+}
+
+/// `stem.exr`, or where `stem.scored.png` would pass a file system's 255 bytes a name, its
+/// first 200 bytes and a hash of the whole (the methods' names grow with their options).
+fn picture_file_name(stem: &str) -> String {
+    use std::hash::{Hash, Hasher};
+    if stem.len() + ".scored.png".len() <= 255 {
+        return format!("{stem}.exr");
+    }
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    stem.hash(&mut hasher);
+    let cut = (0..=200).rev().find(|&i| stem.is_char_boundary(i)).unwrap_or(0);
+    format!("{}_{:016x}.exr", &stem[..cut], hasher.finish())
 }
 
 /// Writes `picture` for a look (linear EXR) at `path`, and beside it (`….scored.png`) the
