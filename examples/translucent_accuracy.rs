@@ -167,7 +167,7 @@ fn main() {
         ));
         let path = PathBuf::from("out/translucent_accuracy")
             .join(picture_file_name(&format!("plugin_{}_{name}_{lighting}_{method}_{budget}", shape.scene_name())));
-        save_picture(&path, &picture, &view);
+        save_picture(&path, picture, &view);
     }
     if cli.bevy {
         let (best, transmission, thickness, colour) =
@@ -260,7 +260,7 @@ fn reference_picture(
                 Shape::Ball if on_sphere => format!("--radius={RADIUS}"),
                 _ => {
                     let obj = dir.join(format!("{}_{}.obj", shape.scene_name(), shape.size_name()));
-                    write_obj(&obj, &view).unwrap_or_else(|e| fail(format!("cannot write {}: {e}", obj.display())));
+                    write_obj(&obj, view).unwrap_or_else(|e| fail(format!("cannot write {}: {e}", obj.display())));
                     format!("--mesh={}", obj.display())
                 }
             };
