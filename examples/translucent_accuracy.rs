@@ -73,7 +73,7 @@ use bevy_mesostructure::translucency::{
 };
 use translucent_accuracy_cli::{Axis, Cli, Gather, Kernel, Late, Medium, Scattering, ShapeArg, Tracer, check_combinations, fail};
 use translucent_accuracy_scene::{
-    ExitAxis, FOV_Y, FRONT_LIGHT, Floor, LateLight, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
+    ExitAxis, FOV_Y, FRONT_LIGHT, Floor, LateLight, Occluder, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
     ShapeView, plugin_picture, score,
 };
 
@@ -106,10 +106,25 @@ fn main() {
     } else {
         format!("front{eta_suffix}")
     } + &cli.point_light.map_or(String::new(), |d| format!("_point{d}"))
-        + &cli.floor.map_or(String::new(), |a| format!("_floor{}", cli.floor_albedo_in_reference.unwrap_or(a)));
+        + &cli.floor.map_or(String::new(), |a| format!("_floor{}", cli.floor_albedo_in_reference.unwrap_or(a)))
+        + if cli.occluder { "_occluded" } else { "" };
     let name = format!("{:?}", cli.medium).to_lowercase();
     let size = cli.size;
-    let view = if cli.pixels_on_mesh { ShapeView::on_mesh(shape, size) } else { ShapeView::new(shape, size) };
+    let mut view = if cli.pixels_on_mesh { ShapeView::on_mesh(shape, size) } else { ShapeView::new(shape, size) };
+    let occluder = cli.occluder.then(|| Occluder::shading(&view.positions, light));
+    if let Some(plate) = occluder {
+        // Pixels the plate hides from the camera are not scored.
+        let eye = shape.eye();
+        for (scored, hit) in view.scored.iter_mut().zip(&view.hits) {
+            if let Some(hit) = hit {
+                let to = hit.point - eye;
+                if plate.hit(eye, to.normalize()).is_some_and(|t| t < to.length()) {
+                    *scored = false;
+                }
+            }
+        }
+    }
+    let view = view;
     let reference = reference_picture(&cli, shape, &view, medium, light, &lighting, &name);
 
     let (settings, gather, method, oracles) = method_of(&cli, shape);
@@ -137,6 +152,7 @@ fn main() {
             },
             oracles,
             cli.floor,
+            occluder,
         );
         if points > 1 {
             result.pixels = box_filtered(&result.pixels, size, points);
@@ -229,7 +245,7 @@ fn reference_picture(
         // Mitsuba's. It traces the ball (the sphere) only.
         let on_sphere = shape == Shape::Ball && !cli.pixels_on_mesh;
         // Nor a floor.
-        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && on_sphere && cli.floor.is_none();
+        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && on_sphere && cli.floor.is_none() && !cli.occluder;
         // Named by renderer and version: the first Mitsuba references (in metres, `volpath`)
         // were dark by Mitsuba's ray offsets (tools/translucent_reference.py says why).
         let (tool, renderer, samples) = if light_traced {
@@ -246,7 +262,7 @@ fn reference_picture(
             },
             samples.trim_start_matches("--spp=").trim_start_matches("--photons="),
             if cli.light.is_some() && !cli.uniform { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() },
-            if cli.uniform || cli.eta != 1.0 || cli.point_light.is_some() || cli.floor.is_some() {
+            if cli.uniform || cli.eta != 1.0 || cli.point_light.is_some() || cli.floor.is_some() || cli.occluder {
                 format!("_{lighting}")
             } else {
                 String::new()
@@ -289,6 +305,10 @@ fn reference_picture(
                 let c = floor.centre;
                 let albedo = cli.floor_albedo_in_reference.unwrap_or(albedo);
                 command.arg(format!("--floor={},{},{},{},{albedo}", c.x, c.y, c.z, floor.half));
+            }
+            if cli.occluder {
+                let Occluder { centre: c, u, v } = Occluder::shading(&view.positions, light);
+                command.arg(format!("--occluder={},{},{},{},{},{},{},{},{}", c.x, c.y, c.z, u.x, u.y, u.z, v.x, v.y, v.z));
             }
             eprintln!("rendering the reference: {command:?}");
             let start = Instant::now();

@@ -58,6 +58,15 @@ import sys
 from translucent_scene import add_scene_arguments, point_light_position
 
 
+def plate_matrix(plate, scale):
+    """The 4×4 matrix taking Mitsuba's rectangle onto the plate X,Y,Z,U,V (times `scale`)."""
+    c, u, v = plate[0:3], plate[3:6], plate[6:9]
+    n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+    length = sum(x * x for x in n) ** 0.5
+    n = [x / length for x in n]
+    return [[scale * u[i], scale * v[i], n[i], scale * c[i]] for i in range(3)] + [[0.0, 0.0, 0.0, 1.0]]
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_scene_arguments(parser)
@@ -73,6 +82,9 @@ def main():
     parser.add_argument("--floor", default=None, metavar="X,Y,Z,HALF,ALBEDO",
                         help="a level square Lambertian floor centred at X,Y,Z (metres), HALF its "
                              "half-side, of grey ALBEDO, facing up (the accuracy example's --floor)")
+    parser.add_argument("--occluder", default=None, metavar="X,Y,Z,UX,UY,UZ,VX,VY,VZ",
+                        help="a black square plate centred at X,Y,Z (metres) with half-axes U and V "
+                             "(the accuracy example's --occluder)")
     parser.add_argument("--seed", type=int, default=0,
                         help="the sampler's seed (two renders of different seeds give the noise)")
     args = parser.parse_args()
@@ -99,6 +111,15 @@ def main():
             parser.error("--floor takes X,Y,Z,HALF,ALBEDO: a positive half-side and an albedo in 0 - 1")
         if args.uniform:
             parser.error("--floor takes the directional or point light, not --uniform")
+
+    occluder = None
+    if args.occluder is not None:
+        try:
+            occluder = [float(v) for v in args.occluder.split(",")]
+        except ValueError:
+            occluder = []
+        if len(occluder) != 9:
+            parser.error("--occluder takes X,Y,Z,UX,UY,UZ,VX,VY,VZ")
 
     import mitsuba as mi
 
@@ -144,6 +165,12 @@ def main():
             @ mi.ScalarTransform4f().scale([mm * floor[3]] * 3),
             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [floor[4]] * 3}},
         }} if floor is not None else {}),
+        **({"occluder": {
+            "type": "rectangle",
+            # The rectangle's [-1, 1]² in z = 0 onto the plate: x along U, y along V.
+            "to_world": mi.ScalarTransform4f(plate_matrix(occluder, mm)),
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}},
+        }} if occluder is not None else {}),
         **({"environment": {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}
            if args.uniform else
            {"sun": {"type": "directional", "direction": args.light,

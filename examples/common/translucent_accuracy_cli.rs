@@ -164,6 +164,14 @@ pub struct Cli {
     /// `_bouncedown` when on (rows without it were measured before)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub bounced_as_own: bool,
+    /// A black square plate between the light and the object, facing the light, its edge on
+    /// the light's line through the object's centre: the object's upper half in its shadow,
+    /// the shadow's edge across its middle (light carried under the surface into the shadow).
+    /// The plate's patches shadow the transport as any `RadiosityReceiver` does; pixels it
+    /// hides are not scored. Directional light; the reference is Mitsuba's. Lighting suffix
+    /// `_occluded`
+    #[arg(long)]
+    pub occluder: bool,
     /// With `--floor 0`: the floor's albedo in the reference (the plugin's floor stays black)
     #[arg(long, value_name = "ALBEDO")]
     pub floor_albedo_in_reference: Option<f32>,
@@ -404,6 +412,12 @@ pub fn check_combinations(cli: &Cli, shape: Shape) {
     }
     if cli.floor_albedo_in_reference.is_some() && cli.floor != Some(0.0) {
         fail("--floor-albedo-in-reference gives a floor the plugin leaves black: it needs --floor 0".into());
+    }
+    if cli.occluder && (cli.uniform || cli.eta != 1.0 || cli.point_light.is_some() || cli.bevy || cli.pixel_samples > 1) {
+        fail("--occluder takes the directional light on an index-matched object (drop --uniform, --eta, --point-light, --bevy, --pixel-samples)".into());
+    }
+    if cli.occluder && cli.marched_single_scattering {
+        fail("--marched-single-scattering's rays see the object alone, not the occluder: drop one".into());
     }
     if cli.floor.is_some() {
         if cli.uniform || cli.eta != 1.0 || cli.point_light.is_some() || cli.bevy || cli.pixel_samples > 1 {

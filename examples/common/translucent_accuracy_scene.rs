@@ -525,6 +525,59 @@ impl Floor {
     }
 }
 
+/// A black square plate between a directional light and an object (`--occluder`), facing
+/// the light, twice the object's bounding radius from its centre, one edge on the light's
+/// line through that centre: the object's upper half (across the light) lies in its shadow,
+/// and the shadow's edge crosses the object's middle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Occluder {
+    /// Its centre (world units).
+    pub centre: Vec3,
+    /// Its half-axes: `u × v` faces the light.
+    pub u: Vec3,
+    pub v: Vec3,
+}
+
+impl Occluder {
+    /// The plate shading the upper half of the object of `positions` from a light travelling
+    /// along `travel`.
+    pub fn shading(positions: &[Vec3], travel: Vec3) -> Self {
+        let (lo, hi) = positions
+            .iter()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let centre = (lo + hi) / 2.0;
+        let radius = positions.iter().map(|p| p.distance(centre)).fold(0.0, f32::max);
+        let t = travel.normalize();
+        // Up across the light (x where the light falls straight down).
+        let up = (Vec3::Y - t * t.y).try_normalize().unwrap_or(Vec3::X);
+        let half = 2.0 * radius;
+        Self {
+            centre: centre - t * (2.0 * radius) + up * half,
+            u: up.cross(-t) * half,
+            v: up * half,
+        }
+    }
+
+    /// Its two triangles, facing the light.
+    pub fn triangles(&self) -> (Vec<Vec3>, Vec<u32>) {
+        let (c, u, v) = (self.centre, self.u, self.v);
+        (vec![c - u - v, c + u - v, c + u + v, c - u + v], vec![0, 1, 2, 0, 2, 3])
+    }
+
+    /// Where the ray from `origin` along the unit `direction` meets it, if it does.
+    pub fn hit(&self, origin: Vec3, direction: Vec3) -> Option<f32> {
+        let n = self.u.cross(self.v);
+        let facing = n.dot(direction);
+        if facing.abs() < 1e-12 {
+            return None;
+        }
+        let t = n.dot(self.centre - origin) / facing;
+        let d = origin + direction * t - self.centre;
+        (t > 0.0 && d.dot(self.u).abs() <= self.u.length_squared() && d.dot(self.v).abs() <= self.v.length_squared())
+            .then_some(t)
+    }
+}
+
 /// The plugin's picture of `view`'s shape of `medium` lit by `lighting`, at `budget`
 /// patches, with `oracles` in place of its own stages; over a Lambertian floor of albedo
 /// `floor` ([`Floor::under`] the shape) where given: patches of their own, the form factors
@@ -540,8 +593,10 @@ pub fn plugin_picture(
     lighting: SceneLighting,
     oracles: Oracles,
     floor: Option<f32>,
+    occluder: Option<Occluder>,
 ) -> ShapePicture {
     let (floor_positions, floor_indices) = Floor::under(&view.positions).triangles();
+    let (plate_positions, plate_indices) = occluder.map(|o| o.triangles()).unwrap_or_default();
     let mut views = vec![PatchObject {
         positions: &view.positions,
         indices: &view.indices,
@@ -557,6 +612,13 @@ pub fn plugin_picture(
             indices: &floor_indices,
         });
         surfaces.push(PatchSurface::Opaque { albedo: Vec3::splat(albedo) });
+    }
+    if occluder.is_some() {
+        views.push(PatchObject {
+            positions: &plate_positions,
+            indices: &plate_indices,
+        });
+        surfaces.push(PatchSurface::Opaque { albedo: Vec3::ZERO });
     }
     // The object's patches and samples come first (patches are grouped by object).
     let surface_albedo = |q: &bevy_mesostructure::translucency::Patch| match surfaces[q.object as usize] {
@@ -736,7 +798,17 @@ pub fn plugin_picture(
     let marched_objects: Option<Vec<Option<MarchedObject>>> = marched.zip(oracles.shadow_map).map(|(_, resolution)| {
         let object_patches = patches.patches.iter().take_while(|q| q.object == 0).count();
         let object_samples = &patches.samples[..patches.sample_offsets[object_patches] as usize];
-        vec![Some(MarchedObject::new(object_samples, MarchedMedium::new(&medium, WORLD_UNITS_PER_MM), &lights, resolution, |_, _| 1.0))]
+        // Each texel's light shadowed by the scene where an occluder can shadow it (as the
+        // GPU's injection map does), else unshadowed (one object). The entry is the object's
+        // first along the light's ray: lifted 1 mm towards the light, the ray is the same line.
+        let visible = |entry: Vec3, light: &PatchLight| match (occluder, light) {
+            (Some(_), PatchLight::Directional { direction, .. }) => {
+                let to_light = -direction.normalize_or_zero();
+                if rays.first_hit(entry + to_light * 1e-3, to_light).is_none() { 1.0 } else { 0.0 }
+            }
+            _ => 1.0,
+        };
+        vec![Some(MarchedObject::new(object_samples, MarchedMedium::new(&medium, WORLD_UNITS_PER_MM), &lights, resolution, visible))]
     });
     let pixels: Vec<Vec3> = view
         .hits

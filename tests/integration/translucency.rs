@@ -2159,6 +2159,7 @@ fn holds_as_documented(
         how,
         oracles,
         floor,
+        None,
     );
     let measured = translucent_accuracy_scene::score(&picture.pixels, reference, view);
     eprintln!(
