@@ -55,7 +55,7 @@ pixel), leaving the light that came through the medium.
 import argparse
 import sys
 
-from translucent_scene import add_scene_arguments, point_light_position
+from translucent_scene import add_scene_arguments, numbers, point_light_position
 
 
 def plate_matrix(plate, scale):
@@ -79,10 +79,10 @@ def main():
                         help="a uniform environment of radiance 1 instead of the light")
     parser.add_argument("--max-depth", type=int, default=-1,
                         help="longest path (2: single scattering alone; -1: unbounded)")
-    parser.add_argument("--floor", default=None, metavar="X,Y,Z,HALF,ALBEDO",
+    parser.add_argument("--floor", type=numbers(5), default=None, metavar="X,Y,Z,HALF,ALBEDO",
                         help="a level square Lambertian floor centred at X,Y,Z (metres), HALF its "
                              "half-side, of grey ALBEDO, facing up (the accuracy example's --floor)")
-    parser.add_argument("--occluder", default=None, metavar="X,Y,Z,UX,UY,UZ,VX,VY,VZ",
+    parser.add_argument("--occluder", type=numbers(9), default=None, metavar="X,Y,Z,UX,UY,UZ,VX,VY,VZ",
                         help="a black square plate centred at X,Y,Z (metres) with half-axes U and V "
                              "(the accuracy example's --occluder)")
     parser.add_argument("--seed", type=int, default=0,
@@ -101,25 +101,12 @@ def main():
     if args.point_light is not None and (not args.point_light > 0 or args.uniform):
         parser.error("--point-light takes a positive distance, and not with --uniform")
 
-    floor = None
-    if args.floor is not None:
-        try:
-            floor = [float(v) for v in args.floor.split(",")]
-        except ValueError:
-            floor = []
-        if len(floor) != 5 or not floor[3] > 0 or not 0 <= floor[4] <= 1:
+    floor, occluder = args.floor, args.occluder
+    if floor is not None:
+        if not floor[3] > 0 or not 0 <= floor[4] <= 1:
             parser.error("--floor takes X,Y,Z,HALF,ALBEDO: a positive half-side and an albedo in 0 - 1")
         if args.uniform:
             parser.error("--floor takes the directional or point light, not --uniform")
-
-    occluder = None
-    if args.occluder is not None:
-        try:
-            occluder = [float(v) for v in args.occluder.split(",")]
-        except ValueError:
-            occluder = []
-        if len(occluder) != 9:
-            parser.error("--occluder takes X,Y,Z,UX,UY,UZ,VX,VY,VZ")
 
     import mitsuba as mi
 

@@ -7,15 +7,20 @@ a perspective camera looking at it, one directional light (or a point light back
 import argparse
 
 
-def triple(text):
-    """Three comma-separated numbers."""
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not three comma-separated numbers")
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"{text!r} is not three comma-separated numbers")
-    return values
+def numbers(count, word=None):
+    """An argparse type: `count` comma-separated numbers (`word` names the count)."""
+    def parse(text):
+        try:
+            values = [float(v) for v in text.split(",")]
+        except ValueError:
+            values = []
+        if len(values) != count:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {word or count} comma-separated numbers")
+        return values
+    return parse
+
+
+triple = numbers(3, "three")
 
 
 def add_scene_arguments(parser):

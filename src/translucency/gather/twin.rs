@@ -144,7 +144,7 @@ pub fn gathered_radiance(
             // leaves about where it entered, not by the law of the light that flowed from
             // elsewhere in the object (a skin ball over a white floor: `docs/translucent.md`).
             let leaving = (exitance[i] - albedo[i] * direct[i]).max(Vec3::ZERO)
-                * law.factor_towards(exitance[i], received.get(i).copied().unwrap_or(direct[i]), n, towards);
+                * law.factor_towards(exitance[i], received[i], n, towards);
             sum += w * leaving / std::f32::consts::PI;
             if let Some(single) = single {
                 sum += w * single.radiance(i, n, mu);
