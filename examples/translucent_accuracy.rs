@@ -6,10 +6,12 @@
 //! is computed on the CPU with the same patches, transport, iteration and gather as the GPU
 //! passes (`translucency::gather::gathered_radiance`, the oracle the GPU tests hold the passes
 //! to: within 0.24/255 mean of it); the reference is a light tracer of the same scene
-//! (`tools/translucent_light_tracer.py`, numpy: converged lit from any side, no fireflies) or
-//! Mitsuba 3's volumetric path tracing (`tools/translucent_reference.py`; the two agree to
-//! 0.2 % in the mean, `docs/translucent.md`); the example runs them where `python3` has
-//! `numpy` and `mitsuba`, or reads one with `--reference`.
+//! (converged lit from any side, no fireflies: the ball's sphere by
+//! `tools/translucent_light_tracer.py`, numpy; a mesh's triangles — the bunny, the torus, the
+//! ball with `--pixels-on-mesh` — by `common/translucent_light_tracer.rs`, in this process) or
+//! Mitsuba 3's volumetric path tracing (`tools/translucent_reference.py`; they agree to
+//! 0.2 % in the mean where Mitsuba converges, `docs/translucent.md`); the example runs the
+//! Python ones where `python3` has `numpy` and `mitsuba`, or reads one with `--reference`.
 //!
 //! ```text
 //! cargo run --example translucent_accuracy -- [--shape ball|bunny|torus] [--medium skin1]
@@ -25,6 +27,7 @@
 //!     [--exit-axis plugin|normal|normal-all|flow-all|lobe] [--exit-lobes true|false]
 //!     [--point-light DISTANCE] [--pixels-on-mesh]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
+//!     [--tracer-seed 1] [--light-traced-part all|single|lambertian-exit]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
 //! ```
@@ -58,6 +61,8 @@ mod translucent_accuracy_cli;
 mod translucent_accuracy_scene;
 #[path = "common/translucent_bevy_fit.rs"]
 mod translucent_bevy_fit;
+#[path = "common/translucent_light_tracer.rs"]
+mod translucent_light_tracer;
 
 use std::{
     io::Write,
@@ -71,6 +76,7 @@ use bevy_mesostructure::translucency::{
     DiffusionKernel, GatherMethod, TranslucentMedium, TranslucentPreset, TransportSettings, beam_table::BeamTableSettings,
     random_walk::ScatteringOrders, translucent_shadow_map::{PLUGIN_DEPTHS, PLUGIN_RESOLUTION},
 };
+use translucent_light_tracer::{Part, Pinhole, Source, light_trace};
 use translucent_accuracy_cli::{Axis, Cli, Gather, Kernel, Late, Medium, Scattering, ShapeArg, Tracer, check_combinations, fail};
 use translucent_accuracy_scene::{
     ExitAxis, FOV_Y, FRONT_LIGHT, Floor, LateLight, Occluder, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
@@ -242,10 +248,51 @@ fn reference_picture(
         let dir = PathBuf::from("out/translucent_accuracy");
         std::fs::create_dir_all(&dir).unwrap_or_else(|e| fail(format!("cannot create {}: {e}", dir.display())));
         // The light tracer takes a directional or a point light: a uniform environment is
-        // Mitsuba's. It traces the ball (the sphere) only.
+        // Mitsuba's, and so are a floor and an occluder. The ball's (the sphere) is
+        // tools/translucent_light_tracer.py's, with a dielectric boundary if asked; a mesh's
+        // is translucent_light_tracer.rs's, index-matched.
         let on_sphere = shape == Shape::Ball && !cli.pixels_on_mesh;
-        // Nor a floor.
-        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && on_sphere && cli.floor.is_none() && !cli.occluder;
+        let light_traced = cli.tracer == Tracer::Light && !cli.uniform && cli.floor.is_none() && !cli.occluder;
+        if light_traced && !on_sphere {
+            if cli.eta != 1.0 {
+                fail("the mesh light tracer is index-matched: --eta above 1 takes the ball's sphere (drop --pixels-on-mesh)".into());
+            }
+            let path = dir.join(format!(
+                "reference_lighttraced-mesh{}_{}_{name}_{size}_{}_seed{}{}{}.exr",
+                match cli.light_traced_part {
+                    Part::All => "",
+                    Part::Single => "-single",
+                    Part::LambertianExit => "-lambertianexit",
+                },
+                if shape == Shape::Ball { "ballmesh" } else { shape.scene_name() },
+                cli.photons,
+                cli.tracer_seed,
+                if cli.light.is_some() { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() },
+                if cli.point_light.is_some() { format!("_{lighting}") } else { String::new() },
+            ));
+            if !path.exists() {
+                let source = match cli.point_light {
+                    Some(distance) => Source::Point(-light.normalize() * distance),
+                    None => Source::Directional(light),
+                };
+                let camera = Pinhole { eye: shape.eye(), fov_y: FOV_Y, size };
+                let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+                let start = Instant::now();
+                let traced =
+                    light_trace(&view.positions, &view.indices, &medium, source, cli.light_traced_part, camera, cli.photons as usize, cli.tracer_seed, threads);
+                let picture = image::Rgb32FImage::from_fn(size, size, |x, y| image::Rgb(traced.pixels[(y * size + x) as usize]));
+                picture.save(&path).unwrap_or_else(|e| fail(format!("cannot write {}: {e}", path.display())));
+                eprintln!(
+                    "light-traced the reference in {:.0} s: {} photons a channel, noise {:.4}, {} of {} crossings on the side the faces do not say",
+                    start.elapsed().as_secs_f32(),
+                    cli.photons,
+                    traced.noise,
+                    traced.side_disagreements,
+                    traced.crossings
+                );
+            }
+            return path;
+        }
         // Named by renderer and version: the first Mitsuba references (in metres, `volpath`)
         // were dark by Mitsuba's ray offsets (tools/translucent_reference.py says why).
         let (tool, renderer, samples) = if light_traced {

@@ -422,8 +422,9 @@ def main():
                         help="a uniform environment of radiance 1 instead of the light")
     args = parser.parse_args()
     if args.mesh is not None:
-        parser.error("the light tracer traces the ball only (--radius); a mesh is Mitsuba's "
-                     "(translucent_reference.py)")
+        parser.error("this light tracer traces the ball's sphere only (--radius); a mesh's is "
+                     "translucent_accuracy's (examples/common/translucent_light_tracer.rs) "
+                     "or Mitsuba's (translucent_reference.py)")
     if not 0.0 < args.connect_fraction <= 1.0:
         parser.error("--connect-fraction must lie in (0, 1]")
     if not 1.0 <= args.eta <= 3.0:

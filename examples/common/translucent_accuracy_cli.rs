@@ -7,6 +7,7 @@ use bevy::prelude::*;
 use bevy_mesostructure::translucency::{TransportSettings, translucent_shadow_map::MAX_RESOLUTION};
 
 use super::translucent_accuracy_scene::Shape;
+use super::translucent_light_tracer::Part;
 
 /// The translucency's picture of a ball, the bunny or a torus against a path tracer's, per patch
 /// budget, into a CSV.
@@ -14,8 +15,8 @@ use super::translucent_accuracy_scene::Shape;
 #[command(long_about = None)]
 pub struct Cli {
     /// The object: the 1 cm ball, the Stanford bunny 4 cm long, or a torus (ring radius 1 cm,
-    /// tube radius 3 mm); the bunny's and the torus's reference is Mitsuba's, index-matched
-    /// (the light tracer traces the ball only)
+    /// tube radius 3 mm); the bunny's and the torus's reference is light-traced on the very
+    /// triangles, index-matched (or Mitsuba's: `--tracer mitsuba`)
     #[arg(long, value_enum, default_value_t = ShapeArg::Ball)]
     pub shape: ShapeArg,
     /// Jensen's medium
@@ -145,7 +146,7 @@ pub struct Cli {
     /// direction, of irradiance 1 across its rays at the centre, instead of the directional
     /// light: each patch's beam from it, each object's map in perspective from it.
     /// Index-matched, `--scattering beam-table` or `profile`; the ball's reference is made by
-    /// `--tracer` (the light tracer by default), the other shapes' by Mitsuba. Lighting suffix
+    /// `--tracer` (the light tracer by default), as are the other shapes'. Lighting suffix
     /// `_point<distance>`
     #[arg(long, value_name = "DISTANCE")]
     pub point_light: Option<f32>,
@@ -228,6 +229,14 @@ pub struct Cli {
     /// Photons per channel of the light tracer's reference
     #[arg(long, default_value_t = 40_000_000, value_parser = clap::value_parser!(u64).range(1000..))]
     pub photons: u64,
+    /// The seed of the mesh light tracer's photons (two seeds' pictures give its noise)
+    #[arg(long, default_value_t = 1)]
+    pub tracer_seed: u64,
+    /// The bunny's, the torus's or (`--pixels-on-mesh`) the ball's light tracer renders this
+    /// part of the light (an oracle against the whole): single scattering alone, or the exact
+    /// transport given out by Lambert's law. Reference suffix `-single` / `-lambertianexit`
+    #[arg(long, value_enum, default_value_t = Part::All)]
+    pub light_traced_part: Part,
     /// A reference EXR made before (else it is rendered into out/translucent_accuracy/)
     #[arg(long)]
     pub reference: Option<PathBuf>,

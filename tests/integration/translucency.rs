@@ -1925,7 +1925,8 @@ mod translucent_accuracy_scene;
 /// 0.017–0.034); under the uniform environment behind a dielectric boundary, by
 /// tools/translucent_reference.py (Mitsuba, 16 384 samples a pixel); the bunny's
 /// (`bunny_<medium>`) and the torus's (`torus_<medium>`), Mitsuba's of the very triangles
-/// (`translucent_accuracy --shape bunny|torus`).
+/// (`translucent_accuracy --shape bunny|torus`), but the bunny's marble lit from behind, which
+/// Mitsuba does not converge: the mesh light tracer's (`common/translucent_light_tracer.rs`).
 fn reference_picture(medium: &str, lighting: &str) -> image::Rgb32FImage {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/translucent");
     let path = ["lighttraced", "mitsuba"]
@@ -2166,7 +2167,8 @@ fn holds_as_documented(
 /// with each map over the bunny's bounding sphere, 0.0582 / 0.1332 / 0.0731 with it fitted to
 /// the bunny's extent), against Mitsuba (`volpathmis`, the very triangles; 8192 samples a pixel
 /// for skin, noise 0.007 front and 0.014 back; 16 384 for marble from the front, noise 0.018;
-/// marble from behind does not converge in Mitsuba and has no reference). The ball-tuned
+/// marble from behind does not converge in Mitsuba: its reference is the mesh light
+/// tracer's, `tests/data/translucent/bunny_marble_back_lighttraced.exr`). The ball-tuned
 /// defaults do much worse here: the object's
 /// walks raise every column by the whole bunny's share (1.18 / 1.16 / 1.14 for skin), which
 /// its thin ears earn and its thick body does not; without them skin from the front is
@@ -2253,6 +2255,12 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0594, [1.018, 1.019, 1.015]),
         (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1319, [0.976, 0.945, 1.010]),
         (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0750, [0.987, 0.985, 0.979]),
+        // Marble lit from behind, against the mesh light tracer (two renders of 3.2·10⁷
+        // photons a channel, seeds 1 and 2: a pair differs by 0.031): short of the issue's
+        // 0.08 and too dark, most on the ears and the head (the exact transport given out by
+        // Lambert's law is 0.86 of the reference here; docs/translucent.md, "The marble
+        // bunny lit from behind").
+        (TranslucentPreset::Marble, "marble", "back", back, true, beam_table, 0.1497, [0.955, 0.909, 0.875]),
         // The table with the deep law about the normal, as before the flow.
         (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2654, [0.857, 0.805, 0.793]),
     ];
@@ -2376,6 +2384,38 @@ fn a_translucent_ball_over_a_floor_matches_mitsuba_as_documented() {
         let label = format!("ball {name} over a floor of albedo {floor} (the reference's 0.8)");
         holds_as_documented(&view, &label, "front_floor0.8", medium, false, &TransportSettings::default(), above, table, &reference, rel_l1, ratio, Some(floor));
     }
+}
+
+// Only the directional light and the whole picture are used here.
+#[allow(dead_code)]
+#[path = "../../examples/common/translucent_light_tracer.rs"]
+mod translucent_light_tracer;
+
+/// The mesh light tracer (`translucent_accuracy`'s reference for a mesh lit from behind,
+/// where Mitsuba's walks from the camera do not converge) against Mitsuba where Mitsuba
+/// does: the bunny's skin lit from the front (8192 samples a pixel, noise 0.007). 250 000
+/// photons a channel here (noise ~0.13 in relative L1; in the mean, under 1 %); at 1.6·10⁷,
+/// 0.018 and 1.000 / 1.001 / 1.001 (docs/translucent.md, "A light tracer for meshes").
+#[test]
+fn the_mesh_light_tracer_matches_mitsuba_where_mitsuba_converges() {
+    use translucent_accuracy_scene::{FOV_Y, FRONT_LIGHT, Shape, ShapeView, score};
+    use translucent_light_tracer::{Part, Pinhole, Source, light_trace};
+    let view = ShapeView::new(Shape::Bunny, 96);
+    let medium = bevy_mesostructure::translucency::TranslucentMedium { index_of_refraction: 1.0, ..TranslucentPreset::Skin1.medium() };
+    let camera = Pinhole { eye: Shape::Bunny.eye(), fov_y: FOV_Y, size: 96 };
+    let traced = light_trace(&view.positions, &view.indices, &medium, Source::Directional(FRONT_LIGHT), Part::All, camera, 250_000, 1, 2);
+    let pixels: Vec<Vec3> = traced.pixels.iter().map(|p| Vec3::from_array(*p)).collect();
+    let measured = score(&pixels, &reference_picture("bunny_skin1", "front"), &view);
+    eprintln!(
+        "mesh light tracer, bunny skin1 front: relative L1 {:.4} (its own noise {:.4}), mean ratio {:.3?}; {} of {} crossings against the faces' side",
+        measured.rel_l1, traced.noise, measured.ratio, traced.side_disagreements, traced.crossings
+    );
+    // Measured 0.1243 (1.6·10⁷ photons: 0.018), 0.998 / 1.002 / 0.999 in the mean.
+    assert!((measured.rel_l1 - 0.1243).abs() < 0.01, "relative L1 {:.4}, documented 0.1243", measured.rel_l1);
+    for (c, ratio) in measured.ratio.iter().enumerate() {
+        assert!((ratio - 1.0).abs() < 0.015, "channel {c}: mean ratio {ratio:.4}");
+    }
+    assert!(traced.side_disagreements * 1000 < traced.crossings);
 }
 
 /// Single scattering marched per pixel (`BeamTableSettings::single_scattering_to_pixels`, on
