@@ -2,10 +2,11 @@
 //! isotropic phase): the reference for scenes a camera path tracer cannot converge. Lit from
 //! behind, Mitsuba's `volpathmis` has to find the light by walks started at the camera, and
 //! in marble (albedo 0.999, walks of hundreds of scatterings) the few that wander to the lit
-//! side are fireflies: on the bunny lit from behind, two 1024-sample renders' means differ by
-//! a fifth. This tracer runs the walks from the light and sends each collision's in-scattered
-//! light to the pinhole camera, so every contribution is bounded (transmittance ≤ 1, the eye
-//! outside the object), as `tools/translucent_light_tracer.py` does on an analytic sphere.
+//! side are fireflies: four 8192-sample renders of the marble bunny lit from behind differ
+//! from each other by 0.22 – 0.38 in relative L1. This tracer runs the walks from the light
+//! and sends each collision's in-scattered light to the pinhole camera, so every
+//! contribution is bounded (transmittance ≤ 1, the eye outside the object), as
+//! `tools/translucent_light_tracer.py` does on an analytic sphere.
 //!
 //! - Photons start uniformly over the disc of the mesh's bounding sphere seen from the light
 //!   (irradiance 1 on a plane facing it) or, from a point light, uniformly in solid angle over
@@ -20,7 +21,9 @@
 //!
 //! Rays are the plugin's [`SceneRays`] (the same BVH queries the precompute makes) over the
 //! mesh in millimetres; the transport is its own. Checked against Mitsuba where Mitsuba
-//! converges (the bunny's skin lit from the front): docs/translucent.md.
+//! converges (the bunny's skin and marble, the torus's under a point light and its single
+//! scattering: 0.018 – 0.052 in relative L1, the means within 1.1 %): docs/translucent.md,
+//! "A light tracer for meshes".
 
 use bevy::math::Vec3;
 use bevy_mesostructure::translucency::{PatchObject, SceneRays, TranslucentMedium};
