@@ -32,6 +32,8 @@ use rand::{RngExt, SeedableRng};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
+use super::translucent_accuracy_scene::camera_frame;
+
 /// Millimetres per world unit (metres): the media's coefficients are per millimetre.
 const MM: f32 = 1000.0;
 /// Photons a work item walks (its own seed, so the picture is the same on any thread count).
@@ -67,7 +69,8 @@ pub enum Part {
     LambertianExit,
 }
 
-/// The pinhole camera of the accuracy scenes: at `eye`, looking at the origin, +Y up.
+/// The pinhole camera of the accuracy scenes: at `eye`, looking at the origin, +Y up
+/// ([`camera_frame`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Pinhole {
     pub eye: Vec3,
@@ -339,8 +342,7 @@ pub fn light_trace(
     let (low, high) = mm.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), p| (l.min(*p), h.max(*p)));
     let centre = (low + high) * 0.5;
     let radius = mm.iter().map(|p| (*p - centre).length()).fold(0.0, f32::max) * 1.001;
-    let forward = (-camera.eye).normalize();
-    let right = forward.cross(Vec3::Y).normalize();
+    let (forward, right, up) = camera_frame(camera.eye);
     let tracer = Tracer {
         rays: &rays,
         winding: if volume >= 0.0 { 1.0 } else { -1.0 },
@@ -348,7 +350,7 @@ pub fn light_trace(
             eye: camera.eye * MM,
             forward,
             right,
-            up: right.cross(forward),
+            up,
             tan_half: (camera.fov_y / 2.0).tan(),
             size: camera.size,
         },
