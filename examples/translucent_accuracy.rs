@@ -253,45 +253,11 @@ fn reference_picture(
         // is translucent_light_tracer.rs's, index-matched.
         let on_sphere = shape == Shape::Ball && !cli.pixels_on_mesh;
         let light_traced = cli.tracer == Tracer::Light && !cli.uniform && cli.floor.is_none() && !cli.occluder;
+        // The light's direction in the name where it is not the default.
+        let light_suffix =
+            if cli.light.is_some() && !cli.uniform { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() };
         if light_traced && !on_sphere {
-            if cli.eta != 1.0 {
-                fail("the mesh light tracer is index-matched: --eta above 1 takes the ball's sphere (drop --pixels-on-mesh)".into());
-            }
-            let path = dir.join(format!(
-                "reference_lighttraced-mesh{}_{}_{name}_{size}_{}_seed{}{}{}.exr",
-                match cli.light_traced_part {
-                    Part::All => "",
-                    Part::Single => "-single",
-                    Part::LambertianExit => "-lambertianexit",
-                },
-                if shape == Shape::Ball { "ballmesh" } else { shape.scene_name() },
-                cli.photons,
-                cli.tracer_seed,
-                if cli.light.is_some() { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() },
-                if cli.point_light.is_some() { format!("_{lighting}") } else { String::new() },
-            ));
-            if !path.exists() {
-                let source = match cli.point_light {
-                    Some(distance) => Source::Point(-light.normalize() * distance),
-                    None => Source::Directional(light),
-                };
-                let camera = Pinhole { eye: shape.eye(), fov_y: FOV_Y, size };
-                let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-                let start = Instant::now();
-                let traced =
-                    light_trace(&view.positions, &view.indices, &medium, source, cli.light_traced_part, camera, cli.photons as usize, cli.tracer_seed, threads);
-                let picture = image::Rgb32FImage::from_fn(size, size, |x, y| image::Rgb(traced.pixels[(y * size + x) as usize]));
-                picture.save(&path).unwrap_or_else(|e| fail(format!("cannot write {}: {e}", path.display())));
-                eprintln!(
-                    "light-traced the reference in {:.0} s: {} photons a channel, noise {:.4}, {} of {} crossings on the side the faces do not say",
-                    start.elapsed().as_secs_f32(),
-                    cli.photons,
-                    traced.noise,
-                    traced.side_disagreements,
-                    traced.crossings
-                );
-            }
-            return path;
+            return light_traced_mesh(cli, shape, view, medium, light, &light_suffix, lighting, name, &dir);
         }
         // Named by renderer and version: the first Mitsuba references (in metres, `volpath`)
         // were dark by Mitsuba's ray offsets (tools/translucent_reference.py says why).
@@ -308,7 +274,7 @@ fn reference_picture(
                 _ => format!("{}_", shape.scene_name()),
             },
             samples.trim_start_matches("--spp=").trim_start_matches("--photons="),
-            if cli.light.is_some() && !cli.uniform { format!("_{:.3}_{:.3}_{:.3}", light.x, light.y, light.z) } else { String::new() },
+            light_suffix,
             if cli.uniform || cli.eta != 1.0 || cli.point_light.is_some() || cli.floor.is_some() || cli.occluder {
                 format!("_{lighting}")
             } else {
@@ -605,6 +571,61 @@ fn append_rows(out: &std::path::Path, header: &str, rows: &[String]) {
     if let Err(e) = written {
         fail(format!("cannot write {}: {e}", out.display()));
     }
+}
+
+/// The mesh light tracer's reference of `view`'s triangles (`translucent_light_tracer.rs`),
+/// rendered into `dir` once and read back from there; index-matched only (one line and exit
+/// otherwise).
+#[allow(clippy::too_many_arguments)]
+fn light_traced_mesh(
+    cli: &Cli,
+    shape: Shape,
+    view: &ShapeView,
+    medium: TranslucentMedium,
+    light: Vec3,
+    light_suffix: &str,
+    lighting: &str,
+    name: &str,
+    dir: &std::path::Path,
+) -> PathBuf {
+    if cli.eta != 1.0 {
+        fail("the mesh light tracer is index-matched: --eta above 1 takes the ball's sphere (drop --pixels-on-mesh)".into());
+    }
+    let size = cli.size;
+    let path = dir.join(format!(
+        "reference_lighttraced-mesh{}_{}_{name}_{size}_{}_seed{}{light_suffix}{}.exr",
+        match cli.light_traced_part {
+            Part::All => "",
+            Part::Single => "-single",
+            Part::LambertianExit => "-lambertianexit",
+        },
+        if shape == Shape::Ball { "ballmesh" } else { shape.scene_name() },
+        cli.photons,
+        cli.tracer_seed,
+        if cli.point_light.is_some() { format!("_{lighting}") } else { String::new() },
+    ));
+    if path.exists() {
+        return path;
+    }
+    let source = match cli.point_light {
+        Some(distance) => Source::Point(-light.normalize() * distance),
+        None => Source::Directional(light),
+    };
+    let camera = Pinhole { eye: shape.eye(), fov_y: FOV_Y, size };
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let start = Instant::now();
+    let traced = light_trace(&view.positions, &view.indices, &medium, source, cli.light_traced_part, camera, cli.photons as usize, cli.tracer_seed, threads);
+    let picture = image::Rgb32FImage::from_fn(size, size, |x, y| image::Rgb(traced.pixels[(y * size + x) as usize]));
+    picture.save(&path).unwrap_or_else(|e| fail(format!("cannot write {}: {e}", path.display())));
+    eprintln!(
+        "light-traced the reference in {:.0} s: {} photons a channel, noise {:.4}, {} of {} crossings on the side the faces do not say",
+        start.elapsed().as_secs_f32(),
+        cli.photons,
+        traced.noise,
+        traced.side_disagreements,
+        traced.crossings
+    );
+    path
 }
 
 /// `stem.exr`, or where `stem.scored.png` would pass a file system's 255 bytes a name, its
