@@ -27,7 +27,7 @@
 //!     [--exit-axis plugin|normal|normal-all|flow-all|lobe] [--exit-lobes true|false]
 //!     [--point-light DISTANCE] [--pixels-on-mesh]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
-//!     [--tracer-seed 1] [--light-traced-part all|single|lambertian-exit]
+//!     [--tracer-seed 1] [--light-traced-part all|single|lambertian-exit|first-exit]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
 //! ```
@@ -501,8 +501,12 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
     // `_bouncedown`: the exit law takes a patch's bounced light as its own, as its direct
     // light (rows before it, and `--bounced-as-own false`, gave it out as light from elsewhere).
     let bounced = if cli.bounced_as_own { "_bouncedown" } else { "" };
+    // `_litbounced`: the lit faces' single scattering (given per pixel) lights the other
+    // patches through the first bounce (`DirectLight::lit_face_exitance`; rows before it
+    // lacked that light), with the beam table.
+    let lit_bounced = if table { "_litbounced" } else { "" };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{}{}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{}{}",
         cli.kernel,
         if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" },
         if cli.pixel_samples > 1 { format!("_px{}", cli.pixel_samples) } else { String::new() }
@@ -598,6 +602,7 @@ fn light_traced_mesh(
             Part::All => "",
             Part::Single => "-single",
             Part::LambertianExit => "-lambertianexit",
+            Part::FirstExit => "-firstexit",
         },
         if shape == Shape::Ball { "ballmesh" } else { shape.scene_name() },
         cli.photons,

@@ -233,8 +233,10 @@ pub struct Cli {
     #[arg(long, default_value_t = 1)]
     pub tracer_seed: u64,
     /// The bunny's, the torus's or (`--pixels-on-mesh`) the ball's light tracer renders this
-    /// part of the light (an oracle against the whole): single scattering alone, or the exact
-    /// transport given out by Lambert's law. Reference suffix `-single` / `-lambertianexit`
+    /// part of the light (an oracle against the whole): single scattering alone, the exact
+    /// transport given out by Lambert's law, or all but the light that left the mesh and came
+    /// back in (each photon stopped at its first exit). Reference suffix `-single` /
+    /// `-lambertianexit` / `-firstexit`
     #[arg(long, value_enum, default_value_t = Part::All)]
     pub light_traced_part: Part,
     /// A reference EXR made before (else it is rendered into out/translucent_accuracy/)

@@ -67,6 +67,10 @@ pub enum Part {
     /// surface point it leaves by (where the eye sees that point), the pixel's radiance that
     /// exitance over π. The unscattered beam is not counted.
     LambertianExit,
+    /// All of it but the light that left the mesh and entered it again: each photon stops at
+    /// its first exit, so that the reference over this picture is what light coming back in
+    /// (a lit ear's light onto the head behind it) is worth.
+    FirstExit,
 }
 
 /// The pinhole camera of the accuracy scenes: at `eye`, looking at the origin, +Y up
@@ -204,6 +208,9 @@ impl Tracer<'_> {
             let mut collisions = 0u32;
             loop {
                 if !inside {
+                    if self.part == Part::FirstExit {
+                        break;
+                    }
                     // Out through the surface: on in a straight line, perhaps into the mesh
                     // again.
                     let start = x + d * PAST_SURFACE;

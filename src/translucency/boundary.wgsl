@@ -70,6 +70,39 @@ fn deep_exit_shape_about(law: vec4<f32>, eta_in: f32, n: vec3<f32>, axis: vec3<f
     return (1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary);
 }
 
+// `single_scattering_radiance` (beam_table/single_scattering.rs): a half-space's single scattering of a beam
+// of irradiance `e` at incidence cosine mu0, seen at exit cosine mu, behind a boundary of
+// index eta: α E T(μ₀) T(μ) / (4π η² (μ₀′ + μ′)).
+fn single_scattering_radiance(alpha: vec3<f32>, eta_in: f32, e: vec3<f32>, mu0: f32, mu: f32) -> vec3<f32> {
+    if !(mu0 > 0.0 && mu > 0.0) {
+        return vec3(0.0);
+    }
+    let eta = clamp(eta_in, 1.0, 3.0);
+    let inside0 = sqrt(max(1.0 - (1.0 - mu0 * mu0) / (eta * eta), 0.0));
+    let inside = sqrt(max(1.0 - (1.0 - mu * mu) / (eta * eta), 0.0));
+    let transmitted = (1.0 - fresnel_reflectance(min(mu0, 1.0), eta)) * (1.0 - fresnel_reflectance(min(mu, 1.0), eta));
+    return alpha * e * transmitted / (4.0 * 3.14159265358979 * eta * eta * (inside0 + inside));
+}
+
+// `lit_face_exitance` (beam_table/single_scattering.rs): the exitance a lit face's single
+// scattering gives out, 2π ∫ L μ dμ by LIT_FACE_NODES midpoints in μ, for a beam of normal
+// irradiance `normal_e` at incidence cosine mu0. The gather gives this light per pixel; the
+// iteration lets it light the other patches (the first bounce's source).
+const LIT_FACE_NODES: u32 = 16u;
+
+fn lit_face_exitance(alpha: vec3<f32>, eta: f32, normal_e: vec3<f32>, mu0: f32) -> vec3<f32> {
+    if !(mu0 > 0.0) {
+        return vec3(0.0);
+    }
+    let e = normal_e * min(mu0, 1.0);
+    var sum = vec3(0.0);
+    for (var k = 0u; k < LIT_FACE_NODES; k++) {
+        let mu = (f32(k) + 0.5) / f32(LIT_FACE_NODES);
+        sum += single_scattering_radiance(alpha, eta, e, mu0, mu) * mu;
+    }
+    return sum * (6.28318530717959 / f32(LIT_FACE_NODES));
+}
+
 // `deep_exit_norm_about` (diffusion.rs): 1/N of `deep_exit_shape_about` for an axis `along`
 // the normal and `across` it is DEEP_EXIT_NORM_SAMPLES over the sum of these samples, the
 // same 16 × 32 midpoint rule in μ² and φ (`cosine_weighted_directions`); sample `s` is ring

@@ -35,6 +35,11 @@ pub struct DirectLight {
     /// Per patch with a table, its beams' travel directions weighted by their irradiance at
     /// normal incidence (unnormalised; the gather takes the mean). Empty without a table.
     pub beam_direction: Vec<Vec3>,
+    /// Per patch with a table, the exitance of single scattering by its lit face, each beam
+    /// at its own incidence ([`lit_face_exitance`](super::beam_table::lit_face_exitance)).
+    /// The gather gives that light per pixel, so it is not in `B`; it joins `B` only as what
+    /// the first bounce gathers (`F`), lighting the other patches. Empty without a table.
+    pub lit_face_exitance: Vec<Vec3>,
 }
 
 /// A light as the transport injects it (Bevy's conventions: colour × intensity per channel).
@@ -257,7 +262,9 @@ pub fn direct_light(
         // With a beam table: (light index, irradiance that got in), and the beams' normal
         // irradiance and weighted direction for single scattering's law.
         let mut beams: Vec<(usize, Vec3)> = Vec::new();
-        let (mut normal_irradiance, mut direction) = (Vec3::ZERO, Vec3::ZERO);
+        let (mut normal_irradiance, mut direction, mut lit_face) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+        // The medium's (α, η) where the patch has a table slot.
+        let medium = table.and_then(|t| t.slots.get(i).filter(|&&s| s != u32::MAX).and_then(|&s| t.media.get(s as usize)));
         for light in lights {
             let (e, to_light) = match *light {
                 PatchLight::Directional {
@@ -289,6 +296,9 @@ pub fn direct_light(
                 beams.extend(at.into_iter().filter(|&(_, w)| w > 0.0).map(|(at, w)| (at, got_in * w)));
                 normal_irradiance += e / cos;
                 direction += -to_light * ((e / cos).element_sum());
+                if let Some(m) = medium {
+                    lit_face += super::beam_table::lit_face_exitance(m.truncate(), m.w, e / cos, cos);
+                }
                 continue;
             }
             // A beam takes in and gives back by its own incidence, not by the diffuse
@@ -307,7 +317,7 @@ pub fn direct_light(
                 exitance += single * e * (shape - diffuse_shape);
             }
         }
-        (irradiance, exitance, beams, normal_irradiance, direction)
+        (irradiance, exitance, beams, normal_irradiance, direction, lit_face)
     });
     let has_single =
         transport.is_some_and(|t| t.single_scattering.iter().any(|s| *s != Vec3::ZERO));
@@ -323,7 +333,7 @@ pub fn direct_light(
     if let Some(table) = table {
         direct.beam_light = vec![Vec3::ZERO; table.media.len() * table.bins() as usize];
         direct.tabled = vec![Vec3::ZERO; per_patch.len()];
-        for (i, (_, _, beams, _, _)) in per_patch.iter().enumerate() {
+        for (i, (_, _, beams, _, _, _)) in per_patch.iter().enumerate() {
             for &(at, got_in) in beams {
                 direct.beam_light[at] += got_in;
                 direct.tabled[i] += got_in;
@@ -331,6 +341,7 @@ pub fn direct_light(
         }
         direct.beam_irradiance = per_patch.iter().map(|d| d.3).collect();
         direct.beam_direction = per_patch.iter().map(|d| d.4).collect();
+        direct.lit_face_exitance = per_patch.iter().map(|d| d.5).collect();
     }
     direct
 }

@@ -473,6 +473,15 @@ fn the_gpu_beam_table_matches_the_cpu_oracle() {
     eprintln!("injected: E⁰ within 2 % on {:.1} %, flux L1 {flux:.4}; B flux relative L1 {:.4}", 100.0 * agree, off / total);
     assert!(agree >= 0.98 && flux <= 0.01, "E⁰: {agree}, {flux}");
     assert!(off / total <= 0.01, "B: {}", off / total);
+    // The lit faces' single scattering the first bounce gathers (`lit_face_exitance`),
+    // injected per light, against the CPU's: its flux within 1 % (the shadow map's edges).
+    let lit_at = gpu.beam_offsets().lit_face as u64 * 16;
+    let bytes = read_back(&device, &queue, gpu.vectors(), lit_at, n as u64 * 16);
+    let gpu_lit: Vec<Vec3> = bytemuck::cast_slice::<u8, [f32; 4]>(&bytes).iter().map(|g| Vec3::new(g[0], g[1], g[2])).collect();
+    let lit_off: f32 = gpu_lit.iter().zip(&direct.lit_face_exitance).zip(&transport.areas).map(|((g, c), a)| (*g - *c).abs().element_sum() * a).sum();
+    let lit_total: f32 = direct.lit_face_exitance.iter().zip(&transport.areas).map(|(c, a)| c.element_sum() * a).sum();
+    eprintln!("lit faces' single scattering: flux relative L1 {:.4} of {lit_total:.3e}", lit_off / lit_total);
+    assert!(lit_total > 0.0 && lit_off / lit_total <= 0.01, "lit faces: {lit_off} of {lit_total}");
 
     // (3) Each patch's exit lobes (`table_lobes_of`) against `ExitLaw::set_far_lobes`: the
     // light from afar, and each lobe's axis, κ and norm. Marble's 16 scatterings stay within
@@ -2252,17 +2261,19 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         // held). 256 beam walks split in 4 far from their entry (before, 384 unsplit: 0.0535,
         // 0.1582, 0.0753), in 16 since 2026-11-29 (in 4: 0.0609, 0.1436, 0.0713 with marble's
         // walks to 32 scatterings; about the normal 0.2751).
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0594, [1.018, 1.019, 1.015]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1319, [0.976, 0.945, 1.010]),
-        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0750, [0.987, 0.985, 0.979]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0610, [1.026, 1.025, 1.020]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1306, [0.997, 0.966, 1.033]),
+        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0747, [0.994, 0.992, 0.986]),
         // Marble lit from behind, against the mesh light tracer (two renders of 3.2·10⁷
         // photons a channel, seeds 1 and 2: a pair differs by 0.031): short of the issue's
         // 0.08 and too dark, most on the ears and the head (the exact transport given out by
         // Lambert's law is 0.86 of the reference here; docs/translucent.md, "The marble
-        // bunny lit from behind").
-        (TranslucentPreset::Marble, "marble", "back", back, true, beam_table, 0.1497, [0.955, 0.909, 0.875]),
+        // bunny lit from behind"). Since 2026-12-06 the lit faces' single scattering lights
+        // the other patches (`DirectLight::lit_face_exitance`; before: 0.1497, [0.955, 0.909,
+        // 0.875]): light that left the bunny and came back in is a sixth of this picture.
+        (TranslucentPreset::Marble, "marble", "back", back, true, beam_table, 0.1396, [0.984, 0.941, 0.911]),
         // The table with the deep law about the normal, as before the flow.
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2654, [0.857, 0.805, 0.793]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2608, [0.877, 0.826, 0.814]),
     ];
     for (preset, name, lighting, how, object_exit_share, oracles, rel_l1, ratio) in cases {
         let label = format!(
@@ -2330,17 +2341,19 @@ fn a_translucent_torus_matches_mitsuba_as_documented() {
     // A point light 5 cm back along a directional light's travel.
     let point = |travel: Vec3| SceneLighting::Point(-travel.normalize() * 0.05);
     let table = Oracles { scattering: ScatteringSource::BeamTable(default()), ..Oracles::NONE };
-    // (medium, lighting, how, relative L1, mean ratio r/g/b): measured.
+    // (medium, lighting, how, relative L1, mean ratio r/g/b): measured. Since 2026-12-06 the
+    // lit faces' single scattering lights the other patches, across the hole (before:
+    // 0.0609, 0.0901, 0.0501, 0.1323, 0.0637, 0.0965, 0.0852).
     let cases = [
-        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0609, [0.964, 0.985, 1.000]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, 0.0901, [0.997, 0.990, 0.978]),
-        (TranslucentPreset::Marble, "marble", "front", front, 0.0501, [0.992, 0.995, 1.000]),
-        (TranslucentPreset::Marble, "marble", "back", back, 0.1323, [0.911, 0.881, 0.873]),
-        (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0637, [0.968, 0.983, 0.994]),
-        (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.0965, [0.990, 0.983, 0.972]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0603, [0.969, 0.989, 1.003]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, 0.0930, [1.006, 1.001, 0.989]),
+        (TranslucentPreset::Marble, "marble", "front", front, 0.0499, [0.997, 1.000, 1.004]),
+        (TranslucentPreset::Marble, "marble", "back", back, 0.1214, [0.928, 0.899, 0.893]),
+        (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0633, [0.972, 0.986, 0.996]),
+        (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.0981, [0.998, 0.992, 0.983]),
         // A point light in the hole, 3 mm above the middle (inside the bounds: a cube of
         // maps; 0.325 with the one orthographic map before).
-        (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.0852, [0.926, 0.953, 0.983]),
+        (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.0762, [0.956, 0.977, 1.003]),
     ];
     for (preset, name, lighting, how, rel_l1, ratio) in cases {
         let reference = reference_picture(&format!("torus_{name}"), lighting);
@@ -2373,9 +2386,9 @@ fn a_translucent_ball_over_a_floor_matches_mitsuba_as_documented() {
     let table = Oracles { scattering: ScatteringSource::BeamTable(default()), ..Oracles::NONE };
     // (medium, the plugin's floor albedo, relative L1, mean ratio r/g/b): measured.
     let cases = [
-        (TranslucentPreset::Skin1, "skin1", 0.8, 0.0391, [0.990, 0.996, 1.024]),
+        (TranslucentPreset::Skin1, "skin1", 0.8, 0.0388, [0.992, 0.997, 1.025]),
         (TranslucentPreset::Skin1, "skin1", 0.0, 0.2777, [0.715, 0.736, 0.771]),
-        (TranslucentPreset::Marble, "marble", 0.8, 0.0605, [1.024, 1.024, 1.023]),
+        (TranslucentPreset::Marble, "marble", 0.8, 0.0610, [1.025, 1.025, 1.025]),
         (TranslucentPreset::Marble, "marble", 0.0, 0.2958, [0.729, 0.730, 0.730]),
     ];
     for (preset, name, floor, rel_l1, ratio) in cases {
@@ -2465,10 +2478,10 @@ fn single_scattering_marched_per_pixel_holds_as_documented() {
     let marched = Oracles { shadow_map: None, ..mapped };
     let medium = bevy_mesostructure::translucency::TranslucentMedium { index_of_refraction: 1.0, ..TranslucentPreset::Skin1.medium() };
     for (oracles, label, lighting, how, rel_l1, ratio) in [
-        (marched, "rays", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0603, [0.964, 0.985, 0.999]),
-        (marched, "rays", "back", SceneLighting::Directional(travel), 0.0887, [0.997, 0.991, 0.978]),
-        (mapped, "a 256² map", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0615, [0.963, 0.984, 1.000]),
-        (mapped, "a 256² map", "back", SceneLighting::Directional(travel), 0.0912, [1.000, 0.994, 0.980]),
+        (marched, "rays", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0589, [0.970, 0.989, 1.002]),
+        (marched, "rays", "back", SceneLighting::Directional(travel), 0.0900, [1.003, 0.998, 0.988]),
+        (mapped, "a 256² map", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0603, [0.969, 0.989, 1.003]),
+        (mapped, "a 256² map", "back", SceneLighting::Directional(travel), 0.0930, [1.006, 1.001, 0.989]),
     ] {
         let reference = reference_picture("torus_skin1", lighting);
         let label = format!("torus skin1 (the table, single scattering marched against {label})");

@@ -42,7 +42,9 @@ pub mod single_scattering;
 pub use build::{ExitPatches, MAX_LATE_WALK_SCALE, late_walks_for, marched_objects};
 pub use directions::{bin_direction, direction_bin, direction_weights};
 pub use flow::{ExitLean, LOBE_SOURCE_DISTANCE, LOBE_SOURCE_MEAN_FREE_PATHS, TableFlow, from_afar, lobe_source_distance};
-pub use single_scattering::{entering, law_gives_single_scattering, single_scattering_radiance};
+pub use single_scattering::{
+    LIT_FACE_NODES, entering, law_gives_single_scattering, lit_face_exitance, single_scattering_radiance,
+};
 
 use bevy::prelude::*;
 

@@ -13,7 +13,9 @@
 // the fullscreen fragment pass (`gather.wgsl`) and the compute passes (`gather_compute.wgsl`).
 
 #import bevy_render::view::View
-#import bevy_mesostructure::translucency::boundary::{deep_exit_shape, deep_exit_shape_about, fresnel_reflectance}
+#import bevy_mesostructure::translucency::boundary::{
+    deep_exit_shape, deep_exit_shape_about, fresnel_reflectance, single_scattering_radiance,
+}
 #import bevy_mesostructure::translucency::marched::marched_single_scattering
 
 struct GatherParams {
@@ -93,20 +95,6 @@ fn member_in_cell(g: GridLevel, k: u32, cell: vec3<i32>) -> i32 {
     let member = g.members + 4u * k;
     let own_cell = bitcast<vec3<i32>>(vec3(grid[member + 1u], grid[member + 2u], grid[member + 3u]));
     return select(-1, i32(grid[member]), all(own_cell == cell));
-}
-
-// `single_scattering_radiance` (beam_table/single_scattering.rs): a half-space's single scattering of a beam
-// of irradiance `e` at incidence cosine mu0, seen at exit cosine mu, behind a boundary of
-// index eta: α E T(μ₀) T(μ) / (4π η² (μ₀′ + μ′)).
-fn single_scattering_radiance(alpha: vec3<f32>, eta_in: f32, e: vec3<f32>, mu0: f32, mu: f32) -> vec3<f32> {
-    if !(mu0 > 0.0 && mu > 0.0) {
-        return vec3(0.0);
-    }
-    let eta = clamp(eta_in, 1.0, 3.0);
-    let inside0 = sqrt(max(1.0 - (1.0 - mu0 * mu0) / (eta * eta), 0.0));
-    let inside = sqrt(max(1.0 - (1.0 - mu * mu) / (eta * eta), 0.0));
-    let transmitted = (1.0 - fresnel_reflectance(min(mu0, 1.0), eta)) * (1.0 - fresnel_reflectance(min(mu, 1.0), eta));
-    return alpha * e * transmitted / (4.0 * 3.14159265358979 * eta * eta * (inside0 + inside));
 }
 
 // `ExitLaw::factor_towards` (transport.rs) in one channel: the share `lobe_exitance / B`

@@ -65,13 +65,16 @@ struct Injection {
     tabled: u32,
     beam_irradiance: u32,
     beam_direction: u32,
-    pad0: u32,
+    // The lit faces' single-scattered exitance (`DirectLight::lit_face_exitance`).
+    lit_face: u32,
 }
 
+const PATCH_RECORD: u32 = 5u;
+
 @group(0) @binding(0) var<uniform> injection: Injection;
-// Samples: (position, radius), (normal, 0). Patches: (surface point, size),
-// (normal, object), (single-scattering factor, 1 on translucent patches), (beam-table slot or
-// −1, index of refraction, 0, 0).
+// Samples: (position, radius), (normal, 0). Patches (PATCH_RECORD vec4s each): (surface
+// point, size), (normal, object), (single-scattering factor, 1 on translucent patches),
+// (beam-table slot or −1, index of refraction, 0, 0), (the slot's single-scattering albedo, 0).
 // Tables per object: (incidence weight, single-scattering shape − its diffuse mean) at
 // cosines 0, 1/(n−1), …, 1.
 @group(0) @binding(1) var<storage, read> scene: array<vec4<f32>>;
@@ -346,10 +349,11 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= injection.patches {
         return;
     }
-    let a = scene[injection.patches_at + 4u * i];
-    let b = scene[injection.patches_at + 4u * i + 1u];
-    let c = scene[injection.patches_at + 4u * i + 2u];
-    let table = scene[injection.patches_at + 4u * i + 3u];
+    let a = scene[injection.patches_at + PATCH_RECORD * i];
+    let b = scene[injection.patches_at + PATCH_RECORD * i + 1u];
+    let c = scene[injection.patches_at + PATCH_RECORD * i + 2u];
+    let table = scene[injection.patches_at + PATCH_RECORD * i + 3u];
+    let alpha = scene[injection.patches_at + PATCH_RECORD * i + 4u].xyz;
     let n = b.xyz;
     let object = u32(b.w);
     // Where the oracle's shadow ray starts, and what its fall-off sees.
@@ -369,6 +373,7 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
     var tabled = vec3(0.0);
     var normal_irradiance = vec3(0.0);
     var direction = vec3(0.0);
+    var lit_face = vec3(0.0);
     for (var l = 0u; l < injection.light_count; l++) {
         let light = injection.lights[l];
         var e = vec3(0.0);
@@ -415,6 +420,7 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
             tabled += got_in;
             normal_irradiance += e / cos_i;
             direction += -to_light * dot(e / cos_i, vec3(1.0));
+            lit_face += lit_face_exitance(alpha, max(table.y, 1.0), e / cos_i, cos_i);
             continue;
         }
         // A beam takes in and gives back by its own incidence (`IncidenceWeight`).
@@ -429,6 +435,7 @@ fn inject(@builtin(global_invocation_id) id: vec3<u32>) {
     vectors[injection.tabled + i] = vec4(tabled, 0.0);
     vectors[injection.beam_irradiance + i] = vec4(normal_irradiance, 0.0);
     vectors[injection.beam_direction + i] = vec4(direction, 0.0);
+    vectors[injection.lit_face + i] = vec4(lit_face, 0.0);
 }
 
 // Translucent shadow maps (`translucent_shadow_map.rs`, their CPU twin): per translucent

@@ -91,7 +91,7 @@ struct Injection {
     tabled: u32,
     beam_irradiance: u32,
     beam_direction: u32,
-    pad: u32,
+    lit_face: u32,
 }
 
 impl InjectedLight {
@@ -405,6 +405,10 @@ impl GpuInjection {
             let slot = table.and_then(|t| t.slots.get(i).copied()).filter(|&s| s != u32::MAX);
             let eta = slot.and_then(|s| table.map(|t| t.media[s as usize].w)).unwrap_or(1.0);
             scene.push([slot.map_or(-1.0, |s| s as f32), eta, 0.0, 0.0]);
+            // Its single-scattering albedo: the lit face's single scattering
+            // (`lit_face_exitance`).
+            let alpha = slot.and_then(|s| table.map(|t| t.media[s as usize].truncate())).unwrap_or(Vec3::ZERO);
+            scene.push([alpha.x, alpha.y, alpha.z, 0.0]);
         }
         let tables_at = scene.len() as u32;
         for object in 0..objects {
@@ -439,7 +443,7 @@ impl GpuInjection {
             tabled: beams.tabled,
             beam_irradiance: beams.irradiance,
             beam_direction: beams.direction,
-            pad: 0,
+            lit_face: beams.lit_face,
         };
 
         let uniform = device.create_buffer_with_data(&BufferInitDescriptor {

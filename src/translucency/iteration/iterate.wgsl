@@ -1,13 +1,15 @@
-// Seed 001's per-frame transport on the GPU: B = K E⁰ + S⁰ + K F B, iterated as
-//   ΔB₀ = K E⁰ + S⁰;  repeat { ΔB_c = cluster means of ΔB;  ΔE = F [ΔB, ΔB_c];  E += ΔE;
-//                         ΔB = K ΔE;  B += ΔB }  until flux(ΔB) ≤ threshold · flux(ΔB₀);
+// Seed 001's per-frame transport on the GPU: B = K E⁰ + S⁰ + K F (B + P), P the lit faces'
+// single scattering (which the gather gives per pixel), iterated as
+//   ΔB₀ = K E⁰ + S⁰, B = ΔB₀, ΔB₀ += P (the first F gathers it, B does not hold it);
+//   repeat { ΔB_c = cluster means of ΔB;  ΔE = F [ΔB, ΔB_c];  E += ΔE;
+//            ΔB = K ΔE;  B += ΔB }  until flux(ΔB) ≤ threshold · flux(ΔB₀);
 //   then B += ΔB r/(1 − r), the geometric tail (r = flux(ΔB) / flux(the ΔB before)).
 // The same arithmetic as `EnergyTransport::solve` (src/translucency/transport/solve.rs), each
 // row's sum in another order (a few lanes' partial sums, then a tree). The loop is
 // recorded max_iterations times; `decide` zeroes the indirect dispatch arguments once the
 // energy still moving is below the threshold, so the rest of the recorded loop costs nothing.
 // Warm-started from the last solution B' (`EnergyTransport::solve_from`): `seed_warm`,
-// `cluster_means` and `gather_warm` give ΔE = E⁰ − E_t + F B', `scatter_first_warm`
+// `cluster_means` and `gather_warm` give ΔE = E⁰ − E_t + F (B' + P), `scatter_first_warm`
 // B = K ΔE + S⁰ + T x and ΔB = B − B' (counted as an iteration), and the loop goes on from
 // that ΔB with its absolute flux, to `warm_threshold`, the first bounce's flux estimated as
 // flux(B) (1 − r') with r' the last solution's tail ratio.
@@ -80,6 +82,9 @@ struct Layout {
     // runs over those alone; the others' exitance, flow and lobes stay zero.
     table_rows: u32,
     table_row_count: u32,
+    // The lit faces' single-scattered exitance P (in vec4s; `DirectLight::lit_face_exitance`):
+    // the gather gives it per pixel, so it is not in B, but the first bounce gathers B + P.
+    lit_face: u32,
 }
 
 struct State {
@@ -199,7 +204,7 @@ fn seed_warm(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     vectors[packing.irradiance + i] = vectors[packing.direct + i];
-    vectors[packing.delta_exitance + i] = vectors[packing.exitance + i];
+    vectors[packing.delta_exitance + i] = vectors[packing.exitance + i] + vectors[packing.lit_face + i];
 }
 
 fn rgb(at: u32) -> vec4<f32> {
@@ -545,8 +550,12 @@ fn scatter_rows(local: u32, group: u32, first: bool, warm: bool) {
             own_exitance = area * (sum.x + sum.y + sum.z);
             sum -= vectors[packing.exitance + row];
         }
-        vectors[packing.delta_exitance + row] = sum;
         vectors[packing.exitance + row] += sum;
+        // A cold start's first bounce gathers the lit faces' single scattering with B.
+        if first && !warm {
+            sum += vectors[packing.lit_face + row];
+        }
+        vectors[packing.delta_exitance + row] = sum;
         if warm {
             let size = abs(sum);
             own = area * (size.x + size.y + size.z);

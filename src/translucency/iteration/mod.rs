@@ -96,8 +96,11 @@ struct Layout {
     // others' exitance, flow and lobes stay zero, as the vectors buffer starts.
     table_rows: u32,
     table_row_count: u32,
+    // The lit faces' single-scattered exitance (`DirectLight::lit_face_exitance`), in
+    // `vectors`: gathered with `B` by the first bounce.
+    lit_face: u32,
     // To a whole number of 16-byte rows, as the uniform's WGSL struct.
-    pad: [u32; 3],
+    pad: [u32; 2],
 }
 
 /// What the iteration needs of a patch to give the deep field's exit law its axis each frame
@@ -176,6 +179,8 @@ pub struct BeamOffsets {
     pub irradiance: u32,
     /// Per patch, the beams' travel directions weighted by it.
     pub direction: u32,
+    /// Per patch, the lit face's single-scattered exitance.
+    pub lit_face: u32,
 }
 
 /// `State` in `iterate.wgsl` (indirect arguments first, as dispatches read them).
@@ -429,7 +434,8 @@ impl GpuTransport {
         layout.table_exitance = 7 * n + clusters;
         layout.beam_irradiance = 8 * n + clusters;
         layout.beam_direction = 9 * n + clusters;
-        layout.beam_light = 10 * n + clusters;
+        layout.lit_face = 10 * n + clusters;
+        layout.beam_light = 11 * n + clusters;
         layout.beam_late = layout.beam_light + layout.slots * layout.bins;
         layout.table_flow = layout.beam_late + layout.slots;
         let flows = if layout.flow == 1 { 3 * n } else { 0 };
@@ -561,6 +567,7 @@ impl GpuTransport {
             write(l.tabled, &direct.tabled, n);
             write(l.beam_irradiance, &direct.beam_irradiance, n);
             write(l.beam_direction, &direct.beam_direction, n);
+            write(l.lit_face, &direct.lit_face_exitance, n);
             let lights = (l.slots * l.bins) as usize;
             if lights > 0 {
                 write(l.beam_light, &direct.beam_light, lights);
@@ -726,9 +733,9 @@ impl GpuTransport {
     }
 
     /// Where the beam table's vectors start in the vectors buffer (in `vec4<f32>`s): the
-    /// beams' light by table direction, the part of `E⁰` the table carries, and the beams'
+    /// beams' light by table direction, the part of `E⁰` the table carries, the beams'
     /// normal irradiance and weighted direction (what the injection writes and the gather's
-    /// single scattering reads).
+    /// single scattering reads), and the lit faces' single-scattered exitance.
     pub fn beam_offsets(&self) -> BeamOffsets {
         let l = &self.layout;
         BeamOffsets {
@@ -736,6 +743,7 @@ impl GpuTransport {
             tabled: l.tabled,
             irradiance: l.beam_irradiance,
             direction: l.beam_direction,
+            lit_face: l.lit_face,
         }
     }
 

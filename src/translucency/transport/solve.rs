@@ -1,4 +1,5 @@
-//! The per-frame solve: `B = K (E⁰ − E_t) + S⁰ + T x + K F B` iterated as a series of
+//! The per-frame solve: `B = K (E⁰ − E_t) + S⁰ + T x + K F (B + P)` (`P` the lit faces'
+//! single scattering, which the gather gives per pixel) iterated as a series of
 //! increments from zero or (a warm start) from the last solution, stopped at a threshold, the
 //! rest added as the series' geometric tail. `iterate.wgsl` is its GPU twin.
 
@@ -111,7 +112,10 @@ impl EnergyTransport {
     /// [`solve`](Self::solve) from `B = K (E⁰ − E_t) + S⁰ + T x`: `direct.exitance` is the
     /// exitance the direct light leaves besides (single scattering at each beam's own
     /// incidence), `direct.tabled` (`E_t`) the irradiance that the beam table `T` carries
-    /// instead of `K`, `direct.beam_light` (`x`) that irradiance by table direction.
+    /// instead of `K`, `direct.beam_light` (`x`) that irradiance by table direction. The
+    /// first bounce gathers `B + P`, `P` the lit faces' single scattering
+    /// (`direct.lit_face_exitance`, which the gather gives per pixel), so that
+    /// `B = K (E⁰ − E_t) + S⁰ + T x + K F (B + P)`.
     pub fn solve_with(
         &self,
         direct: &DirectLight,
@@ -146,8 +150,16 @@ impl EnergyTransport {
         } else {
             direct.irradiance.iter().zip(&direct.tabled).map(|(e, t)| *e - *t).collect()
         };
+        // Single scattering by the lit faces leaves by the gather, not `B`, but lights the
+        // others: it joins the source of the first bounce (`direct.lit_face_exitance`).
+        let with_lit_face = |b: &[Vec3]| -> Vec<Vec3> {
+            b.iter()
+                .enumerate()
+                .map(|(i, v)| *v + direct.lit_face_exitance.get(i).copied().unwrap_or(Vec3::ZERO))
+                .collect()
+        };
         if let Some(previous) = previous {
-            let gathered = self.gather(&previous.exitance);
+            let gathered = self.gather(&with_lit_face(&previous.exitance));
             for ((e, s), g) in irradiance.iter_mut().zip(scattered.iter_mut()).zip(&gathered) {
                 *e += *g;
                 *s += *g;
@@ -163,13 +175,17 @@ impl EnergyTransport {
             }
         }
         let mut exitance = delta.clone();
+        // Cold: the first bounce gathers the lit faces' single scattering with `B`.
+        if previous.is_none() {
+            delta = with_lit_face(&delta);
+        }
         // Cold: the first bounce's flux, the increments' flux (never negative but for a
         // profile's negative correction), the ratio found by the loop. Warm: B₁'s share the
         // first bounce holds, the increments' absolute flux, the last solution's ratio until
         // the increments show their own; the application counted as an iteration.
         let (first, size, threshold, mut tail_ratio, mut iterations): (f32, fn(&Self, &[Vec3]) -> f32, f32, f32, u32) =
             match previous {
-                None => (self.flux(&exitance), Self::flux, threshold, 0.0, 0),
+                None => (self.flux(&delta), Self::flux, threshold, 0.0, 0),
                 Some(previous) => {
                     let ratio = previous.tail_ratio.clamp(0.0, MAX_TAIL_RATIO);
                     for (d, b) in delta.iter_mut().zip(&previous.exitance) {
