@@ -264,7 +264,7 @@ pub fn direct_light(
         let mut beams: Vec<(usize, Vec3)> = Vec::new();
         let (mut normal_irradiance, mut direction, mut lit_face) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
         // The medium's (α, η) where the patch has a table slot.
-        let medium = table.and_then(|t| t.slots.get(i).filter(|&&s| s != u32::MAX).and_then(|&s| t.media.get(s as usize)));
+        let medium = table.and_then(|t| t.patch_medium(i));
         for light in lights {
             let (e, to_light) = match *light {
                 PatchLight::Directional {

@@ -311,10 +311,12 @@ impl BeamTable {
     /// Per patch, its medium's `(α, η)` where it has a table, zero elsewhere (what the
     /// gather's single scattering takes).
     pub fn patch_media(&self) -> Vec<Vec4> {
-        self.slots
-            .iter()
-            .map(|&s| self.media.get(s as usize).copied().unwrap_or(Vec4::ZERO))
-            .collect()
+        (0..self.slots.len()).map(|i| self.patch_medium(i).unwrap_or(Vec4::ZERO)).collect()
+    }
+
+    /// Patch `i`'s medium, `(α, η)`, where it has a table slot.
+    pub fn patch_medium(&self, i: usize) -> Option<Vec4> {
+        self.slots.get(i).and_then(|&s| self.media.get(s as usize)).copied()
     }
 
     /// Direction `bin` of patch `j`'s column: the exitance per unit of irradiance that got

@@ -403,11 +403,12 @@ impl GpuInjection {
             // refraction.
             let table = transport.beam_table.as_ref();
             let slot = table.and_then(|t| t.slots.get(i).copied()).filter(|&s| s != u32::MAX);
-            let eta = slot.and_then(|s| table.map(|t| t.media[s as usize].w)).unwrap_or(1.0);
+            let medium = table.and_then(|t| t.patch_medium(i));
+            let eta = medium.map_or(1.0, |m| m.w);
             scene.push([slot.map_or(-1.0, |s| s as f32), eta, 0.0, 0.0]);
             // Its single-scattering albedo: the lit face's single scattering
             // (`lit_face_exitance`).
-            let alpha = slot.and_then(|s| table.map(|t| t.media[s as usize].truncate())).unwrap_or(Vec3::ZERO);
+            let alpha = medium.map_or(Vec3::ZERO, |m| m.truncate());
             scene.push([alpha.x, alpha.y, alpha.z, 0.0]);
         }
         let tables_at = scene.len() as u32;
