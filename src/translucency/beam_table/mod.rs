@@ -233,7 +233,7 @@ impl BeamTable {
     /// [`direction_weights`]), and the share of it that gets in (`entering`); `None` for a
     /// patch without a table or a beam along or behind its surface.
     pub fn light_index(&self, patches: &Patches, j: usize, travel: Vec3) -> Option<([(usize, f32); 4], f32)> {
-        let slot = *self.slots.get(j).filter(|&&s| s != u32::MAX)?;
+        let slot = self.slot(j)?;
         let normal = patches.patches[j].normal;
         let weights = direction_weights(travel, normal, self.settings.cosines, self.settings.azimuths)?;
         let eta = self.media[slot as usize].w;
@@ -316,14 +316,19 @@ impl BeamTable {
 
     /// Patch `i`'s medium, `(α, η)`, where it has a table slot.
     pub fn patch_medium(&self, i: usize) -> Option<Vec4> {
-        self.slots.get(i).and_then(|&s| self.media.get(s as usize)).copied()
+        self.slot(i).and_then(|s| self.media.get(s as usize)).copied()
+    }
+
+    /// Patch `i`'s slot, where it has a table (`slots` holds `u32::MAX` elsewhere).
+    pub fn slot(&self, i: usize) -> Option<u32> {
+        self.slots.get(i).copied().filter(|&s| s != u32::MAX)
     }
 
     /// Direction `bin` of patch `j`'s column: the exitance per unit of irradiance that got
     /// in, by the patch it leaves through (early and late light summed; empty without a
     /// table).
     pub fn column(&self, j: usize, bin: u32) -> Vec<(usize, Vec3)> {
-        let Some(&slot) = self.slots.get(j).filter(|&&s| s != u32::MAX) else {
+        let Some(slot) = self.slot(j) else {
             return Vec::new();
         };
         let (direction, share) = (

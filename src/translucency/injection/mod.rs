@@ -402,7 +402,7 @@ impl GpuInjection {
             // The patch's beam-table slot (−1: none; exact as a float below 2²⁴) and index of
             // refraction.
             let table = transport.beam_table.as_ref();
-            let slot = table.and_then(|t| t.slots.get(i).copied()).filter(|&s| s != u32::MAX);
+            let slot = table.and_then(|t| t.slot(i));
             let medium = table.and_then(|t| t.patch_medium(i));
             let eta = medium.map_or(1.0, |m| m.w);
             scene.push([slot.map_or(-1.0, |s| s as f32), eta, 0.0, 0.0]);

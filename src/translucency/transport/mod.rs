@@ -666,7 +666,7 @@ impl EnergyTransport {
         // mean, the ball's skin lit from the front went 0.058 → 0.088 in relative L1.
         let moments = table.early_moments(&direct.beam_light, |i, j| from_afar(patches, source_depths, i, j));
         for (i, (law, (early, moment))) in laws.iter_mut().zip(moments).enumerate() {
-            if table.slots.get(i).is_none_or(|&s| s == u32::MAX) {
+            if table.slot(i).is_none() {
                 continue;
             }
             let (b, normal) = (exitance.get(i).copied().unwrap_or(Vec3::ZERO), p[i].normal);
