@@ -27,7 +27,7 @@
 //!     [--exit-axis plugin|normal|normal-all|flow-all|lobe] [--exit-lobes true|false]
 //!     [--point-light DISTANCE] [--pixels-on-mesh]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
-//!     [--tracer-seed 1] [--light-traced-part all|single|lambertian-exit|first-exit]
+//!     [--tracer-seed 1] [--light-traced-part all|single|lambertian-exit|first-exit|no-uncollided-reentry]
 //!     [--reference FILE.exr]
 //!     [--out docs/translucent.csv]
 //! ```
@@ -603,6 +603,7 @@ fn light_traced_mesh(
             Part::Single => "-single",
             Part::LambertianExit => "-lambertianexit",
             Part::FirstExit => "-firstexit",
+            Part::NoUncollidedReentry => "-nouncollidedreentry",
         },
         if shape == Shape::Ball { "ballmesh" } else { shape.scene_name() },
         cli.photons,

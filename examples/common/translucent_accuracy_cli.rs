@@ -234,9 +234,10 @@ pub struct Cli {
     pub tracer_seed: u64,
     /// The bunny's, the torus's or (`--pixels-on-mesh`) the ball's light tracer renders this
     /// part of the light (an oracle against the whole): single scattering alone, the exact
-    /// transport given out by Lambert's law, or all but the light that left the mesh and came
-    /// back in (each photon stopped at its first exit). Reference suffix `-single` /
-    /// `-lambertianexit` / `-firstexit`
+    /// transport given out by Lambert's law, all but the light that left the mesh and came
+    /// back in (each photon stopped at its first exit), or all but the light that crossed a
+    /// thin part unscattered and came back in. Reference suffix `-single` /
+    /// `-lambertianexit` / `-firstexit` / `-nouncollidedreentry`
     #[arg(long, value_enum, default_value_t = Part::All)]
     pub light_traced_part: Part,
     /// A reference EXR made before (else it is rendered into out/translucent_accuracy/)

@@ -71,6 +71,11 @@ pub enum Part {
     /// its first exit, so that the reference over this picture is what light coming back in
     /// (a lit ear's light onto the head behind it) is worth.
     FirstExit,
+    /// All of it but the light that crossed a thin part without scattering and entered the
+    /// mesh again: a photon that leaves before its first collision stops there (the plugin
+    /// lights only the first surface a light meets), so that the reference over this picture
+    /// is what light through a thin part onto the mesh behind it is worth.
+    NoUncollidedReentry,
 }
 
 /// The pinhole camera of the accuracy scenes: at `eye`, looking at the origin, +Y up
@@ -208,7 +213,7 @@ impl Tracer<'_> {
             let mut collisions = 0u32;
             loop {
                 if !inside {
-                    if self.part == Part::FirstExit {
+                    if self.part == Part::FirstExit || (self.part == Part::NoUncollidedReentry && collisions == 0) {
                         break;
                     }
                     // Out through the surface: on in a straight line, perhaps into the mesh
