@@ -272,9 +272,11 @@ pub enum WalkEnd {
 /// three colour channels, and calls `on_end(weight, end)` for each that leaves after at least
 /// `orders.first` scatterings or is still inside after `orders.last`: `weight / walks` is its
 /// share of the light that entered, per channel (with `split`, a split walk's copies each
-/// carry their share of it in `weight`). A beam's walks from entries facing away
-/// from it are not walked (their share is lost). `false` where the medium, the scale or the
-/// entries are invalid (nothing walked). The same physics as the path-traced references
+/// carry their share of it in `weight`). A beam's walks enter by each entry's projected
+/// area, none through an entry that faces away from it (its light enters there, and where a
+/// patch curves away from the light a walk drawn by area at its back lost its share). `false`
+/// where the medium, the scale or the entries are invalid, or a beam meets none of the
+/// entries from outside (nothing walked). The same physics as the path-traced references
 /// (`tools/translucent_reference.py`): `translucent_accuracy --scattering walks` builds `K`
 /// from it to measure what the diffusion profile costs, and the beam table its columns.
 ///
@@ -304,7 +306,16 @@ pub fn walk_ends(
     split: Option<FarSplit>,
     mut on_end: impl FnMut(Vec3, WalkEnd),
 ) -> bool {
-    let Some(entry_table) = EntryTable::new(medium, world_units_per_mm, entries) else {
+    let Some(entry_table) = (match launch {
+        // A beam enters each sample by its projected area, and none where it meets the
+        // sample's back: a walk drawn there would count in `walks` unwalked, and a patch
+        // curving away from the light (a terminator, an ear's rim) lose its share
+        // (`docs/translucent.md`, "A beam's walks lost where a patch curves away").
+        WalkLaunch::Beam(d) => {
+            EntryTable::weighted(medium, world_units_per_mm, entries, |e| e.area.max(0.0) * (-d.dot(e.normal)).max(0.0))
+        }
+        _ => EntryTable::new(medium, world_units_per_mm, entries),
+    }) else {
         return false;
     };
     let scale = world_units_per_mm as f64;
@@ -373,6 +384,15 @@ impl<'a> EntryTable<'a> {
         world_units_per_mm: f32,
         entries: &'a [EntryPoint],
     ) -> Option<Self> {
+        Self::weighted(medium, world_units_per_mm, entries, |e| e.area.max(0.0))
+    }
+
+    fn weighted(
+        medium: &TranslucentMedium,
+        world_units_per_mm: f32,
+        entries: &'a [EntryPoint],
+        weight: impl Fn(&EntryPoint) -> f32,
+    ) -> Option<Self> {
         if medium.invalid_reason().is_some()
             || !(world_units_per_mm.is_finite() && world_units_per_mm > 0.0)
             || entries.is_empty()
@@ -382,7 +402,7 @@ impl<'a> EntryTable<'a> {
         let mut cumulative = Vec::with_capacity(entries.len());
         let mut total = 0.0f64;
         for e in entries {
-            total += e.area.max(0.0) as f64;
+            total += weight(e) as f64;
             cumulative.push(total);
         }
         (total > 0.0).then(|| Self {

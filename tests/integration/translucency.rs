@@ -2091,21 +2091,21 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     // 0.3081, marble 0.0794).
     let (lean, flow) = (true, false);
     let table_cases = [
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0502, [1.042, 1.040, 1.068]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.0748, [1.015, 0.989, 1.386]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0419, [1.029, 1.023, 1.028]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0617, [0.972, 0.964, 0.971]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0411, [0.984, 0.987, 0.993]),
-        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.0819, [0.949, 1.070, 1.622]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0658, [0.988, 0.981, 0.973]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0780, [1.031, 1.007, 0.999]),
-        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0496, [0.981, 0.961, 0.965]),
-        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2321, [0.793, 0.585, 0.696]),
-        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3133, [0.709, 0.441, 0.668]),
-        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0807, [0.946, 0.936, 0.935]),
-        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1435, [1.012, 0.962, 1.402]),
-        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0392, [0.989, 0.965, 0.967]),
-        ((table_1024, "beam table, 1024 walks, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2339, [0.803, 0.565, 0.651]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0569, [1.049, 1.045, 1.073]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.0782, [1.026, 0.957, 1.217]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0451, [1.037, 1.030, 1.036]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0589, [0.978, 0.972, 0.980]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0404, [0.985, 0.987, 0.989]),
+        ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.0804, [0.948, 1.058, 1.613]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0642, [0.990, 0.984, 0.976]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0780, [1.023, 1.002, 0.997]),
+        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0452, [0.988, 0.966, 0.969]),
+        ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2295, [0.804, 0.571, 0.637]),
+        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3094, [0.720, 0.431, 0.612]),
+        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0764, [0.950, 0.944, 0.946]),
+        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1492, [1.004, 0.952, 1.335]),
+        ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0381, [0.990, 0.968, 0.967]),
+        ((table_1024, "beam table, 1024 walks, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2337, [0.807, 0.561, 0.617]),
     ];
     for ((oracles, named), exit_lobes, preset, name, lighting, how, eta, rel_l1, ratio) in table_cases {
         let medium = bevy_mesostructure::translucency::TranslucentMedium {
@@ -2247,10 +2247,10 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         (TranslucentPreset::Skin1, "skin1", "front", front, false, own, 0.1188, [0.925, 0.946, 0.965]),
         (TranslucentPreset::Skin1, "skin1", "back", back, false, own, 0.4026, [0.766, 0.684, 0.712]),
         (TranslucentPreset::Skin1, "skin1", "front", front, true, walks, 0.1535, [1.114, 1.127, 1.134]),
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks, 0.1089, [1.038, 1.060, 1.084]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_walks, 0.2919, [0.775, 0.832, 0.872]),
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks_and_law, 0.0801, [1.001, 1.008, 1.014]),
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table_and_law, 0.0825, [1.001, 1.009, 1.014]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks, 0.1131, [1.047, 1.071, 1.090]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_walks, 0.2608, [0.845, 0.862, 0.874]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_walks_and_law, 0.0807, [1.010, 1.018, 1.020]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table_and_law, 0.0821, [1.016, 1.018, 1.022]),
         // With its exit lobes (`TransportSettings::exit_lobes`) and each beam spread over the
         // four table directions about it (`direction_weights`; the nearest direction and the
         // flow's law alone: 0.0802, 0.2581, 0.0763), single scattering past the terminator
@@ -2261,9 +2261,9 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         // held). 256 beam walks split in 4 far from their entry (before, 384 unsplit: 0.0535,
         // 0.1582, 0.0753), in 16 since 2026-11-29 (in 4: 0.0609, 0.1436, 0.0713 with marble's
         // walks to 32 scatterings; about the normal 0.2751).
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0610, [1.026, 1.025, 1.020]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1306, [0.997, 0.966, 1.033]),
-        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0747, [0.994, 0.992, 0.986]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0622, [1.033, 1.029, 1.022]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1279, [0.993, 0.962, 1.012]),
+        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0733, [1.005, 1.002, 0.997]),
         // Marble lit from behind, against the mesh light tracer (two renders of 3.2·10⁷
         // photons a channel, seeds 1 and 2: a pair differs by 0.031): short of the issue's
         // 0.08 and too dark, most on the ears and the head (the exact transport given out by
@@ -2271,9 +2271,9 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         // bunny lit from behind"). Since 2026-12-06 the lit faces' single scattering lights
         // the other patches (`DirectLight::lit_face_exitance`; before: 0.1497, [0.955, 0.909,
         // 0.875]): light that left the bunny and came back in is a sixth of this picture.
-        (TranslucentPreset::Marble, "marble", "back", back, true, beam_table, 0.1396, [0.984, 0.941, 0.911]),
+        (TranslucentPreset::Marble, "marble", "back", back, true, beam_table, 0.1261, [0.999, 0.959, 0.928]),
         // The table with the deep law about the normal, as before the flow.
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2608, [0.877, 0.826, 0.814]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2626, [0.886, 0.841, 0.813]),
     ];
     for (preset, name, lighting, how, object_exit_share, oracles, rel_l1, ratio) in cases {
         let label = format!(
@@ -2345,15 +2345,15 @@ fn a_translucent_torus_matches_mitsuba_as_documented() {
     // lit faces' single scattering lights the other patches, across the hole (before:
     // 0.0609, 0.0901, 0.0501, 0.1323, 0.0637, 0.0965, 0.0852).
     let cases = [
-        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0603, [0.969, 0.989, 1.003]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, 0.0930, [1.006, 1.001, 0.989]),
-        (TranslucentPreset::Marble, "marble", "front", front, 0.0499, [0.997, 1.000, 1.004]),
-        (TranslucentPreset::Marble, "marble", "back", back, 0.1214, [0.928, 0.899, 0.893]),
-        (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0633, [0.972, 0.986, 0.996]),
-        (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.0981, [0.998, 0.992, 0.983]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0546, [0.976, 0.993, 1.007]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, 0.0923, [1.020, 1.011, 0.996]),
+        (TranslucentPreset::Marble, "marble", "front", front, 0.0507, [1.006, 1.008, 1.009]),
+        (TranslucentPreset::Marble, "marble", "back", back, 0.1138, [0.942, 0.912, 0.904]),
+        (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0554, [0.980, 0.994, 1.004]),
+        (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.0995, [1.003, 0.998, 0.989]),
         // A point light in the hole, 3 mm above the middle (inside the bounds: a cube of
         // maps; 0.325 with the one orthographic map before).
-        (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.0762, [0.956, 0.977, 1.003]),
+        (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.0709, [0.975, 0.994, 1.014]),
     ];
     for (preset, name, lighting, how, rel_l1, ratio) in cases {
         let reference = reference_picture(&format!("torus_{name}"), lighting);
@@ -2386,10 +2386,10 @@ fn a_translucent_ball_over_a_floor_matches_mitsuba_as_documented() {
     let table = Oracles { scattering: ScatteringSource::BeamTable(default()), ..Oracles::NONE };
     // (medium, the plugin's floor albedo, relative L1, mean ratio r/g/b): measured.
     let cases = [
-        (TranslucentPreset::Skin1, "skin1", 0.8, 0.0388, [0.992, 0.997, 1.025]),
-        (TranslucentPreset::Skin1, "skin1", 0.0, 0.2777, [0.715, 0.736, 0.771]),
-        (TranslucentPreset::Marble, "marble", 0.8, 0.0610, [1.025, 1.025, 1.025]),
-        (TranslucentPreset::Marble, "marble", 0.0, 0.2958, [0.729, 0.730, 0.730]),
+        (TranslucentPreset::Skin1, "skin1", 0.8, 0.0381, [0.994, 1.003, 1.031]),
+        (TranslucentPreset::Skin1, "skin1", 0.0, 0.2728, [0.718, 0.742, 0.778]),
+        (TranslucentPreset::Marble, "marble", 0.8, 0.0601, [1.029, 1.027, 1.026]),
+        (TranslucentPreset::Marble, "marble", 0.0, 0.2913, [0.733, 0.731, 0.731]),
     ];
     for (preset, name, floor, rel_l1, ratio) in cases {
         let reference = reference_picture(name, "front_floor0.8");
@@ -2478,10 +2478,10 @@ fn single_scattering_marched_per_pixel_holds_as_documented() {
     let marched = Oracles { shadow_map: None, ..mapped };
     let medium = bevy_mesostructure::translucency::TranslucentMedium { index_of_refraction: 1.0, ..TranslucentPreset::Skin1.medium() };
     for (oracles, label, lighting, how, rel_l1, ratio) in [
-        (marched, "rays", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0589, [0.970, 0.989, 1.002]),
-        (marched, "rays", "back", SceneLighting::Directional(travel), 0.0900, [1.003, 0.998, 0.988]),
-        (mapped, "a 256² map", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0603, [0.969, 0.989, 1.003]),
-        (mapped, "a 256² map", "back", SceneLighting::Directional(travel), 0.0930, [1.006, 1.001, 0.989]),
+        (marched, "rays", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0529, [0.976, 0.994, 1.006]),
+        (marched, "rays", "back", SceneLighting::Directional(travel), 0.0889, [1.017, 1.009, 0.994]),
+        (mapped, "a 256² map", "front", SceneLighting::Directional(FRONT_LIGHT.normalize()), 0.0546, [0.976, 0.993, 1.007]),
+        (mapped, "a 256² map", "back", SceneLighting::Directional(travel), 0.0923, [1.020, 1.011, 0.996]),
     ] {
         let reference = reference_picture("torus_skin1", lighting);
         let label = format!("torus skin1 (the table, single scattering marched against {label})");
