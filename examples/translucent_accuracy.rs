@@ -505,8 +505,11 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
     // patches through the first bounce (`DirectLight::lit_face_exitance`; rows before it
     // lacked that light), with the beam table.
     let lit_bounced = if table { "_litbounced" } else { "" };
+    // `_projected`: a beam's walks enter by projected area, none lost at a sample facing away
+    // (rows before it lost them where a patch curves away from the light).
+    let projected = if table || cli.scattering == Scattering::BeamWalks { "_projected" } else { "" };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{}{}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{projected}{}{}",
         cli.kernel,
         if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" },
         if cli.pixel_samples > 1 { format!("_px{}", cli.pixel_samples) } else { String::new() }
