@@ -309,8 +309,8 @@ pub fn walk_ends(
     let Some(entry_table) = (match launch {
         // A beam enters each sample by its projected area, and none where it meets the
         // sample's back: a walk drawn there would count in `walks` unwalked, and a patch
-        // curving away from the light (a terminator, an ear's rim) lose its share
-        // (`docs/translucent.md`, "A beam's walks lost where a patch curves away").
+        // curving away from the light (a terminator, an ear's rim) would lose its share
+        // (`docs/translucent.md`, "A beam's walks enter by projected area").
         WalkLaunch::Beam(d) => {
             EntryTable::weighted(medium, world_units_per_mm, entries, |e| e.area.max(0.0) * (-d.dot(e.normal)).max(0.0))
         }

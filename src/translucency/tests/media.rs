@@ -125,16 +125,29 @@ fn beam_exits_split(
     last: u32,
     split: Option<crate::translucency::random_walk::FarSplit>,
 ) -> Option<BeamExits> {
+    let (_, _, cap) = skin_cube_top();
+    beam_exits_from(&cap, beam, first, last, split)
+}
+
+/// [`beam_exits_split`] from `entries` on [`skin_cube_top`]'s cube (`FAR` measured from the
+/// first).
+fn beam_exits_from(
+    entries: &[crate::translucency::random_walk::EntryPoint],
+    beam: Vec3,
+    first: u32,
+    last: u32,
+    split: Option<crate::translucency::random_walk::FarSplit>,
+) -> Option<BeamExits> {
     use crate::translucency::random_walk::{
         ScatteringOrders, WALKS_PER_CHANNEL, WalkEnd, WalkLaunch, walk_ends,
     };
-    let (medium, rays, cap) = skin_cube_top();
+    let (medium, rays, _) = skin_cube_top();
     let share = 1.0 / WALKS_PER_CHANNEL as f32;
     let mut exits = BeamExits { left: Vec3::ZERO, inside: Vec3::ZERO, far: Vec3::ZERO, far_exits: 0 };
     walk_ends(
         &medium,
         0.001,
-        &cap,
+        entries,
         &rays,
         WALKS_PER_CHANNEL,
         11,
@@ -144,7 +157,7 @@ fn beam_exits_split(
         |weight, end| match end {
             WalkEnd::Exit(exit) => {
                 exits.left += weight * share;
-                if exit.position.distance(cap[0].position) > FAR {
+                if exit.position.distance(entries[0].position) > FAR {
                     exits.far += weight * share;
                     exits.far_exits += 1;
                 }
@@ -190,31 +203,10 @@ fn beam_walks_give_back_the_plane_albedo() {
 /// area, half the walks started at the bottom and their share was lost: 0.285 / 0.166 / 0.100.
 #[test]
 fn a_beam_enters_a_patch_only_through_the_faces_it_meets() {
-    use crate::translucency::{
-        diffusion::collimated_albedo,
-        random_walk::{EntryPoint, ScatteringOrders, WALKS_PER_CHANNEL, WalkEnd, WalkLaunch, walk_ends},
-    };
-    let (medium, rays, cap) = skin_cube_top();
+    use crate::translucency::{diffusion::collimated_albedo, random_walk::EntryPoint};
+    let (medium, _, cap) = skin_cube_top();
     let entries = [cap[0], EntryPoint { position: Vec3::new(0.123, -1.0, -0.217), normal: Vec3::NEG_Y, area: 1.0 }];
-    let share = 1.0 / WALKS_PER_CHANNEL as f32;
-    let mut left = Vec3::ZERO;
-    let walked = walk_ends(
-        &medium,
-        0.001,
-        &entries,
-        &rays,
-        WALKS_PER_CHANNEL,
-        11,
-        WalkLaunch::Beam(Vec3::NEG_Y),
-        ScatteringOrders { first: 1, last: u32::MAX },
-        None,
-        |weight, end| {
-            if matches!(end, WalkEnd::Exit(_) | WalkEnd::Gap) {
-                left += weight * share;
-            }
-        },
-    );
-    assert!(walked, "nothing walked");
+    let left = beam_exits_from(&entries, Vec3::NEG_Y, 1, u32::MAX, None).expect("nothing walked").left;
     let albedo = medium.single_scattering_albedo();
     let expected = Vec3::from_array(albedo.map(|a| collimated_albedo(a, 1.0) as f32));
     assert!((left - expected).abs().max_element() < 0.025, "walks {left}, plane albedo {expected}");
