@@ -2131,27 +2131,40 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
 /// plugin's").
 #[test]
 fn the_ball_of_triangles_matches_its_own_light_traced_reference_as_documented() {
-    use translucent_accuracy_scene::{BACK_LIGHT, FRONT_LIGHT, Oracles, ScatteringSource, SceneLighting, Shape, ShapeView};
+    use translucent_accuracy_scene::{BACK_LIGHT, FRONT_LIGHT, SceneLighting, Shape, ShapeView};
     let view = ShapeView::on_mesh(Shape::Ball, 96);
     let (front, back) = (
         SceneLighting::Directional(FRONT_LIGHT.normalize()),
         SceneLighting::Directional(BACK_LIGHT.normalize()),
     );
-    let table = Oracles { scattering: ScatteringSource::BeamTable(default()), ..Oracles::NONE };
     // (medium, lighting, how, relative L1, mean ratio r/g/b): measured.
     let cases = [
         (TranslucentPreset::Marble, "marble", "front", front, 0.0431, [1.003, 0.990, 0.992]),
         (TranslucentPreset::Skin1, "skin1", "front", front, 0.0376, [1.029, 1.005, 1.003]),
         (TranslucentPreset::Skin1, "skin1", "back", back, 0.0802, [1.002, 0.912, 1.123]),
     ];
+    table_holds_as_documented(&view, "ballmesh", "the ball's triangles,", cases);
+}
+
+/// Each of `cases` — (medium, lighting, how, relative L1, mean ratio r/g/b) — index-matched
+/// with the defaults' beam table, against the reference `{scene}_{medium}_{lighting}`,
+/// labelled `{shown} {medium} (the beam table)`: [`holds_as_documented`].
+fn table_holds_as_documented(
+    view: &translucent_accuracy_scene::ShapeView,
+    scene: &str,
+    shown: &str,
+    cases: impl IntoIterator<Item = (TranslucentPreset, &'static str, &'static str, translucent_accuracy_scene::SceneLighting, f64, [f64; 3])>,
+) {
+    use translucent_accuracy_scene::{Oracles, ScatteringSource};
+    let table = Oracles { scattering: ScatteringSource::BeamTable(default()), ..Oracles::NONE };
     for (preset, name, lighting, how, rel_l1, ratio) in cases {
         let medium = bevy_mesostructure::translucency::TranslucentMedium {
             index_of_refraction: 1.0,
             ..preset.medium()
         };
-        let reference = reference_picture(&format!("ballmesh_{name}"), lighting);
-        let label = format!("the ball's triangles, {name} (the beam table)");
-        holds_as_documented(&view, &label, lighting, medium, false, &TransportSettings::default(), how, table, &reference, rel_l1, ratio, None);
+        let reference = reference_picture(&format!("{scene}_{name}"), lighting);
+        let label = format!("{shown} {name} (the beam table)");
+        holds_as_documented(view, &label, lighting, medium, false, &TransportSettings::default(), how, table, &reference, rel_l1, ratio, None);
     }
 }
 
@@ -2366,7 +2379,7 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
 /// with orthographic maps along the line to the centre (before) 0.114 and 0.111.
 #[test]
 fn a_translucent_torus_matches_mitsuba_as_documented() {
-    use translucent_accuracy_scene::{BACK_LIGHT, FRONT_LIGHT, Oracles, ScatteringSource, SceneLighting, Shape, ShapeView};
+    use translucent_accuracy_scene::{BACK_LIGHT, FRONT_LIGHT, SceneLighting, Shape, ShapeView};
     let view = ShapeView::new(Shape::Torus, 96);
     let (front, back) = (
         SceneLighting::Directional(FRONT_LIGHT.normalize()),
@@ -2374,7 +2387,6 @@ fn a_translucent_torus_matches_mitsuba_as_documented() {
     );
     // A point light 5 cm back along a directional light's travel.
     let point = |travel: Vec3| SceneLighting::Point(-travel.normalize() * 0.05);
-    let table = Oracles { scattering: ScatteringSource::BeamTable(default()), ..Oracles::NONE };
     // (medium, lighting, how, relative L1, mean ratio r/g/b): measured. Since 2026-12-06 the
     // lit faces' single scattering lights the other patches, across the hole (before:
     // 0.0609, 0.0901, 0.0501, 0.1323, 0.0637, 0.0965, 0.0852).
@@ -2389,15 +2401,7 @@ fn a_translucent_torus_matches_mitsuba_as_documented() {
         // maps; 0.325 with the one orthographic map before).
         (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.0709, [0.975, 0.994, 1.014]),
     ];
-    for (preset, name, lighting, how, rel_l1, ratio) in cases {
-        let reference = reference_picture(&format!("torus_{name}"), lighting);
-        let medium = bevy_mesostructure::translucency::TranslucentMedium {
-            index_of_refraction: 1.0,
-            ..preset.medium()
-        };
-        let label = format!("torus {name} (the beam table)");
-        holds_as_documented(&view, &label, lighting, medium, false, &TransportSettings::default(), how, table, &reference, rel_l1, ratio, None);
-    }
+    table_holds_as_documented(&view, "torus", "torus", cases);
 }
 
 /// Light bounced between objects, against a path tracer (docs/translucent.md, "Over a
