@@ -64,6 +64,11 @@ struct Cli {
     /// (`TransportSettings::exit_lobes`)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     exit_lobes: bool,
+    /// With the beam table, lean the light that crossed an object towards the camera about
+    /// its silhouette: diffusion's flux along the surface (`TransportSettings::tangential_flux`,
+    /// opt-in; closer for the marble bunny lit from behind, not for skin)
+    #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
+    tangential_flux: bool,
     /// Headless: swing the spot during the warm-up frames, as in a window, so that every frame
     /// injects and iterates anew (for timing; the shots still fix it in front and behind)
     #[arg(long)]
@@ -163,6 +168,7 @@ fn main() {
                 deep_exit_law: cli.deep_exit_law,
                 beam_table: cli.beam_table.then(default),
                 exit_lobes: cli.exit_lobes,
+                tangential_flux: cli.tangential_flux,
                 ..default()
             },
             max_iterations: cli.max_iterations,

@@ -364,6 +364,7 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
         deep_exit_law: cli.deep_exit_law,
         exit_lobes: cli.exit_lobes,
         flow_law_takes_all: cli.flow_law_takes_all,
+        tangential_flux: cli.tangential_flux && cli.deep_exit_law,
         diffusion_energy_kept: cli.energy_kept,
         shape_energy_dropped: cli.shape_energy_dropped,
         ..default()
@@ -510,8 +511,15 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
     // `_projected`: a beam's walks enter by projected area, none lost at a sample facing away
     // (rows before it lost them where a patch curves away from the light).
     let projected = if table || cli.scattering == Scattering::BeamWalks { "_projected" } else { "" };
+    // `_tangential`: the light leans down the exitance's gradient along the surface
+    // (`--tangential-flux true`), with the table, the deep law and the interpolating gather.
+    let tangential = if table && cli.tangential_flux && cli.deep_exit_law && matches!(cli.gather, Gather::Interpolation) {
+        "_tangential"
+    } else {
+        ""
+    };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{projected}{}{}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{projected}{tangential}{}{}",
         cli.kernel,
         if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" },
         if cli.pixel_samples > 1 { format!("_px{}", cli.pixel_samples) } else { String::new() }

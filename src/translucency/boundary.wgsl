@@ -53,6 +53,17 @@ fn deep_exit_shape(law: vec4<f32>, eta_in: f32, mu_in: f32) -> f32 {
     return (1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary) * law.z;
 }
 
+// `tangential_flux_factor` (diffusion.rs): the diffusion field's flux along the surface (P1)
+// in the exit radiance, 1 − clamp(w (1 − F(μ)) ∇_t ln B · ω, ±MAX_TANGENTIAL_LEAN), for the
+// weight w (`tangential_flux_weight`), per channel.
+const MAX_TANGENTIAL_LEAN: f32 = 0.5;
+fn tangential_flux_factor(weight: vec3<f32>, eta_in: f32, mu: f32, along: vec3<f32>) -> vec3<f32> {
+    let eta = clamp(eta_in, 1.0, 3.0);
+    let out = 1.0 - fresnel_reflectance(clamp(mu, 0.0, 1.0), eta);
+    let lean = clamp(weight * out * along, vec3(-MAX_TANGENTIAL_LEAN), vec3(MAX_TANGENTIAL_LEAN));
+    return select(vec3(1.0), 1.0 - lean, weight > vec3(0.0));
+}
+
 // `deep_exit_shape_about` (diffusion.rs): the same law with the mode's axis along `axis` (the
 // way the light flows, its length how much of it flows one way) instead of the normal `n`,
 // towards the unit `towards`, unnormalised: (1 − F(μ)) (1 + (H(μ_i)/(1 − ν ω_i·a) − 1)/A).

@@ -248,6 +248,51 @@ pub fn deep_exit_shape(law: [f32; 4], eta: f32, mu: f32) -> f32 {
     ((1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary) * law[2] as f64) as f32
 }
 
+/// The most the tangential flux's term moves a pixel's radiance from the exit law's, either
+/// way (a share of it): P1 holds for a small anisotropy, and a steep gradient at a
+/// silhouette must not turn the radiance negative.
+pub const MAX_TANGENTIAL_LEAN: f32 = 0.5;
+
+/// The weight of the diffusion field's flux along the surface in the exit radiance, per
+/// world unit of gradient: `g · 3A/(2η³) · D` ([`tangential_flux_factor`]). Inside, diffusion's
+/// radiance is `(φ + 3F·ω)/4π` (P1), with `F = −D∇φ`. Along the surface `F_t = −D∇_tφ`, and
+/// the exitance is `B = φ/(2A)` (the boundary condition); leaving through the boundary the
+/// radiance is `(1 − F(μ))/η²` of the refracted direction's inside, whose tangential part is
+/// `ω_t/η`. Over Lambert's `B/π` that adds `−(3A/(2η³)) (1 − F(μ)) D ∇_t ln B · ω` — `1.5 D`
+/// index-matched — and nothing to the exitance (the term is odd in `ω_t`). Light that
+/// crossed an object lit from behind flows along its surface at the silhouette and leaves
+/// towards the camera brighter than any law about the normal gives (the exact exit is
+/// 1.16× Lambert's share there, the deep law 1.09×: `docs/translucent.md`). Weighted by the
+/// share `g = 1 − √(3(1 − α))` of the light in the diffusion mode, which P1 describes (all of
+/// marble's, none of skin's blue); `α` the reduced albedo, `reduced_extinction` `σa + σs′`
+/// (mm⁻¹).
+pub fn tangential_flux_weight(alpha: f64, reduced_extinction: f64, eta: f64, world_units_per_mm: f64) -> f32 {
+    let alpha = alpha.clamp(0.0, 1.0);
+    let g = (1.0 - (3.0 * (1.0 - alpha)).sqrt()).max(0.0);
+    if !(reduced_extinction > 0.0 && world_units_per_mm > 0.0) || g == 0.0 {
+        return 0.0;
+    }
+    let eta = if eta.is_finite() { eta.clamp(1.0, 3.0) } else { 1.0 };
+    let f_dr = jensen_internal_diffuse_reflectance(eta);
+    let boundary = (1.0 + f_dr) / (1.0 - f_dr);
+    let diffusion = world_units_per_mm / (3.0 * reduced_extinction);
+    (g * 1.5 * boundary / (eta * eta * eta) * diffusion) as f32
+}
+
+/// The exit radiance's factor from the flux along the surface (P1, [`tangential_flux_weight`]):
+/// `1 − clamp(w (1 − F(μ)) ∇_t ln B · ω, ±`[`MAX_TANGENTIAL_LEAN`]`)`, for the weight `w`,
+/// the boundary's `eta`, the exit cosine `mu` and `along`, the exitance's gradient along the
+/// surface over the exitance, dotted with the unit direction towards the camera (the same
+/// arithmetic as `boundary.wgsl`).
+pub fn tangential_flux_factor(weight: f32, eta: f32, mu: f32, along: f32) -> f32 {
+    if !(weight > 0.0 && along.is_finite()) {
+        return 1.0;
+    }
+    let eta = if eta.is_finite() { eta.clamp(1.0, 3.0) } else { 1.0 };
+    let out = 1.0 - fresnel_reflectance(mu as f64, eta as f64) as f32;
+    1.0 - (weight * out * along).clamp(-MAX_TANGENTIAL_LEAN, MAX_TANGENTIAL_LEAN)
+}
+
 /// [`deep_exit_shape`] with the mode's axis along `axis` instead of the normal `n`,
 /// unnormalised (`law[2]` not applied): light leaving towards the unit `towards` (outside)
 /// leaves from inside along its refracted direction `ω_i`, and the deep field's mode, which

@@ -147,6 +147,7 @@ pub(crate) fn run_precompute(
             settings.transport.deep_exit_law as u32 as f32,
             settings.transport.exit_lobes as u32 as f32,
             settings.transport.flow_law_takes_all as u32 as f32,
+            settings.transport.tangential_flux as u32 as f32,
         ]),
         // The beam table's settings (none: all zero).
         hash_f32s(settings.transport.beam_table.map_or([0.0; 10], |t| {

@@ -15,6 +15,7 @@
 #import bevy_render::view::View
 #import bevy_mesostructure::translucency::boundary::{
     deep_exit_shape, deep_exit_shape_about, fresnel_reflectance, single_scattering_radiance,
+    tangential_flux_factor,
 }
 #import bevy_mesostructure::translucency::marched::marched_single_scattering
 
@@ -58,6 +59,8 @@ struct GatherPatch {
     // Where a beam table carries the patch's beams: its medium's single-scattering albedo and
     // η, for single scattering by the lit face (zero elsewhere).
     single: vec4<f32>,
+    // `ExitLaw::tangential`: per channel the weight of the flux along the surface (zero: none).
+    tangential: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -102,10 +105,11 @@ fn member_in_cell(g: GridLevel, k: u32, cell: vec3<i32>) -> i32 {
 // `B' = B − lobe_exitance` by 1 + D (s − 1), D = g·clamp(1 − A E/B'), E the patch's
 // irradiance direct and bounced (light bounced onto it enters as its direct light does), s the deep law about
 // the channel's `flow` where it has one (axis, 1/N), else about the normal
-// (`shape_about_normal`, `deep_exit_shape` at the pixel's exit cosine).
+// (`shape_about_normal`, `deep_exit_shape` at the pixel's exit cosine). Returns the factor
+// and of it the part that leaves by the law, not the lobe (`ExitLaw::factor_towards_parts`).
 fn exit_factor(law: vec4<f32>, flow: vec4<f32>, lobe: vec4<f32>, lobe_norm: f32, lobe_exitance: f32,
                local_albedo: f32, eta: f32, b: f32, e: f32, n: vec3<f32>, towards: vec3<f32>,
-               shape_about_normal: f32) -> f32 {
+               shape_about_normal: f32) -> vec2<f32> {
     var share = 0.0;
     if lobe_norm > 0.0 && b > 0.0 {
         share = clamp(lobe_exitance / b, 0.0, 1.0);
@@ -113,14 +117,15 @@ fn exit_factor(law: vec4<f32>, flow: vec4<f32>, lobe: vec4<f32>, lobe_norm: f32,
     let lobed = share * lobe_norm * exp(lobe.w * (dot(towards, lobe.xyz) - 1.0));
     let rest = b * (1.0 - share);
     if law.w <= 0.0 || rest <= 0.0 {
-        return lobed + (1.0 - share);
+        return vec2(lobed + (1.0 - share), 1.0 - share);
     }
     let deep = law.w * clamp(1.0 - local_albedo * e / rest, 0.0, 1.0);
     var shape = shape_about_normal;
     if any(flow != vec4(0.0)) {
         shape = deep_exit_shape_about(law, eta, n, flow.xyz, towards) * flow.w;
     }
-    return lobed + (1.0 - share) * (1.0 + deep * (shape - 1.0));
+    let own = (1.0 - share) * (1.0 + deep * (shape - 1.0));
+    return vec2(lobed + own, own);
 }
 
 // Patch `i`'s exit lobes: `k` 0 – 2 a channel's axis and κ, 3 the norms, 4 the light from
@@ -148,10 +153,12 @@ struct Surface {
     n: vec3<f32>,
     towards: vec3<f32>,
     mu: f32,
+    // A tangent frame about `n` (`tangent_frame`), for the exitance's gradient.
+    frame: mat2x3<f32>,
 }
 
 fn no_surface() -> Surface {
-    return Surface(false, vec3(0.0), vec3(0.0), vec3(0.0), 0.0);
+    return Surface(false, vec3(0.0), vec3(0.0), vec3(0.0), 0.0, mat2x3<f32>(vec3(0.0), vec3(0.0)));
 }
 
 fn pixel_surface(p: vec2<i32>, position: vec2<f32>) -> Surface {
@@ -165,7 +172,7 @@ fn pixel_surface(p: vec2<i32>, position: vec2<f32>) -> Surface {
     let x = world.xyz / world.w;
     let n = normalize(textureLoad(normal_prepass, p, 0).xyz * 2.0 - 1.0);
     let towards = normalize(view.world_position - x);
-    return Surface(true, x, n, towards, clamp(dot(n, towards), 0.0, 1.0));
+    return Surface(true, x, n, towards, clamp(dot(n, towards), 0.0, 1.0), tangent_frame(n));
 }
 
 // A pixel's sums over the patches that reach it, and the deep law's shape at its exit cosine
@@ -187,10 +194,26 @@ struct Gathered {
     // weight.
     object: i32,
     object_weight: f32,
+    // The flux along the surface (`AlongSurface` in twin.rs), over the patches with a weight
+    // for it: their light that leaves by the laws, their weights, Σ w·weight, Σ w B, and for
+    // a plane fitted to their exitance Σ w d, Σ w (dx², dx dy, dy²) and per channel Σ w d B
+    // (`d` a patch's offset in the pixel's tangent frame), and their η.
+    along_leaving: vec3<f32>,
+    along_weights: f32,
+    along_weight: vec3<f32>,
+    along_exitance: vec3<f32>,
+    along_offset: vec2<f32>,
+    along_second: vec3<f32>,
+    along_times_r: vec2<f32>,
+    along_times_g: vec2<f32>,
+    along_times_b: vec2<f32>,
+    along_eta: f32,
 }
 
 fn no_light() -> Gathered {
-    return Gathered(vec3(0.0), 0.0, vec4(-1.0), vec4(-1.0), vec4(-1.0), -1.0, vec3(1.0), 3.0e38, -1, 0.0);
+    return Gathered(vec3(0.0), 0.0, vec4(-1.0), vec4(-1.0), vec4(-1.0), -1.0, vec3(1.0), 3.0e38, -1, 0.0,
+                    vec3(0.0), 0.0, vec3(0.0), vec3(0.0), vec2(0.0), vec3(0.0), vec2(0.0), vec2(0.0), vec2(0.0),
+                    1.0);
 }
 
 // Patch `i`'s light at the pixel `s`, if it reaches it.
@@ -235,15 +258,29 @@ fn add_patch(i: u32, s: Surface, acc: ptr<function, Gathered>) {
     let shape = (*acc).shape;
     let norms = patch_lobes(i, 3u);
     let afar = patch_lobes(i, 4u);
-    let law = vec3(
-        exit_factor(record.law_r, patch_flow(i, 0u), patch_lobes(i, 0u), norms.r, afar.r,
-                    record.local_albedo.r, eta, b_i.r, received.r, s.n, s.towards, shape.r),
-        exit_factor(record.law_g, patch_flow(i, 1u), patch_lobes(i, 1u), norms.g, afar.g,
-                    record.local_albedo.g, eta, b_i.g, received.g, s.n, s.towards, shape.g),
-        exit_factor(record.law_b, patch_flow(i, 2u), patch_lobes(i, 2u), norms.b, afar.b,
-                    record.local_albedo.b, eta, b_i.b, received.b, s.n, s.towards, shape.b),
-    );
-    (*acc).sum += w * max(b_i - record.albedo.rgb * e0, vec3(0.0)) * law / 3.14159265358979;
+    let factor_r = exit_factor(record.law_r, patch_flow(i, 0u), patch_lobes(i, 0u), norms.r, afar.r,
+                    record.local_albedo.r, eta, b_i.r, received.r, s.n, s.towards, shape.r);
+    let factor_g = exit_factor(record.law_g, patch_flow(i, 1u), patch_lobes(i, 1u), norms.g, afar.g,
+                    record.local_albedo.g, eta, b_i.g, received.g, s.n, s.towards, shape.g);
+    let factor_b = exit_factor(record.law_b, patch_flow(i, 2u), patch_lobes(i, 2u), norms.b, afar.b,
+                    record.local_albedo.b, eta, b_i.b, received.b, s.n, s.towards, shape.b);
+    let own = max(b_i - record.albedo.rgb * e0, vec3(0.0)) / 3.14159265358979;
+    (*acc).sum += w * own * vec3(factor_r.x, factor_g.x, factor_b.x);
+#ifndef PHOTON_DENSITY
+    if any(record.tangential.rgb > vec3(0.0)) {
+        let o = vec2(dot(d, s.frame[0]), dot(d, s.frame[1]));
+        (*acc).along_leaving += w * own * vec3(factor_r.y, factor_g.y, factor_b.y);
+        (*acc).along_weights += w;
+        (*acc).along_weight += w * record.tangential.rgb;
+        (*acc).along_exitance += w * b_i;
+        (*acc).along_offset += w * o;
+        (*acc).along_second += w * vec3(o.x * o.x, o.x * o.y, o.y * o.y);
+        (*acc).along_times_r += w * o * b_i.r;
+        (*acc).along_times_g += w * o * b_i.g;
+        (*acc).along_times_b += w * o * b_i.b;
+        (*acc).along_eta = eta;
+    }
+#endif
     // Single scattering by the lit face (`BeamSingleScattering::radiance`): the patch's beams
     // at this pixel's own incidence.
     if any(record.single.rgb > vec3(0.0)) {
@@ -272,8 +309,54 @@ fn finish(acc: Gathered, s: Surface) -> vec4<f32> {
 #ifdef PHOTON_DENSITY
     return vec4((acc.sum + marched) * view.exposure, 1.0);
 #else
-    return vec4((acc.sum / acc.weights + marched) * view.exposure, 1.0);
+    return vec4(((acc.sum + along_surface(acc, s)) / acc.weights + marched) * view.exposure, 1.0);
 #endif
+}
+
+// The pixel's tangent frame about its unit normal (`tangent_frame` in twin.rs).
+fn tangent_frame(n: vec3<f32>) -> mat2x3<f32> {
+    var helper = vec3(0.0, 1.0, 0.0);
+    if abs(n.x) < 0.9 {
+        helper = vec3(1.0, 0.0, 0.0);
+    }
+    let t = normalize(cross(n, helper));
+    return mat2x3<f32>(t, cross(n, t));
+}
+
+// A plane's gradient fitted to one channel's exitance about the pixel: the offsets'
+// covariance (xx, xy, yy, its determinant) solved against Σ w d B / Σ w − mean · B̄.
+fn fitted_gradient(times: vec2<f32>, total: f32, mean: vec2<f32>, b: f32, cov: vec4<f32>) -> vec2<f32> {
+    let cross_term = times / total - mean * b;
+    return vec2(cov.z * cross_term.x - cov.y * cross_term.y, cov.x * cross_term.y - cov.y * cross_term.x) / cov.w;
+}
+
+// What the flux along the surface adds to the pixel's weighted sum (`AlongSurface::lean` in
+// twin.rs): the light that left by the laws times `tangential_flux_factor − 1`, the exitance's
+// gradient a weighted least-squares plane's (none where the patches do not span the plane).
+fn along_surface(acc: Gathered, s: Surface) -> vec3<f32> {
+    if acc.along_weights <= 0.0 {
+        return vec3(0.0);
+    }
+    let total = acc.along_weights;
+    let mean = acc.along_offset / total;
+    let b = acc.along_exitance / total;
+    let xx = acc.along_second.x / total - mean.x * mean.x;
+    let xy = acc.along_second.y / total - mean.x * mean.y;
+    let yy = acc.along_second.z / total - mean.y * mean.y;
+    let det = xx * yy - xy * xy;
+    if !(det > 1e-6 * (xx + yy) * (xx + yy)) {
+        return vec3(0.0);
+    }
+    let cov = vec4(xx, xy, yy, det);
+    let view = vec2(dot(s.towards, s.frame[0]), dot(s.towards, s.frame[1]));
+    let along = vec3(
+        dot(fitted_gradient(acc.along_times_r, total, mean, b.r, cov), view),
+        dot(fitted_gradient(acc.along_times_g, total, mean, b.g, cov), view),
+        dot(fitted_gradient(acc.along_times_b, total, mean, b.b, cov), view),
+    ) / max(b, vec3(1e-30));
+    let factor = tangential_flux_factor(
+        select(vec3(0.0), acc.along_weight / total, b > vec3(0.0)), acc.along_eta, s.mu, along);
+    return acc.along_leaving * (factor - 1.0);
 }
 
 // The light the patches give the pixel `s` by its own walk of the grids: the 27 cells about

@@ -206,7 +206,8 @@ fn gather_buffers(
     let grids = PatchGrid::levels(&centres, &reaches);
     // `GatherPatch` in gathered.wgsl: (surface point, reach), (normal, area), (albedo, object),
     // (the exit law's local albedo, η), its law per channel, (α, η) of its medium where a
-    // beam table carries its beams (single scattering's law; zero elsewhere).
+    // beam table carries its beams (single scattering's law; zero elsewhere), the weight of
+    // the flux along its surface per channel.
     // Where an object's single scattering is marched per pixel, the lit face's law is not
     // given as well.
     let marches = |object: u32| scene.marched.get(object as usize).is_some_and(Option::is_some);
@@ -222,7 +223,7 @@ fn gather_buffers(
                 .collect()
         })
         .unwrap_or_default();
-    let records: Vec<[f32; 32]> = patches
+    let records: Vec<[f32; 36]> = patches
         .patches
         .iter()
         .enumerate()
@@ -230,7 +231,7 @@ fn gather_buffers(
         .zip(&reaches)
         .map(|(((i, p), a), reach)| {
             let law = scene.exit_laws.get(i).copied().unwrap_or_default();
-            let mut record = [0.0; 32];
+            let mut record = [0.0; 36];
             record[..12].copy_from_slice(&[
                 p.surface_point.x,
                 p.surface_point.y,
@@ -253,6 +254,7 @@ fn gather_buffers(
                 record[16 + 4 * c..20 + 4 * c].copy_from_slice(&channel.to_array());
             }
             record[28..32].copy_from_slice(&media.get(i).copied().unwrap_or(Vec4::ZERO).to_array());
+            record[32..35].copy_from_slice(&law.tangential.to_array());
             record
         })
         .collect();
