@@ -364,7 +364,7 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
         deep_exit_law: cli.deep_exit_law,
         exit_lobes: cli.exit_lobes,
         flow_law_takes_all: cli.flow_law_takes_all,
-        tangential_flux: cli.tangential_flux && cli.deep_exit_law,
+        tangential_flux: cli.tangential_flux,
         diffusion_energy_kept: cli.energy_kept,
         shape_energy_dropped: cli.shape_energy_dropped,
         ..default()

@@ -133,6 +133,21 @@ pub fn jensen_internal_diffuse_reflectance(eta: f64) -> f64 {
     -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta
 }
 
+/// Diffusion theory's boundary coefficient `A = (1 + F_dr)/(1 − F_dr)` behind a boundary of
+/// relative index `eta` (Jensen's `F_dr`): the dipole's extrapolation, and how much the
+/// boundary's internal reflection flattens the radiance inside.
+pub fn boundary_coefficient(eta: f64) -> f64 {
+    let f_dr = jensen_internal_diffuse_reflectance(eta);
+    (1.0 + f_dr) / (1.0 - f_dr)
+}
+
+/// The share `g = 1 − √(3(1 − α))` of the light arriving from elsewhere that is in the
+/// diffusion mode, for the reduced albedo `alpha`: all of it for no absorption, none where a
+/// mean free path is a diffusion length.
+pub fn diffusion_mode_share(alpha: f64) -> f64 {
+    (1.0 - (3.0 * (1.0 - alpha.clamp(0.0, 1.0))).sqrt()).max(0.0)
+}
+
 /// Unpolarised Fresnel reflectance of a smooth boundary, light arriving from the side of index
 /// 1 at `cos_i` onto index `eta`.
 pub fn fresnel_reflectance(cos_i: f64, eta: f64) -> f64 {
@@ -232,7 +247,7 @@ pub fn deep_exit_law(alpha: f64, eta: f64) -> [f32; 4] {
         alpha as f32,
         nu as f32,
         (1.0 / norm) as f32,
-        (1.0 - decay).max(0.0) as f32,
+        diffusion_mode_share(alpha) as f32,
     ]
 }
 
@@ -242,8 +257,7 @@ pub fn deep_exit_shape(law: [f32; 4], eta: f32, mu: f32) -> f32 {
     let eta = f64::from(if eta.is_finite() { eta } else { 1.0 }).clamp(1.0, 3.0);
     let mu = mu.clamp(0.0, 1.0) as f64;
     let inside = (1.0 - (1.0 - mu * mu) / (eta * eta)).max(0.0).sqrt();
-    let f_dr = jensen_internal_diffuse_reflectance(eta);
-    let boundary = (1.0 + f_dr) / (1.0 - f_dr);
+    let boundary = boundary_coefficient(eta);
     let mode = chandrasekhar_h(law[0] as f64, inside) / (1.0 - law[1] as f64 * inside);
     ((1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary) * law[2] as f64) as f32
 }
@@ -267,14 +281,12 @@ pub const MAX_TANGENTIAL_LEAN: f32 = 0.5;
 /// marble's, none of skin's blue); `α` the reduced albedo, `reduced_extinction` `σa + σs′`
 /// (mm⁻¹).
 pub fn tangential_flux_weight(alpha: f64, reduced_extinction: f64, eta: f64, world_units_per_mm: f64) -> f32 {
-    let alpha = alpha.clamp(0.0, 1.0);
-    let g = (1.0 - (3.0 * (1.0 - alpha)).sqrt()).max(0.0);
+    let g = diffusion_mode_share(alpha);
     if !(reduced_extinction > 0.0 && world_units_per_mm > 0.0) || g == 0.0 {
         return 0.0;
     }
     let eta = if eta.is_finite() { eta.clamp(1.0, 3.0) } else { 1.0 };
-    let f_dr = jensen_internal_diffuse_reflectance(eta);
-    let boundary = (1.0 + f_dr) / (1.0 - f_dr);
+    let boundary = boundary_coefficient(eta);
     let diffusion = world_units_per_mm / (3.0 * reduced_extinction);
     (g * 1.5 * boundary / (eta * eta * eta) * diffusion) as f32
 }
@@ -305,8 +317,7 @@ pub fn deep_exit_shape_about(law: [f32; 4], eta: f32, n: Vec3, axis: Vec3, towar
     let tangent = (towards - n * n.dot(towards)).as_dvec3();
     let inside_mu = (1.0 - tangent.length_squared() / (eta * eta)).max(0.0).sqrt();
     let inside = tangent / eta + n.as_dvec3() * inside_mu;
-    let f_dr = jensen_internal_diffuse_reflectance(eta);
-    let boundary = (1.0 + f_dr) / (1.0 - f_dr);
+    let boundary = boundary_coefficient(eta);
     let flow = (law[1] as f64 * inside.dot(axis.as_dvec3())).min(0.99);
     let mode = chandrasekhar_h(law[0] as f64, inside_mu) / (1.0 - flow);
     ((1.0 - fresnel_reflectance(mu, eta)) * (1.0 + (mode - 1.0) / boundary)) as f32
@@ -459,8 +470,7 @@ impl DiffusionProfile {
         depth: f64,
     ) -> Self {
         let eta = medium.index_of_refraction as f64;
-        let f_dr = jensen_internal_diffuse_reflectance(eta);
-        let a_boundary = (1.0 + f_dr) / (1.0 - f_dr);
+        let a_boundary = boundary_coefficient(eta);
         let albedos = medium.single_scattering_albedo();
         let channels = std::array::from_fn(|c| {
             let sigma_a = medium.absorption[c] as f64;

@@ -1011,6 +1011,62 @@ fn marched_against_its_twin(app: &mut App, image: &Handle<Image>, pixels: &[(u32
     (compared, sum_error / compared.max(1) as f32, worst, marching)
 }
 
+/// `marching_app`'s settings for a GPU gather against its CPU twin: the CPU's shadow rays (no
+/// maps, no march: the twin iterates their very `E⁰`) and a smaller beam table, so that the
+/// patches' light from elsewhere flows and leaves by its law.
+fn shadow_rays_and_a_small_table(app: &mut App) {
+    use bevy_mesostructure::translucency::{LightInjection, TranslucencySettings, beam_table::BeamTableSettings};
+    let mut settings = app.world_mut().resource_mut::<TranslucencySettings>();
+    settings.patch_budget = 600;
+    settings.light_injection = LightInjection::ShadowRays;
+    settings.transport.beam_table = Some(BeamTableSettings { walks: 16, late_walks: 64, ..default() });
+}
+
+/// The GPU's picture `shot` against the gather's CPU twin (interpolated, the lit face's single
+/// scattering, no march) over `pixels` seen from `eye`, in red: the twin with the exit `laws`,
+/// each patch's own light `received` and its `exitance`. |GPU − twin| in 8-bit sRGB: (mean,
+/// worst).
+#[allow(clippy::too_many_arguments)]
+fn gathered_against_twin(
+    shot: &Image,
+    scene: &bevy_mesostructure::translucency::TranslucencyScene,
+    laws: &[bevy_mesostructure::translucency::ExitLaw],
+    direct: &bevy_mesostructure::translucency::DirectLight,
+    received: &[Vec3],
+    exitance: &[Vec3],
+    pixels: &[(u32, u32, Vec3, Vec3)],
+    eye: Vec3,
+) -> (f32, f32) {
+    use bevy::camera::Exposure;
+    use bevy_mesostructure::translucency::{GatherMethod, gather::{BeamSingleScattering, gathered_radiance}};
+    let table = scene.transport.beam_table.as_ref().expect("the scene has its beam table");
+    let media = table.patch_media();
+    let single = BeamSingleScattering { irradiance: &direct.beam_irradiance, direction: &direct.beam_direction, media: &media };
+    let exposure = Exposure::default().exposure();
+    let (mut sum, mut worst) = (0.0f32, 0.0f32);
+    for &(x, y, hit, n) in pixels {
+        let expected = gathered_radiance(
+            GatherMethod::Interpolation,
+            &scene.patches,
+            &scene.albedo,
+            laws,
+            &direct.irradiance,
+            received,
+            exitance,
+            Some(&single),
+            None,
+            eye,
+            hit,
+            n,
+        )
+        .map_or(0.0, |l| l.x * exposure);
+        let error = (shot.get_color_at(x, y).unwrap().to_srgba().red * 255.0 - srgb8(expected)).abs();
+        sum += error;
+        worst = worst.max(error);
+    }
+    (sum / pixels.len().max(1) as f32, worst)
+}
+
 /// Light bounced onto a translucent object leaves it as its own light does, on the GPU as in
 /// its CPU twin: a ball 1 cm above a white floor, the sun from above, so the floor lights the
 /// ball's underside. The gather's exit law takes each patch's irradiance direct and bounced
@@ -1021,23 +1077,11 @@ fn marched_against_its_twin(app: &mut App, image: &Handle<Image>, pixels: &[(u32
 /// the GPU reads.
 #[test]
 fn light_bounced_onto_a_translucent_object_leaves_as_its_own_on_the_gpu() {
-    use bevy::camera::Exposure;
-    use bevy_mesostructure::translucency::{
-        GatherMethod, LightInjection, TranslucencyFrame, TranslucencySettings, Translucent,
-        beam_table::BeamTableSettings,
-        gather::{BeamSingleScattering, gathered_radiance},
-    };
+    use bevy_mesostructure::translucency::{TranslucencyFrame, Translucent};
     let Some(mut app) = marching_app() else {
         return;
     };
-    // The CPU's shadow rays (no maps, no march): the twin iterates their very `E⁰`. A smaller
-    // beam table, so that the patches' light from elsewhere flows and leaves by its law.
-    {
-        let mut settings = app.world_mut().resource_mut::<TranslucencySettings>();
-        settings.patch_budget = 600;
-        settings.light_injection = LightInjection::ShadowRays;
-        settings.transport.beam_table = Some(BeamTableSettings { walks: 16, late_walks: 64, ..default() });
-    }
+    shadow_rays_and_a_small_table(&mut app);
     let light_travel = Vec3::new(-0.5, -1.0, -0.3).normalize();
     sun(&mut app, light_travel, 2_000.0);
     let radius = 0.05;
@@ -1064,41 +1108,16 @@ fn light_bounced_onto_a_translucent_object_leaves_as_its_own_on_the_gpu() {
     let (_, scene) = frame.scene.expect("a scene");
     let (_, direct) = frame.direct.expect("the light injected");
     let solution = scene.transport.solve_with(&direct, frame.settings.iteration_threshold, frame.settings.max_iterations);
-    let table = scene.transport.beam_table.as_ref().expect("the scene has its beam table");
-    let media = table.patch_media();
-    let single = BeamSingleScattering { irradiance: &direct.beam_irradiance, direction: &direct.beam_direction, media: &media };
     let exit_laws = scene.transport.exit_laws_along_flow(&scene.patches, &scene.exit_laws, &direct, &scene.source_depths);
     // Translucent patches that take more from the floor than from the sun.
     let bounced = (0..scene.patches.patches.len())
         .filter(|&i| scene.albedo[i] == Vec3::ZERO && solution.irradiance[i].x > 2.0 * direct.irradiance[i].x + 1e-3)
         .count();
-    let exposure = Exposure::default().exposure();
     let (ball_pixels, eye) = ball_pixels_seen(&mut app, camera, size, radius);
     // |GPU − twin| over the ball's pixels, the twin's exit law taking `received` as each
     // patch's own light: (mean, worst).
     let against = |received: &[Vec3]| {
-        let (mut sum, mut worst) = (0.0f32, 0.0f32);
-        for &(x, y, hit, n) in &ball_pixels {
-            let expected = gathered_radiance(
-                GatherMethod::Interpolation,
-                &scene.patches,
-                &scene.albedo,
-                &exit_laws,
-                &direct.irradiance,
-                received,
-                &solution.exitance,
-                Some(&single),
-                None,
-                eye,
-                hit,
-                n,
-            )
-            .map_or(0.0, |l| l.x * exposure);
-            let error = (shot.get_color_at(x, y).unwrap().to_srgba().red * 255.0 - srgb8(expected)).abs();
-            sum += error;
-            worst = worst.max(error);
-        }
-        (sum / ball_pixels.len().max(1) as f32, worst)
+        gathered_against_twin(&shot, &scene, &exit_laws, &direct, received, &solution.exitance, &ball_pixels, eye)
     };
     let (mean, worst) = against(&solution.irradiance);
     let (direct_mean, direct_worst) = against(&direct.irradiance);
@@ -1121,23 +1140,12 @@ fn light_bounced_onto_a_translucent_object_leaves_as_its_own_on_the_gpu() {
 /// twin without it is held away from the GPU's picture, so the test sees that the GPU leans.
 #[test]
 fn the_flux_along_the_surface_leans_the_gpus_gather_as_its_twin_does() {
-    use bevy::camera::Exposure;
-    use bevy_mesostructure::translucency::{
-        GatherMethod, LightInjection, TranslucencyFrame, TranslucencySettings, Translucent,
-        beam_table::BeamTableSettings,
-        gather::{BeamSingleScattering, gathered_radiance},
-    };
+    use bevy_mesostructure::translucency::{ExitLaw, TranslucencyFrame, TranslucencySettings, Translucent};
     let Some(mut app) = marching_app() else {
         return;
     };
-    // The CPU's shadow rays (no maps, no march): the twin iterates their very `E⁰`.
-    {
-        let mut settings = app.world_mut().resource_mut::<TranslucencySettings>();
-        settings.patch_budget = 600;
-        settings.light_injection = LightInjection::ShadowRays;
-        settings.transport.beam_table = Some(BeamTableSettings { walks: 16, late_walks: 64, ..default() });
-        settings.transport.tangential_flux = true;
-    }
+    shadow_rays_and_a_small_table(&mut app);
+    app.world_mut().resource_mut::<TranslucencySettings>().transport.tangential_flux = true;
     // From behind and the right: the light crosses the ball towards the camera and flows
     // along its surface about the silhouette.
     let light_travel = Vec3::new(-0.6, -0.2, 0.8).normalize();
@@ -1162,38 +1170,13 @@ fn the_flux_along_the_surface_leans_the_gpus_gather_as_its_twin_does() {
     let (_, scene) = frame.scene.expect("a scene");
     let (_, direct) = frame.direct.expect("the light injected");
     let solution = scene.transport.solve_with(&direct, frame.settings.iteration_threshold, frame.settings.max_iterations);
-    let table = scene.transport.beam_table.as_ref().expect("the scene has its beam table");
-    let media = table.patch_media();
-    let single = BeamSingleScattering { irradiance: &direct.beam_irradiance, direction: &direct.beam_direction, media: &media };
     let leaning = scene.transport.exit_laws_along_flow(&scene.patches, &scene.exit_laws, &direct, &scene.source_depths);
     assert!(leaning.iter().any(|law| law.tangential != Vec3::ZERO), "no patch takes the flux along the surface");
-    let plain: Vec<_> = leaning.iter().map(|law| bevy_mesostructure::translucency::ExitLaw { tangential: Vec3::ZERO, ..*law }).collect();
-    let exposure = Exposure::default().exposure();
+    let plain: Vec<_> = leaning.iter().map(|law| ExitLaw { tangential: Vec3::ZERO, ..*law }).collect();
     let (ball_pixels, eye) = ball_pixels_seen(&mut app, camera, size, radius);
     // |GPU − twin| over the ball's pixels: (mean, worst).
-    let against = |laws: &[bevy_mesostructure::translucency::ExitLaw]| {
-        let (mut sum, mut worst) = (0.0f32, 0.0f32);
-        for &(x, y, hit, n) in &ball_pixels {
-            let expected = gathered_radiance(
-                GatherMethod::Interpolation,
-                &scene.patches,
-                &scene.albedo,
-                laws,
-                &direct.irradiance,
-                &solution.irradiance,
-                &solution.exitance,
-                Some(&single),
-                None,
-                eye,
-                hit,
-                n,
-            )
-            .map_or(0.0, |l| l.x * exposure);
-            let error = (shot.get_color_at(x, y).unwrap().to_srgba().red * 255.0 - srgb8(expected)).abs();
-            sum += error;
-            worst = worst.max(error);
-        }
-        (sum / ball_pixels.len().max(1) as f32, worst)
+    let against = |laws: &[ExitLaw]| {
+        gathered_against_twin(&shot, &scene, laws, &direct, &solution.irradiance, &solution.exitance, &ball_pixels, eye)
     };
     let (mean, worst) = against(&leaning);
     let (plain_mean, plain_worst) = against(&plain);
