@@ -518,8 +518,11 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
     } else {
         ""
     };
+    // `_gaussself`: the shape solve's self term from Gauss's identity on a closed object
+    // (`shape_diffusion::boundary_correction`; rows before it took the curvature's `−ρH/4`).
+    let gauss_self = if cli.shape_diffusion { "_gaussself" } else { "" };
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{projected}{tangential}{}{}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{projected}{tangential}{gauss_self}{}{}",
         cli.kernel,
         if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" },
         if cli.pixel_samples > 1 { format!("_px{}", cli.pixel_samples) } else { String::new() }
