@@ -74,12 +74,12 @@ use std::{
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
     DiffusionKernel, GatherMethod, TranslucentMedium, TranslucentPreset, TransportSettings, beam_table::BeamTableSettings,
-    random_walk::ScatteringOrders, translucent_shadow_map::{PLUGIN_DEPTHS, PLUGIN_RESOLUTION},
+    patches::Patches, random_walk::ScatteringOrders, translucent_shadow_map::{PLUGIN_DEPTHS, PLUGIN_RESOLUTION},
 };
-use translucent_light_tracer::{Part, Pinhole, Source, light_trace};
+use translucent_light_tracer::{Part, Pinhole, Reentering, Source, light_trace, patch_exitance};
 use translucent_accuracy_cli::{Axis, Cli, Gather, Kernel, Late, Medium, Scattering, ShapeArg, Tracer, check_combinations, fail};
 use translucent_accuracy_scene::{
-    ExitAxis, FOV_Y, FRONT_LIGHT, Floor, LateLight, Occluder, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
+    ExactExitance, ExitAxis, FOV_Y, FRONT_LIGHT, Floor, LateLight, Occluder, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
     ShapeView, plugin_picture, score,
 };
 
@@ -136,12 +136,25 @@ fn main() {
     let (settings, gather, method, oracles) = method_of(&cli, shape);
     // A floor the plugin leaves black under the reference's grey one: what the bounce is worth.
     let method = if cli.floor == Some(0.0) { method + "_floorblack" } else { method };
+    // Only where the exact exitance is what the picture gathers (else it is only compared).
+    let method = match cli.exact_exitance {
+        Some(photons) if cli.exact_exitance_gathered => format!(
+            "{method}_exactexitance{photons}{}",
+            if cli.exact_exitance_after > 0 { format!("after{}", cli.exact_exitance_after) } else { String::new() }
+                + cli.exact_exitance_reentering.suffix()
+        ),
+        _ => method,
+    };
     let header = "scene,method,setting,patches,width,height,gpu_ms,precompute_s,memory_mb,rel_l1,flip,adapter";
     let mut rows = Vec::new();
     // The plugin's pixels at `pixel_samples`² points a pixel: the centres of a finer view's.
     let points = cli.pixel_samples;
     let fine = (points > 1).then(|| {
         if cli.pixels_on_mesh { ShapeView::on_mesh(shape, size * points) } else { ShapeView::new(shape, size * points) }
+    });
+    let (cli_ref, view_ref) = (&cli, &view);
+    let exact = cli.exact_exitance.map(|photons| {
+        move |patches: &Patches| exact_patch_exitance(cli_ref, view_ref, medium, light, patches, photons)
     });
     for &budget in &cli.budgets {
         let mut result = plugin_picture(
@@ -159,6 +172,7 @@ fn main() {
             oracles,
             cli.floor,
             occluder,
+            exact.as_ref().map(|f| ExactExitance { trace: f, gathered: cli.exact_exitance_gathered }),
         );
         if points > 1 {
             result.pixels = box_filtered(&result.pixels, size, points);
@@ -636,7 +650,7 @@ fn light_traced_mesh(
     let camera = Pinhole { eye: shape.eye(), fov_y: FOV_Y, size };
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let start = Instant::now();
-    let traced = light_trace(&view.positions, &view.indices, &medium, source, cli.light_traced_part, camera, cli.photons as usize, cli.tracer_seed, threads);
+    let traced = light_trace(&view.positions, &view.indices, &medium, source, cli.light_traced_part, camera, cli.photons as usize, cli.tracer_seed, threads, None);
     let picture = image::Rgb32FImage::from_fn(size, size, |x, y| image::Rgb(traced.pixels[(y * size + x) as usize]));
     picture.save(&path).unwrap_or_else(|e| fail(format!("cannot write {}: {e}", path.display())));
     eprintln!(
@@ -648,6 +662,51 @@ fn light_traced_mesh(
         traced.crossings
     );
     path
+}
+
+/// An oracle's exitance of each of the object's patches (the rest zero): the mesh light
+/// tracer's exits after a scattering or more, each on the patch of the sample nearest it
+/// (facing its way), over the patch's area; per unit irradiance, as the plugin's.
+fn exact_patch_exitance(cli: &Cli, view: &ShapeView, medium: TranslucentMedium, light: Vec3, patches: &Patches, photons: u64) -> Vec<Vec3> {
+    // Traced once per scene, patches and photons: other laws and gathers take it again
+    // (delete the file to trace it again after a change to the tracer).
+    let cache = PathBuf::from("out/translucent_accuracy").join(format!(
+        "exact_exitance_{}_{:?}_{}_{}_{:.3}_{:.3}_{:.3}_{photons}_seed{}_after{}{}{}.bin",
+        view.shape.scene_name(),
+        cli.medium,
+        cli.size,
+        patches.patches.len(),
+        light.x,
+        light.y,
+        light.z,
+        cli.tracer_seed,
+        cli.exact_exitance_after,
+        if cli.exact_exitance_reentering == Reentering::All { "" } else { "_" },
+        cli.exact_exitance_reentering.suffix()
+    ));
+    if let Ok(bytes) = std::fs::read(&cache)
+        && bytes.len() == patches.patches.len() * 12
+    {
+        let values: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        return values.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+    }
+    let camera = Pinhole { eye: view.shape.eye(), fov_y: FOV_Y, size: cli.size };
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let start = Instant::now();
+    let (exitance, unbinned) =
+        patch_exitance(&view.positions, &view.indices, &medium, light, patches, camera, photons as usize, cli.tracer_seed, threads, cli.exact_exitance_after, cli.exact_exitance_reentering);
+    eprintln!(
+        "  exact exitance: {photons} photons a channel in {:.0} s; {:.1e} / {:.1e} / {:.1e} of the exits on no patch",
+        start.elapsed().as_secs_f32(),
+        unbinned.x,
+        unbinned.y,
+        unbinned.z
+    );
+    let bytes: Vec<u8> = exitance.iter().flat_map(|e| e.to_array()).flat_map(f32::to_le_bytes).collect();
+    if let Err(e) = cache.parent().map_or(Ok(()), std::fs::create_dir_all).and_then(|_| std::fs::write(&cache, bytes)) {
+        eprintln!("warning: cannot write {}: {e}", cache.display());
+    }
+    exitance
 }
 
 /// `stem.exr`, or where `stem.scored.png` would pass a file system's 255 bytes a name, its

@@ -7,7 +7,7 @@ use bevy::prelude::*;
 use bevy_mesostructure::translucency::{TransportSettings, translucent_shadow_map::MAX_RESOLUTION};
 
 use super::translucent_accuracy_scene::Shape;
-use super::translucent_light_tracer::Part;
+use super::translucent_light_tracer::{Part, Reentering};
 
 /// The translucency's picture of a ball, the bunny or a torus against a path tracer's, per patch
 /// budget, into a CSV.
@@ -245,6 +245,27 @@ pub struct Cli {
     /// `-lambertianexit` / `-firstexit` / `-nouncollidedreentry`
     #[arg(long, value_enum, default_value_t = Part::All)]
     pub light_traced_part: Part,
+    /// An oracle: the exact transport's exitance on the plugin's own patches, light-traced
+    /// with this many photons a channel (each exit after a scattering or more tallied on the
+    /// patch whose sample is nearest), compared patch by patch with the plugin's (printed)
+    /// and, with `--exact-exitance-gathered true` (the default), gathered by the plugin's
+    /// laws in its place (single scattering in it: no march). Index-matched, directional
+    /// light; cached in out/translucent_accuracy/
+    #[arg(long, value_name = "PHOTONS")]
+    pub exact_exitance: Option<u64>,
+    /// With `--exact-exitance`: gather the exact exitance (true) or only compare it with the
+    /// plugin's, whose picture is then its own (false)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set, requires = "exact_exitance")]
+    pub exact_exitance_gathered: bool,
+    /// With `--exact-exitance`: only the exits after more than this many scatterings (the
+    /// light a method's late model carries past its walks' last order)
+    #[arg(long, default_value_t = 0, requires = "exact_exitance")]
+    pub exact_exitance_after: u32,
+    /// With `--exact-exitance`: which of the light that left the object and came back in is
+    /// followed — all, only what scattered before it left, or none (each photon stops at its
+    /// first exit)
+    #[arg(long, value_enum, default_value_t = Reentering::All, requires = "exact_exitance")]
+    pub exact_exitance_reentering: Reentering,
     /// A reference EXR made before (else it is rendered into out/translucent_accuracy/)
     #[arg(long)]
     pub reference: Option<PathBuf>,
@@ -380,6 +401,9 @@ pub fn check_combinations(cli: &Cli, shape: Shape) {
     }
     if shape != Shape::Ball && (cli.eta != 1.0 || cli.uniform) {
         fail("the bunny and the torus are index-matched under the directional light only (their reference is Mitsuba's; drop --eta and --uniform)".into());
+    }
+    if cli.exact_exitance.is_some() && (cli.eta != 1.0 || cli.uniform || cli.point_light.is_some() || cli.floor.is_some() || cli.occluder) {
+        fail("--exact-exitance light-traces one index-matched object under the directional light (drop --eta, --uniform, --point-light, --floor and --occluder)".into());
     }
     if cli.scattering == Scattering::BeamWalks && (cli.eta != 1.0 || cli.uniform) {
         fail("--scattering beam-walks takes the directional light into an index-matched object only (drop --eta and --uniform)".into());

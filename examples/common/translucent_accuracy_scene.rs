@@ -221,6 +221,7 @@ pub fn plugin_picture(
     oracles: Oracles,
     floor: Option<f32>,
     occluder: Option<Occluder>,
+    exact_exitance: Option<ExactExitance>,
 ) -> ShapePicture {
     let (floor_positions, floor_indices) = floor.map(|_| Floor::under(&view.positions).triangles()).unwrap_or_default();
     let (plate_positions, plate_indices) = occluder.map(|o| o.triangles()).unwrap_or_default();
@@ -398,7 +399,18 @@ pub fn plugin_picture(
     for e in &mut direct.irradiance {
         *e += ambient;
     }
-    let solution = transport.solve_with(&direct, 1e-4, 256);
+    let mut solution = transport.solve_with(&direct, 1e-4, 256);
+    // An oracle: the exact transport's exitance on the plugin's own patches (single
+    // scattering in it), compared with the plugin's and perhaps gathered in its place.
+    let exact = exact_exitance.as_ref().map(|o| (o.trace)(&patches));
+    let gathered = exact_exitance.as_ref().is_some_and(|o| o.gathered);
+    if let Some(exact) = &exact {
+        compare_exitance(&patches, &direct.irradiance, &solution.exitance, exact, view.shape.eye());
+        if gathered {
+            solution.exitance.copy_from_slice(exact);
+        }
+    }
+    let single = if gathered { None } else { single };
     let albedo: Vec<Vec3> = patches.patches.iter().map(surface_albedo).collect();
     // The oracles of other axes keep the share `g` in the mode, as they were measured.
     let law_settings = TransportSettings {
@@ -422,6 +434,7 @@ pub fn plugin_picture(
     let eye = view.shape.eye();
     // With a map: the plugin's own march (`MarchedObject`, in the gather's twin), unshadowed
     // (one object).
+    let marched = if gathered { None } else { marched };
     let marched_objects: Option<Vec<Option<MarchedObject>>> = marched.zip(oracles.shadow_map).map(|(_, resolution)| {
         let object_patches = patches.patches.iter().take_while(|q| q.object == 0).count();
         let object_samples = &patches.samples[..patches.sample_offsets[object_patches] as usize];
@@ -497,6 +510,42 @@ pub fn plugin_picture(
             + 16 * transport.scattering.entries(),
         iterations: solution.iterations,
     }
+}
+
+/// Prints the plugin's exitance `plugin` over the exact one `exact`, patch by patch on the
+/// first object, area-weighted: the transport alone, before any exit law or gather. Over
+/// all its patches, and over those the light does not reach (`direct` zero) that face the
+/// camera at `eye` — the light that crossed the object. The plugin's `B` leaves out the lit
+/// face's single scattering, which its gather gives per pixel, so only the second compares
+/// like with like.
+fn compare_exitance(patches: &Patches, direct: &[Vec3], plugin: &[Vec3], exact: &[Vec3], eye: Vec3) {
+    for (label, unlit_facing) in [("all", false), ("unlit, facing the camera", true)] {
+        let (mut ours, mut theirs, mut apart) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+        for (i, q) in patches.patches.iter().enumerate() {
+            if q.object != 0 || (unlit_facing && (direct[i] != Vec3::ZERO || q.normal.dot(eye - q.centre) <= 0.0)) {
+                continue;
+            }
+            ours += q.area * plugin[i];
+            theirs += q.area * exact[i];
+            apart += q.area * (plugin[i] - exact[i]).abs();
+        }
+        let ratio = ours / theirs;
+        eprintln!(
+            "  the plugin's exitance over the exact, {label}: {:.3} / {:.3} / {:.3}, relative L1 {:.4}",
+            ratio.x,
+            ratio.y,
+            ratio.z,
+            apart.element_sum() / theirs.element_sum()
+        );
+    }
+}
+
+/// An oracle's exitance on the plugin's patches (`--exact-exitance`): how to trace it for
+/// the patches, and whether the picture gathers it in place of the plugin's own or only
+/// compares the two (printed).
+pub struct ExactExitance<'a> {
+    pub trace: &'a dyn Fn(&Patches) -> Vec<Vec3>,
+    pub gathered: bool,
 }
 
 /// A picture against the reference over the scored pixels.

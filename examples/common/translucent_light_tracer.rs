@@ -25,8 +25,8 @@
 //! scattering: 0.018 – 0.052 in relative L1, the means within 1.1 %): docs/translucent.md,
 //! "A light tracer for meshes".
 
-use bevy::math::Vec3;
-use bevy_mesostructure::translucency::{PatchObject, SceneRays, TranslucentMedium};
+use bevy::math::{IVec3, Vec3};
+use bevy_mesostructure::translucency::{PatchObject, SceneRays, TranslucentMedium, patches::Patches};
 use rand::rngs::SmallRng;
 use rand::{RngExt, SeedableRng};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -96,6 +96,46 @@ pub struct LightTraced {
     /// (a mesh that is not closed, or rays along an edge): should be a tiny share.
     pub side_disagreements: u64,
     pub crossings: u64,
+    /// With [`ExitBins`]: per bin, the flux (mm², per unit irradiance) that left through the
+    /// surface after a scattering or more, per channel.
+    pub binned_exits: Vec<[f32; 3]>,
+    /// With [`ExitBins`]: the flux of exits after a scattering that no bin took, per channel.
+    pub unbinned_exits: [f32; 3],
+}
+
+/// Where each exit after a scattering or more is tallied (an oracle of a method's transport
+/// on its own patches): `of(point, outward normal)`, both in the tracer's millimetres, gives
+/// the bin, of `count`.
+pub struct ExitBins<'a> {
+    pub of: &'a (dyn Fn(Vec3, Vec3) -> Option<usize> + Sync),
+    pub count: usize,
+    /// Only exits after more than this many scatterings (0: all that scattered).
+    pub after: u32,
+    /// Which of the light that left the mesh and came back in is followed.
+    pub reentering: Reentering,
+}
+
+/// Which of the light that left the mesh and entered it again [`ExitBins`] follow.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Reentering {
+    /// All of it (the exact transport).
+    All,
+    /// Only what scattered before it left: a photon that crosses a thin part unscattered
+    /// stops there (the plugin lights only the first surface a light meets).
+    Scattered,
+    /// None: each photon stops at its first exit.
+    None,
+}
+
+impl Reentering {
+    /// Its name in file names and method names (empty for all of it).
+    pub fn suffix(self) -> &'static str {
+        match self {
+            Self::All => "",
+            Self::Scattered => "reenteringscattered",
+            Self::None => "reenteringnone",
+        }
+    }
 }
 
 struct Camera {
@@ -140,11 +180,14 @@ struct Tracer<'a> {
     part: Part,
     centre: Vec3,
     radius: f32,
+    bins: Option<&'a ExitBins<'a>>,
 }
 
 #[derive(Default)]
 struct Tally {
     halves: [Vec<f32>; 2],
+    bins: Vec<f32>,
+    unbinned: f32,
     disagreements: u64,
     crossings: u64,
 }
@@ -240,6 +283,22 @@ impl Tracer<'_> {
                     on_surface = true;
                     if !inside && self.part == Part::LambertianExit && collisions > 0 {
                         self.exit_seen(x, normal * self.winding, weight, pixel_area, image);
+                    }
+                    // `after` is at least 0: only exits after a scattering or more.
+                    if !inside
+                        && let Some(bins) = self.bins
+                        && collisions > bins.after
+                    {
+                        match (bins.of)(x, normal * self.winding) {
+                            Some(bin) => tally.bins[bin] += weight,
+                            None => tally.unbinned += weight,
+                        }
+                    }
+                    if !inside
+                        && let Some(bins) = self.bins
+                        && (bins.reentering == Reentering::None || (bins.reentering == Reentering::Scattered && collisions == 0))
+                    {
+                        break;
                     }
                     continue;
                 }
@@ -344,6 +403,7 @@ pub fn light_trace(
     photons: usize,
     seed: u64,
     threads: usize,
+    bins: Option<&ExitBins>,
 ) -> LightTraced {
     let mm: Vec<Vec3> = positions.iter().map(|p| *p * MM).collect();
     let rays = SceneRays::new(&[PatchObject { positions: &mm, indices }]);
@@ -373,7 +433,11 @@ pub fn light_trace(
         part,
         centre,
         radius,
+        bins,
     };
+    let bin_count = bins.map_or(0, |b| b.count);
+    let mut binned_exits = vec![[0.0f32; 3]; bin_count];
+    let mut unbinned_exits = [0.0f32; 3];
     let n = (camera.size * camera.size) as usize;
     // An even number of chunks, so the two halves walk as many photons.
     let chunks = photons.div_ceil(CHUNK).max(2).next_multiple_of(2);
@@ -390,7 +454,7 @@ pub fn light_trace(
             let workers: Vec<_> = (0..threads.max(1))
                 .map(|_| {
                     scope.spawn(|| {
-                        let mut tally = Tally { halves: [vec![0.0; n], vec![0.0; n]], ..Default::default() };
+                        let mut tally = Tally { halves: [vec![0.0; n], vec![0.0; n]], bins: vec![0.0; bin_count], ..Default::default() };
                         loop {
                             let k = next.fetch_add(1, Ordering::Relaxed);
                             if k >= chunks {
@@ -412,6 +476,11 @@ pub fn light_trace(
                     pixel[c] += v;
                 }
             }
+            for (b, v) in binned_exits.iter_mut().zip(&tally.bins) {
+                // Each photon's power counts twice (for the two halves' pictures).
+                b[c] += 0.5 * v;
+            }
+            unbinned_exits[c] += 0.5 * tally.unbinned;
             disagreements += tally.disagreements;
             crossings += tally.crossings;
         }
@@ -431,5 +500,82 @@ pub fn light_trace(
         noise: if total > 0.0 { (difference / total) as f32 } else { 0.0 },
         side_disagreements: disagreements,
         crossings,
+        binned_exits,
+        unbinned_exits,
     }
+}
+
+/// The exact transport's exitance on a method's own patches: each exit after a scattering or
+/// more tallied on the patch whose surface sample is nearest (of those facing its way), over
+/// the patch's area — per unit irradiance, as the plugin's `B`, with the light that left and
+/// came back in counted at each exit (as the plugin's bounce counts it). An oracle of the
+/// transport alone, before any exit law or gather. Patches of the first object only (the
+/// mesh traced; world units metres); the others are zero. Also the share of the binned
+/// flux no patch took (an exit further than two patch sizes from every sample facing it).
+/// With `after` above 0, only the exits after more than that many scatterings; `reentering`
+/// says which of the light that left and came back in is followed.
+#[allow(clippy::too_many_arguments)]
+pub fn patch_exitance(
+    positions: &[Vec3],
+    indices: &[u32],
+    medium: &TranslucentMedium,
+    light: Vec3,
+    patches: &Patches,
+    camera: Pinhole,
+    photons: usize,
+    seed: u64,
+    threads: usize,
+    after: u32,
+    reentering: Reentering,
+) -> (Vec<Vec3>, Vec3) {
+    let object = patches.patches.iter().take_while(|q| q.object == 0).count();
+    let samples: Vec<(Vec3, Vec3, usize)> = (0..object)
+        .flat_map(|i| patches.samples_of(i).iter().map(move |s| (s.position * MM, s.normal, i)))
+        .collect();
+    // Cells of half a patch: the nearest sample is within a few of them.
+    let cell = patches.size_of(0) * MM * 0.5;
+    let key = |x: Vec3| (x / cell).floor().as_ivec3();
+    let mut grid: std::collections::HashMap<IVec3, Vec<usize>> = std::collections::HashMap::new();
+    for (k, s) in samples.iter().enumerate() {
+        grid.entry(key(s.0)).or_default().push(k);
+    }
+    let of = |x: Vec3, outward: Vec3| -> Option<usize> {
+        let c = key(x);
+        for reach in 1..=4 {
+            let mut best: Option<(f32, usize)> = None;
+            for dz in -reach..=reach {
+                for dy in -reach..=reach {
+                    for dx in -reach..=reach {
+                        for &k in grid.get(&(c + IVec3::new(dx, dy, dz))).map_or(&[][..], Vec::as_slice) {
+                            let (p, normal, i) = samples[k];
+                            // Not the far side of a thin part.
+                            if normal.dot(outward) <= 0.0 {
+                                continue;
+                            }
+                            let d = p.distance_squared(x);
+                            if best.is_none_or(|(b, _)| d < b) {
+                                best = Some((d, i));
+                            }
+                        }
+                    }
+                }
+            }
+            // Nearer than any cell not searched yet.
+            if let Some((d, i)) = best
+                && d.sqrt() <= reach as f32 * cell
+            {
+                return Some(i);
+            }
+        }
+        None
+    };
+    let bins = ExitBins { of: &of, count: object, after, reentering };
+    let traced = light_trace(positions, indices, medium, Source::Directional(light), Part::LambertianExit, camera, photons, seed, threads, Some(&bins));
+    let mut exitance = vec![Vec3::ZERO; patches.patches.len()];
+    for (e, (b, q)) in exitance.iter_mut().zip(traced.binned_exits.iter().zip(&patches.patches)) {
+        *e = Vec3::from_array(*b) / (q.area * MM * MM);
+    }
+    let binned = traced.binned_exits.iter().fold(Vec3::ZERO, |sum, b| sum + Vec3::from_array(*b));
+    let unbinned = Vec3::from_array(traced.unbinned_exits);
+    (exitance, unbinned / (binned + unbinned).max(Vec3::splat(f32::MIN_POSITIVE)))
 }
