@@ -247,7 +247,7 @@ pub struct Cli {
     pub light_traced_part: Part,
     /// An oracle: the exact transport's exitance on the plugin's own patches, light-traced
     /// with this many photons a channel (each exit after a scattering or more tallied on the
-    /// patch whose sample is nearest), compared patch by patch with the plugin's (printed)
+    /// patch the plugin's walks would leave by), compared patch by patch with the plugin's (printed)
     /// and, with `--exact-exitance-gathered true` (the default), gathered by the plugin's
     /// laws in its place (single scattering in it: no march). Index-matched, directional
     /// light; cached in out/translucent_accuracy/

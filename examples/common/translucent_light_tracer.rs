@@ -25,8 +25,8 @@
 //! scattering: 0.018 – 0.052 in relative L1, the means within 1.1 %): docs/translucent.md,
 //! "A light tracer for meshes".
 
-use bevy::math::{IVec3, Vec3};
-use bevy_mesostructure::translucency::{PatchObject, SceneRays, TranslucentMedium, patches::Patches};
+use bevy::math::Vec3;
+use bevy_mesostructure::translucency::{PatchObject, SceneRays, TranslucentMedium, beam_table::ExitPatches, patches::Patches};
 use rand::rngs::SmallRng;
 use rand::{RngExt, SeedableRng};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -506,12 +506,12 @@ pub fn light_trace(
 }
 
 /// The exact transport's exitance on a method's own patches: each exit after a scattering or
-/// more tallied on the patch whose surface sample is nearest (of those facing its way), over
-/// the patch's area — per unit irradiance, as the plugin's `B`, with the light that left and
+/// more tallied on the patch the plugin's own walks would leave by (`ExitPatches`: the
+/// nearest surface sample facing its way, else the nearest), over the patch's area — per unit irradiance, as the plugin's `B`, with the light that left and
 /// came back in counted at each exit (as the plugin's bounce counts it). An oracle of the
 /// transport alone, before any exit law or gather. Patches of the first object only (the
 /// mesh traced; world units metres); the others are zero. Also the share of the binned
-/// flux no patch took (an exit further than two patch sizes from every sample facing it).
+/// flux no patch took (an exit further than a patch size from every sample).
 /// With `after` above 0, only the exits after more than that many scatterings; `reentering`
 /// says which of the light that left and came back in is followed.
 #[allow(clippy::too_many_arguments)]
@@ -529,46 +529,9 @@ pub fn patch_exitance(
     reentering: Reentering,
 ) -> (Vec<Vec3>, Vec3) {
     let object = patches.patches.iter().take_while(|q| q.object == 0).count();
-    let samples: Vec<(Vec3, Vec3, usize)> = (0..object)
-        .flat_map(|i| patches.samples_of(i).iter().map(move |s| (s.position * MM, s.normal, i)))
-        .collect();
-    // Cells of half a patch: the nearest sample is within a few of them.
-    let cell = patches.size_of(0) * MM * 0.5;
-    let key = |x: Vec3| (x / cell).floor().as_ivec3();
-    let mut grid: std::collections::HashMap<IVec3, Vec<usize>> = std::collections::HashMap::new();
-    for (k, s) in samples.iter().enumerate() {
-        grid.entry(key(s.0)).or_default().push(k);
-    }
-    let of = |x: Vec3, outward: Vec3| -> Option<usize> {
-        let c = key(x);
-        for reach in 1..=4 {
-            let mut best: Option<(f32, usize)> = None;
-            for dz in -reach..=reach {
-                for dy in -reach..=reach {
-                    for dx in -reach..=reach {
-                        for &k in grid.get(&(c + IVec3::new(dx, dy, dz))).map_or(&[][..], Vec::as_slice) {
-                            let (p, normal, i) = samples[k];
-                            // Not the far side of a thin part.
-                            if normal.dot(outward) <= 0.0 {
-                                continue;
-                            }
-                            let d = p.distance_squared(x);
-                            if best.is_none_or(|(b, _)| d < b) {
-                                best = Some((d, i));
-                            }
-                        }
-                    }
-                }
-            }
-            // Nearer than any cell not searched yet.
-            if let Some((d, i)) = best
-                && d.sqrt() <= reach as f32 * cell
-            {
-                return Some(i);
-            }
-        }
-        None
-    };
+    // The patch the table's walks would leave by (`ExitPatches`, in world units).
+    let exit_patches = ExitPatches::new(patches);
+    let of = |x: Vec3, outward: Vec3| exit_patches.of(0, x / MM, outward).map(|i| i as usize);
     let bins = ExitBins { of: &of, count: object, after, reentering };
     let traced = light_trace(positions, indices, medium, Source::Directional(light), Part::LambertianExit, camera, photons, seed, threads, Some(&bins));
     let mut exitance = vec![Vec3::ZERO; patches.patches.len()];
