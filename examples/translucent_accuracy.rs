@@ -26,6 +26,9 @@
 //!     [--marched-single-scattering | --translucent-shadow-map N | --single-scattering-in-table]
 //!     [--exit-axis plugin|normal|normal-all|flow-all|lobe] [--exit-lobes true|false]
 //!     [--point-light DISTANCE] [--pixels-on-mesh]
+//!     [--bounces N] [--exact-exitance PHOTONS [--exact-exitance-gathered true|false]
+//!      [--exact-exitance-after N] [--exact-exitance-reentering all|scattered|none]
+//!      [--exact-exitance-bounced]]
 //!     [--size 96] [--tracer light|mitsuba] [--spp 1024] [--photons 40000000]
 //!     [--tracer-seed 1] [--light-traced-part all|single|lambertian-exit|first-exit|no-uncollided-reentry]
 //!     [--reference FILE.exr]
@@ -154,7 +157,14 @@ fn main() {
     });
     let (cli_ref, view_ref) = (&cli, &view);
     let exact = cli.exact_exitance.map(|photons| {
-        move |patches: &Patches| exact_patch_exitance(cli_ref, view_ref, medium, light, patches, photons)
+        move |patches: &Patches| {
+            exact_patch_exitance(cli_ref, view_ref, medium, light, patches, photons, cli_ref.exact_exitance_reentering)
+        }
+    });
+    // `--exact-exitance-bounced`: the same tally without the light that came back in, for the
+    // plugin's bounce to bounce.
+    let unreturned = cli.exact_exitance.filter(|_| cli.exact_exitance_bounced).map(|photons| {
+        move |patches: &Patches| exact_patch_exitance(cli_ref, view_ref, medium, light, patches, photons, Reentering::None)
     });
     for &budget in &cli.budgets {
         let mut result = plugin_picture(
@@ -172,7 +182,12 @@ fn main() {
             oracles,
             cli.floor,
             occluder,
-            exact.as_ref().map(|f| ExactExitance { trace: f, gathered: cli.exact_exitance_gathered }),
+            exact.as_ref().map(|f| ExactExitance {
+                trace: f,
+                gathered: cli.exact_exitance_gathered,
+                without_single_scattering: cli.exact_exitance_after >= 1,
+                bounced_source: unreturned.as_ref().map(|f| f as &dyn Fn(&Patches) -> Vec<Vec3>),
+            }),
         );
         if points > 1 {
             result.pixels = box_filtered(&result.pixels, size, points);
@@ -535,8 +550,9 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
     // `_gaussself`: the shape solve's self term from Gauss's identity on a closed object
     // (`shape_diffusion::boundary_correction`; rows before it took the curvature's `−ρH/4`).
     let gauss_self = if cli.shape_diffusion { "_gaussself" } else { "" };
+    let bounces = cli.bounces.map_or(String::new(), |n| format!("_bounces{n}"));
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{projected}{tangential}{gauss_self}{}{}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{projected}{tangential}{gauss_self}{bounces}{}{}",
         cli.kernel,
         if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" },
         if cli.pixel_samples > 1 { format!("_px{}", cli.pixel_samples) } else { String::new() }
@@ -548,6 +564,7 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
         exit_axis,
         shadow_map: if cli.marched_single_scattering { None } else { Some(cli.translucent_shadow_map.unwrap_or(PLUGIN_RESOLUTION)) },
         bounced_as_own: cli.bounced_as_own,
+        bounces: cli.bounces,
     };
     (settings, gather, method, oracles)
 }
@@ -667,7 +684,15 @@ fn light_traced_mesh(
 /// An oracle's exitance of each of the object's patches (the rest zero): the mesh light
 /// tracer's exits after a scattering or more, each on the patch of the sample nearest it
 /// (facing its way), over the patch's area; per unit irradiance, as the plugin's.
-fn exact_patch_exitance(cli: &Cli, view: &ShapeView, medium: TranslucentMedium, light: Vec3, patches: &Patches, photons: u64) -> Vec<Vec3> {
+fn exact_patch_exitance(
+    cli: &Cli,
+    view: &ShapeView,
+    medium: TranslucentMedium,
+    light: Vec3,
+    patches: &Patches,
+    photons: u64,
+    reentering: Reentering,
+) -> Vec<Vec3> {
     // Traced once per scene, patches and photons: other laws and gathers take it again
     // (delete the file to trace it again after a change to the tracer).
     let cache = PathBuf::from("out/translucent_accuracy").join(format!(
@@ -681,8 +706,8 @@ fn exact_patch_exitance(cli: &Cli, view: &ShapeView, medium: TranslucentMedium, 
         light.z,
         cli.tracer_seed,
         cli.exact_exitance_after,
-        if cli.exact_exitance_reentering == Reentering::All { "" } else { "_" },
-        cli.exact_exitance_reentering.suffix()
+        if reentering == Reentering::All { "" } else { "_" },
+        reentering.suffix()
     ));
     if let Ok(bytes) = std::fs::read(&cache)
         && bytes.len() == patches.patches.len() * 12
@@ -694,7 +719,7 @@ fn exact_patch_exitance(cli: &Cli, view: &ShapeView, medium: TranslucentMedium, 
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let start = Instant::now();
     let (exitance, unbinned) =
-        patch_exitance(&view.positions, &view.indices, &medium, light, patches, camera, photons as usize, cli.tracer_seed, threads, cli.exact_exitance_after, cli.exact_exitance_reentering);
+        patch_exitance(&view.positions, &view.indices, &medium, light, patches, camera, photons as usize, cli.tracer_seed, threads, cli.exact_exitance_after, reentering);
     eprintln!(
         "  exact exitance: {photons} photons a channel in {:.0} s; {:.1e} / {:.1e} / {:.1e} of the exits on no patch",
         start.elapsed().as_secs_f32(),

@@ -75,6 +75,10 @@ struct Cli {
     /// (`BeamTableSettings::far_splits`; default the plugin's)
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=64))]
     far_splits: Option<u32>,
+    /// With `--beam-table`: the most scatterings a walk takes in a medium that barely absorbs
+    /// (`BeamTableSettings::max_last_order`; default the plugin's)
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    max_last_order: Option<u32>,
     /// Also turn the spot this many frames by 0.75° each about the vertical through the
     /// objects (the `translucent` example's swing at 60 frames a second) and report on stderr
     /// each frame's products and distance from the converged exitance, warm-started from the
@@ -175,6 +179,7 @@ iterations,solve_ms,threads,shadow_ray_injection_ms";
                 BeamTableSettings {
                     walks: cli.walks.unwrap_or(BeamTableSettings::default().walks),
                     far_splits: cli.far_splits.unwrap_or(BeamTableSettings::default().far_splits),
+                    max_last_order: cli.max_last_order.unwrap_or(BeamTableSettings::default().max_last_order),
                     ..default()
                 },
                 None,

@@ -170,6 +170,11 @@ pub struct Cli {
     /// `_bouncedown` when on (rows without it were measured before)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub bounced_as_own: bool,
+    /// An oracle: the solve stops after this many bounces of light between patches (0: the
+    /// light that got in leaves by the transport alone, none of what left comes back in;
+    /// default: as many as its threshold takes). Method suffix `_bounces<n>`
+    #[arg(long, value_name = "N")]
+    pub bounces: Option<u32>,
     /// A black square plate between the light and the object, facing the light, its edge on
     /// the light's line through the object's centre: the object's upper half in its shadow,
     /// the shadow's edge across its middle (light carried under the surface into the shadow).
@@ -249,7 +254,8 @@ pub struct Cli {
     /// with this many photons a channel (each exit after a scattering or more tallied on the
     /// patch the plugin's walks would leave by), compared patch by patch with the plugin's (printed)
     /// and, with `--exact-exitance-gathered true` (the default), gathered by the plugin's
-    /// laws in its place (single scattering in it: no march). Index-matched, directional
+    /// laws in its place (single scattering in it: no march; with `--exact-exitance-after 1`
+    /// or more the march gives it, as for the plugin's own). Index-matched, directional
     /// light; cached in out/translucent_accuracy/
     #[arg(long, value_name = "PHOTONS")]
     pub exact_exitance: Option<u64>,
@@ -266,6 +272,12 @@ pub struct Cli {
     /// first exit)
     #[arg(long, value_enum, default_value_t = Reentering::All, requires = "exact_exitance")]
     pub exact_exitance_reentering: Reentering,
+    /// With `--exact-exitance`: the plugin's bounce alone — the exact exitance of light that
+    /// never came back in (traced as with `--exact-exitance-reentering none`) as the solve's
+    /// source in place of the plugin's own, bounced by its form factors and `K`, against the
+    /// exact exitance (with `--exact-exitance-reentering`'s light that came back in)
+    #[arg(long, requires = "exact_exitance")]
+    pub exact_exitance_bounced: bool,
     /// A reference EXR made before (else it is rendered into out/translucent_accuracy/)
     #[arg(long)]
     pub reference: Option<PathBuf>,

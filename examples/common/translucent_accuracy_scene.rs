@@ -15,7 +15,7 @@ use bevy_mesostructure::translucency::{
         BeamTable, ExitPatches, BeamTableSettings, bin_direction, direction_bin, direction_weights,
         law_gives_single_scattering, single_scattering_radiance,
     },
-    EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface,
+    DirectLight, EnergyTransport, GatherMethod, PatchLight, PatchObject, PatchSurface,
     SceneRays, SparseMatrix, TranslucentMedium, TransportSettings, direct_light,
     diffusion::{diffuse_fresnel_reflectance, single_scattering_shape},
     gather::{BeamSingleScattering, gathered_radiance},
@@ -173,6 +173,9 @@ pub struct Oracles {
     /// bounced onto a translucent patch leaves by the law of light from elsewhere in the
     /// object (the plugin before).
     pub bounced_as_own: bool,
+    /// The solve stops after this many bounces between patches (`None`: as many as its
+    /// threshold takes; 0: none of the light that left comes back in).
+    pub bounces: Option<u32>,
 }
 
 impl Oracles {
@@ -183,6 +186,7 @@ impl Oracles {
         exit_axis: ExitAxis::Plugin,
         shadow_map: Some(PLUGIN_RESOLUTION),
         bounced_as_own: true,
+        bounces: None,
     };
 }
 
@@ -399,10 +403,18 @@ pub fn plugin_picture(
     for e in &mut direct.irradiance {
         *e += ambient;
     }
-    let mut solution = transport.solve_with(&direct, 1e-4, 256);
+    let bounces = oracles.bounces.unwrap_or(256);
+    let mut solution = transport.solve_with(&direct, 1e-4, bounces);
     // An oracle: the exact transport's exitance on the plugin's own patches (single
     // scattering in it), compared with the plugin's and perhaps gathered in its place.
     let exact = exact_exitance.as_ref().map(|o| (o.trace)(&patches));
+    if let Some(source) = exact_exitance.as_ref().and_then(|o| o.bounced_source) {
+        // The plugin's bounce alone: the exact light that never came back in as `S⁰`, no
+        // light into `K` or the table, bounced by the plugin's `F` and `K`.
+        let source = source(&patches);
+        let unreturned = DirectLight { irradiance: vec![Vec3::ZERO; source.len()], exitance: source, ..default() };
+        solution = transport.solve_with(&unreturned, 1e-4, bounces);
+    }
     let gathered = exact_exitance.as_ref().is_some_and(|o| o.gathered);
     if let Some(exact) = &exact {
         compare_exitance(&patches, &direct.irradiance, &solution.exitance, exact, view.shape.eye());
@@ -434,7 +446,9 @@ pub fn plugin_picture(
     let eye = view.shape.eye();
     // With a map: the plugin's own march (`MarchedObject`, in the gather's twin), unshadowed
     // (one object).
-    let marched = if gathered { None } else { marched };
+    // The exact exitance holds single scattering unless it was tallied after the first
+    // scattering only: then the march gives it, as for the plugin's own `B`.
+    let marched = if gathered && !exact_exitance.as_ref().is_some_and(|o| o.without_single_scattering) { None } else { marched };
     let marched_objects: Option<Vec<Option<MarchedObject>>> = marched.zip(oracles.shadow_map).map(|(_, resolution)| {
         let object_patches = patches.patches.iter().take_while(|q| q.object == 0).count();
         let object_samples = &patches.samples[..patches.sample_offsets[object_patches] as usize];
@@ -546,6 +560,13 @@ fn compare_exitance(patches: &Patches, direct: &[Vec3], plugin: &[Vec3], exact: 
 pub struct ExactExitance<'a> {
     pub trace: &'a dyn Fn(&Patches) -> Vec<Vec3>,
     pub gathered: bool,
+    /// It was tallied after more than one scattering (`--exact-exitance-after` ≥ 1): single
+    /// scattering is the march's, as in the plugin's `B`, where the table leaves it to the
+    /// pixels.
+    pub without_single_scattering: bool,
+    /// The exact exitance of light that never came back in, as the solve's source in place
+    /// of the plugin's (`--exact-exitance-bounced`): the plugin's bounce alone against `trace`.
+    pub bounced_source: Option<&'a dyn Fn(&Patches) -> Vec<Vec3>>,
 }
 
 /// A picture against the reference over the scored pixels.
