@@ -82,7 +82,7 @@ use bevy_mesostructure::translucency::{
 use translucent_light_tracer::{Part, Pinhole, Reentering, Source, light_trace, patch_exitance};
 use translucent_accuracy_cli::{Axis, Cli, Gather, Kernel, Late, Medium, Scattering, ShapeArg, Tracer, check_combinations, fail};
 use translucent_accuracy_scene::{
-    ExactExitance, ExitAxis, FOV_Y, FRONT_LIGHT, Floor, LateLight, Occluder, Oracles, RADIUS, ScatteringSource, SceneLighting, Shape,
+    ExactExitance, ExitAxis, FOV_Y, FRONT_LIGHT, Floor, LateLight, Occluder, Oracles, PatchExitanceOracle, RADIUS, ScatteringSource, SceneLighting, Shape,
     ShapeView, plugin_picture, score,
 };
 
@@ -186,7 +186,7 @@ fn main() {
                 trace: f,
                 gathered: cli.exact_exitance_gathered,
                 without_single_scattering: cli.exact_exitance_after >= 1,
-                bounced_source: unreturned.as_ref().map(|f| f as &dyn Fn(&Patches) -> Vec<Vec3>),
+                bounced_source: unreturned.as_ref().map(|f| f as PatchExitanceOracle),
             }),
         );
         if points > 1 {

@@ -404,17 +404,19 @@ pub fn plugin_picture(
         *e += ambient;
     }
     let bounces = oracles.bounces.unwrap_or(256);
-    let mut solution = transport.solve_with(&direct, 1e-4, bounces);
+    let mut solution = match exact_exitance.as_ref().and_then(|o| o.bounced_source) {
+        // The plugin's bounce alone: the exact light that never came back in as `S⁰`, no
+        // light into `K` or the table, bounced by the plugin's `F` and `K`.
+        Some(source) => {
+            let source = source(&patches);
+            let unreturned = DirectLight { irradiance: vec![Vec3::ZERO; source.len()], exitance: source, ..default() };
+            transport.solve_with(&unreturned, 1e-4, bounces)
+        }
+        None => transport.solve_with(&direct, 1e-4, bounces),
+    };
     // An oracle: the exact transport's exitance on the plugin's own patches (single
     // scattering in it), compared with the plugin's and perhaps gathered in its place.
     let exact = exact_exitance.as_ref().map(|o| (o.trace)(&patches));
-    if let Some(source) = exact_exitance.as_ref().and_then(|o| o.bounced_source) {
-        // The plugin's bounce alone: the exact light that never came back in as `S⁰`, no
-        // light into `K` or the table, bounced by the plugin's `F` and `K`.
-        let source = source(&patches);
-        let unreturned = DirectLight { irradiance: vec![Vec3::ZERO; source.len()], exitance: source, ..default() };
-        solution = transport.solve_with(&unreturned, 1e-4, bounces);
-    }
     let gathered = exact_exitance.as_ref().is_some_and(|o| o.gathered);
     if let Some(exact) = &exact {
         compare_exitance(&patches, &direct.irradiance, &solution.exitance, exact, view.shape.eye());
@@ -558,7 +560,7 @@ fn compare_exitance(patches: &Patches, direct: &[Vec3], plugin: &[Vec3], exact: 
 /// the patches, and whether the picture gathers it in place of the plugin's own or only
 /// compares the two (printed).
 pub struct ExactExitance<'a> {
-    pub trace: &'a dyn Fn(&Patches) -> Vec<Vec3>,
+    pub trace: PatchExitanceOracle<'a>,
     pub gathered: bool,
     /// It was tallied after more than one scattering (`--exact-exitance-after` ≥ 1): single
     /// scattering is the march's, as in the plugin's `B`, where the table leaves it to the
@@ -566,8 +568,11 @@ pub struct ExactExitance<'a> {
     pub without_single_scattering: bool,
     /// The exact exitance of light that never came back in, as the solve's source in place
     /// of the plugin's (`--exact-exitance-bounced`): the plugin's bounce alone against `trace`.
-    pub bounced_source: Option<&'a dyn Fn(&Patches) -> Vec<Vec3>>,
+    pub bounced_source: Option<PatchExitanceOracle<'a>>,
 }
+
+/// An oracle's exitance on the plugin's patches, traced for them.
+pub type PatchExitanceOracle<'a> = &'a dyn Fn(&Patches) -> Vec<Vec3>;
 
 /// A picture against the reference over the scored pixels.
 pub struct ShapeScore {
