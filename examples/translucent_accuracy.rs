@@ -76,7 +76,7 @@ use std::{
 
 use bevy::prelude::*;
 use bevy_mesostructure::translucency::{
-    DiffusionKernel, GatherMethod, TranslucentMedium, TranslucentPreset, TransportSettings, beam_table::BeamTableSettings,
+    DiffusionKernel, GatherMethod, TranslucentMedium, TranslucentPreset, TransportSettings, beam_table::{BeamTableSettings, LATE_WALKS_ORDER},
     patches::Patches, random_walk::ScatteringOrders, translucent_shadow_map::{PLUGIN_DEPTHS, PLUGIN_RESOLUTION},
 };
 use translucent_light_tracer::{Part, Pinhole, Reentering, Source, light_trace, patch_exitance};
@@ -450,9 +450,12 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
                     table.late_walks,
                     table.last_order,
                     // `upto<most>`: walks in a barely absorbing medium go on past the last
-                    // order (`BeamTableSettings::max_last_order`; rows before it lack it).
+                    // order (`BeamTableSettings::max_last_order`; rows before it lack it);
+                    // `_lateperorder`: their late walks times `order/32` (`late_walks_for`;
+                    // rows before 2026-12-07 lack it: `late6144` there is `late3072` here).
                     if table.max_last_order > table.last_order {
-                        format!("upto{}", table.max_last_order)
+                        let per_order = if table.max_last_order > LATE_WALKS_ORDER { "_lateperorder" } else { "" };
+                        format!("upto{}{per_order}", table.max_last_order)
                     } else {
                         String::new()
                     },

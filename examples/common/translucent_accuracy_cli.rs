@@ -105,7 +105,8 @@ pub struct Cli {
     pub late_light: Late,
     /// Diffuse walks from each patch (shared by the channels) for `--late-light
     /// profile-less-early|clamped` (default 1024) and `--scattering beam-table` (default the
-    /// plugin's, `BeamTableSettings::default().late_walks`)
+    /// plugin's, `BeamTableSettings::default().late_walks`; the table's are then scaled as the
+    /// plugin's, `beam_table::late_walks_for`: times `order/32` in marble)
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
     pub late_walks: Option<u32>,
     /// With `--scattering beam-table`: how many walks each beam walk becomes once it

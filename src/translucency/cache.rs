@@ -53,8 +53,9 @@ impl Hash {
 /// cluster's area-weighted centre; 9: walks in a medium that barely absorbs go on past
 /// `last_order`, `BeamTableSettings::max_last_order`; 10: a beam's walks enter by projected
 /// area, none through a sample that faces away from it; 11: the shape solve's self term from
-/// Gauss's identity, `shape_diffusion::boundary_correction`).
-const REVISION: u32 = 11;
+/// Gauss's identity, `shape_diffusion::boundary_correction`; 12: the late light's walks
+/// scaled by `order/32` in a medium walked past 32 scatterings, `late_walks_for`).
+const REVISION: u32 = 12;
 
 /// The cache key of a scene: its objects (world-space positions, indices, surface), the
 /// patch budget, the transport settings, the crate's version and [`REVISION`].

@@ -1948,11 +1948,14 @@ fn of_more_translucent_objects_than_march_the_largest_do_and_the_rest_keep_singl
         app.add_plugins(TranslucencyPlugin);
     });
     let mut settings = TranslucencySettings { patch_budget: 900, ..default() };
-    settings.transport.beam_table = Some(BeamTableSettings { walks: 16, late_walks: 16, ..default() });
+    // Marble (the default medium) walked to 32 scatterings: at 16 walks a direction the
+    // default 64's noise put the middle's two pictures 0.126 apart (its green; 0.079 at 32),
+    // and what is held here is which objects march, not the walks' length.
+    settings.transport.beam_table = Some(BeamTableSettings { walks: 16, late_walks: 16, max_last_order: 32, ..default() });
     app.insert_resource(settings);
     sun(&mut app, Vec3::new(-0.3, -0.3, -1.0), 1000.0);
     let material = matte_white(&mut app);
-    // Nine skin balls in a 3 × 3 grid, the smallest (1 cm) in the middle, the others 1.1 –
+    // Nine marble balls in a 3 × 3 grid, the smallest (1 cm) in the middle, the others 1.1 –
     // 1.8 cm.
     let mut balls = Vec::new();
     for k in 0..9 {
@@ -2166,8 +2169,10 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     // rows were 0.0475 / 0.1107 and 0.0439 / 0.1080 behind the dielectric) from its entry
     // (`BeamTableSettings::far_splits`), and 3072 late walks by default;
     // before, 384 unsplit: 0.0518, 0.1323, 0.0449, 0.0617 in the first four rows, 0.1214
-    // behind the dielectric). Walks in marble go on to 32 scatterings before they leave as
-    // late light (`BeamTableSettings::max_last_order`; at 16, marble's rows were 0.0417 /
+    // behind the dielectric). Walks in marble go on to 64 scatterings on twice the late walks
+    // since 2026-12-07 (`BeamTableSettings::max_last_order`, `late_walks_for`; at 32 marble's
+    // rows were 0.0447 / 0.0629, behind the dielectric 0.0642 / 0.0760, about the normal
+    // 0.0844), before they leave as late light (at 16, marble's rows were 0.0417 /
     // 0.0619, behind the dielectric 0.0672 / 0.0778, and about the normal 0.0778). Each beam
     // walk splits in 16 far from its entry since 2026-11-29 (in 4 before: skin 0.0475 /
     // 0.0943, marble 0.0425 / 0.0606, behind the dielectric skin 0.0436 / 0.1008, marble
@@ -2177,16 +2182,16 @@ fn translucent_balls_match_a_light_traced_reference_as_documented() {
     let table_cases = [
         ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0567, [1.049, 1.045, 1.073]),
         ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.0780, [1.023, 0.957, 1.217]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0447, [1.036, 1.029, 1.035]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0629, [0.955, 0.954, 0.965]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front", front, 1.0, 0.0414, [1.027, 1.023, 1.032]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0579, [0.980, 0.963, 0.958]),
         ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "front_eta1.3", front, 1.3, 0.0404, [0.985, 0.987, 0.989]),
         ((table, "beam table"), lean, TranslucentPreset::Skin1, "skin1", "back_eta1.3", back, 1.3, 0.0806, [0.948, 1.058, 1.613]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0642, [0.990, 0.983, 0.976]),
-        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0760, [1.010, 0.992, 0.989]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "front_eta1.3", front, 1.3, 0.0626, [0.991, 0.983, 0.977]),
+        ((table, "beam table"), lean, TranslucentPreset::Marble, "marble", "back_eta1.3", back, 1.3, 0.0780, [1.025, 0.988, 0.974]),
         ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0452, [0.988, 0.966, 0.969]),
         ((table_ss, "beam table, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2312, [0.801, 0.570, 0.637]),
         ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.3112, [0.717, 0.431, 0.611]),
-        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0844, [0.927, 0.926, 0.931]),
+        ((table_normal, "beam table, the normal's law"), flow, TranslucentPreset::Marble, "marble", "back", back, 1.0, 0.0796, [0.941, 0.926, 0.915]),
         ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.1493, [1.001, 0.951, 1.335]),
         ((table_lobe, "beam table, 1024 walks, exit lobes"), flow, TranslucentPreset::Skin1, "skin1", "front", front, 1.0, 0.0381, [0.990, 0.968, 0.967]),
         ((table_1024, "beam table, 1024 walks, the flow's law"), flow, TranslucentPreset::Skin1, "skin1", "back", back, 1.0, 0.2353, [0.804, 0.561, 0.617]),
@@ -2223,7 +2228,8 @@ fn the_ball_of_triangles_matches_its_own_light_traced_reference_as_documented() 
     );
     // (medium, lighting, how, relative L1, mean ratio r/g/b): measured.
     let cases = [
-        (TranslucentPreset::Marble, "marble", "front", front, 0.0430, [1.002, 0.990, 0.992]),
+        // Marble at 64 scatterings since 2026-12-07 (at 32: 0.0430, [1.002, 0.990, 0.992]).
+        (TranslucentPreset::Marble, "marble", "front", front, 0.0406, [0.993, 0.984, 0.988]),
         (TranslucentPreset::Skin1, "skin1", "front", front, 0.0375, [1.028, 1.005, 1.003]),
         (TranslucentPreset::Skin1, "skin1", "back", back, 0.0804, [0.999, 0.912, 1.123]),
     ];
@@ -2395,7 +2401,7 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         // walks to 32 scatterings; about the normal 0.2751).
         (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0620, [1.032, 1.029, 1.022]),
         (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1261, [0.988, 0.962, 1.012]),
-        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0736, [1.005, 1.002, 0.997]),
+        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0733, [1.002, 1.002, 0.996]),
         // Marble lit from behind, against the mesh light tracer (two renders of 3.2·10⁷
         // photons a channel, seeds 1 and 2: a pair differs by 0.031): short of the issue's
         // 0.08 and too dark, most on the ears and the head (the exact transport given out by
@@ -2403,7 +2409,9 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         // bunny lit from behind"). Since 2026-12-06 the lit faces' single scattering lights
         // the other patches (`DirectLight::lit_face_exitance`; before: 0.1497, [0.955, 0.909,
         // 0.875]): light that left the bunny and came back in is a sixth of this picture.
-        (TranslucentPreset::Marble, "marble", "back", back, true, beam_table, 0.1204, [0.978, 0.946, 0.919]),
+        // Marble's walks go on to 64 scatterings on twice the late walks since 2026-12-07
+        // (at 32: 0.1204, [0.978, 0.946, 0.919]; front 0.0736).
+        (TranslucentPreset::Marble, "marble", "back", back, true, beam_table, 0.1133, [0.983, 0.962, 0.946]),
         // The table with the deep law about the normal, as before the flow.
         (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2607, [0.881, 0.840, 0.813]),
     ];
@@ -2474,12 +2482,14 @@ fn a_translucent_torus_matches_mitsuba_as_documented() {
     let point = |travel: Vec3| SceneLighting::Point(-travel.normalize() * 0.05);
     // (medium, lighting, how, relative L1, mean ratio r/g/b): measured. Since 2026-12-06 the
     // lit faces' single scattering lights the other patches, across the hole (before:
-    // 0.0609, 0.0901, 0.0501, 0.1323, 0.0637, 0.0965, 0.0852).
+    // 0.0609, 0.0901, 0.0501, 0.1323, 0.0637, 0.0965, 0.0852). Marble at 64 scatterings on
+    // twice the late walks since 2026-12-07 (at 32: 0.0506, [1.005, 1.008, 1.008]; 0.1133,
+    // [0.938, 0.909, 0.902]).
     let cases = [
         (TranslucentPreset::Skin1, "skin1", "front", front, 0.0546, [0.976, 0.993, 1.007]),
         (TranslucentPreset::Skin1, "skin1", "back", back, 0.0921, [1.020, 1.011, 0.996]),
-        (TranslucentPreset::Marble, "marble", "front", front, 0.0506, [1.005, 1.008, 1.008]),
-        (TranslucentPreset::Marble, "marble", "back", back, 0.1133, [0.938, 0.909, 0.902]),
+        (TranslucentPreset::Marble, "marble", "front", front, 0.0538, [1.003, 1.004, 1.005]),
+        (TranslucentPreset::Marble, "marble", "back", back, 0.1063, [0.946, 0.918, 0.905]),
         (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0554, [0.979, 0.994, 1.004]),
         (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.0993, [1.002, 0.998, 0.989]),
         // A point light in the hole, 3 mm above the middle (inside the bounds: a cube of
@@ -2507,12 +2517,14 @@ fn a_translucent_ball_over_a_floor_matches_mitsuba_as_documented() {
     let view = ShapeView::new(Shape::Ball, 96);
     let above = SceneLighting::Directional(Vec3::new(-1.0, -1.0, -0.3).normalize());
     let table = Oracles { scattering: ScatteringSource::BeamTable(default()), ..Oracles::NONE };
-    // (medium, the plugin's floor albedo, relative L1, mean ratio r/g/b): measured.
+    // (medium, the plugin's floor albedo, relative L1, mean ratio r/g/b): measured (marble at
+    // 64 scatterings since 2026-12-07; at 32: 0.0600, [1.028, 1.027, 1.026]; 0.2914, [0.732,
+    // 0.731, 0.731]).
     let cases = [
         (TranslucentPreset::Skin1, "skin1", 0.8, 0.0381, [0.994, 1.003, 1.031]),
         (TranslucentPreset::Skin1, "skin1", 0.0, 0.2728, [0.718, 0.742, 0.778]),
-        (TranslucentPreset::Marble, "marble", 0.8, 0.0600, [1.028, 1.027, 1.026]),
-        (TranslucentPreset::Marble, "marble", 0.0, 0.2914, [0.732, 0.731, 0.731]),
+        (TranslucentPreset::Marble, "marble", 0.8, 0.0624, [1.031, 1.031, 1.031]),
+        (TranslucentPreset::Marble, "marble", 0.0, 0.2901, [0.735, 0.736, 0.736]),
     ];
     for (preset, name, floor, rel_l1, ratio) in cases {
         let reference = reference_picture(name, "front_floor0.8");

@@ -269,7 +269,12 @@ impl BeamTable {
             let late = column_of.late_light(
                 &profile_columns[j],
                 diffuse_entering,
-                late_walks_for(settings.late_walks, patches.size_of(j), source_depths[j].max_element()),
+                late_walks_for(
+                    settings.late_walks,
+                    patches.size_of(j),
+                    source_depths[j].max_element(),
+                    column_of.last_order,
+                ),
             );
             let mut lean = LeanSums::default();
             let directions = walked
@@ -354,19 +359,33 @@ impl BeamTable {
 /// the near field shrinks again with the patches, and the build's cost grows as `1/h²`.
 pub const MAX_LATE_WALK_SCALE: f32 = 4.0;
 
-/// Diffuse walks for a patch's late light: `late_walks · (ℓ/h)²`, `ℓ` the medium's longest
-/// transport mean free path and `h` the patch size (the patches in a square of side `ℓ`), at
-/// least `late_walks` and at most [`MAX_LATE_WALK_SCALE`] times it. The near field is the set
-/// of patches the walks leave by, so with a fixed count it shrank as patches got smaller: per
-/// patch fewer walks land, and a patch in the early exits' tail is touched less often. The
-/// ball's skin lit from behind darkened from 0.1046 at 960 patches to 0.164 at 3680. Walks
-/// that grow as `1/h²` give each patch as many exits whatever its size, which holds the set's
-/// reach in the medium's own units. Patches wider than `ℓ` (marble's 0.46 mm at any budget of
-/// the suite, the example's room) keep `late_walks`.
-pub fn late_walks_for(late_walks: u32, patch_size: f32, transport_mean_free_path: f32) -> u32 {
+/// The last order [`BeamTableSettings::late_walks`] is given for: a medium walked further
+/// ([`BeamTableSettings::last_order_for`]) takes `order / 32` times as many ([`late_walks_for`]).
+pub const LATE_WALKS_ORDER: u32 = 32;
+
+/// Diffuse walks for a patch's late light: `late_walks · (ℓ/h)² · max(1, order/32)`, `ℓ` the
+/// medium's longest transport mean free path, `h` the patch size and `order` the walks' last
+/// order in this medium.
+///
+/// - `(ℓ/h)²`, the patches in a square of side `ℓ`, at least 1 and at most
+///   [`MAX_LATE_WALK_SCALE`]: the near field is the set of patches the walks leave by, so with
+///   a fixed count it shrank as patches got smaller: per patch fewer walks land, and a patch in
+///   the early exits' tail is touched less often. The ball's skin lit from behind darkened
+///   from 0.1046 at 960 patches to 0.164 at 3680. Walks that grow as `1/h²` give each patch as
+///   many exits whatever its size, which holds the set's reach in the medium's own units.
+///   Patches wider than `ℓ` (marble's 0.46 mm at any budget of the suite, the example's room)
+///   keep `late_walks`.
+/// - `order / 32` ([`LATE_WALKS_ORDER`]): the late light is the profile's column less these
+///   walks' exits through the last order, a difference whose share of the column shrinks as
+///   the order grows, so its noise grows against it. Marble walked to 64 scatterings on 3072
+///   walks lost the ball from behind (0.0667 at 32 → 0.0747) and held it on 6144 (0.0595):
+///   `docs/translucent.md`, "Marble walks to 64 scatterings". Media that stop sooner (skin:
+///   16) keep `late_walks`.
+pub fn late_walks_for(late_walks: u32, patch_size: f32, transport_mean_free_path: f32, last_order: u32) -> u32 {
     let squares = (transport_mean_free_path / patch_size).powi(2);
     let scale = if squares.is_finite() { squares.clamp(1.0, MAX_LATE_WALK_SCALE) } else { 1.0 };
-    (late_walks as f32 * scale).round() as u32
+    let orders = (last_order as f32 / LATE_WALKS_ORDER as f32).max(1.0);
+    (late_walks as f32 * scale * orders).round() as u32
 }
 
 /// Object `object`'s medium and scale where the table walks its patches: translucent, with a

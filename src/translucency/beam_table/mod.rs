@@ -39,7 +39,7 @@ pub mod directions;
 pub mod flow;
 pub mod single_scattering;
 
-pub use build::{ExitPatches, MAX_LATE_WALK_SCALE, late_walks_for, marched_objects};
+pub use build::{ExitPatches, LATE_WALKS_ORDER, MAX_LATE_WALK_SCALE, late_walks_for, marched_objects};
 pub use directions::{bin_direction, direction_bin, direction_weights};
 pub use flow::{ExitLean, LOBE_SOURCE_DISTANCE, LOBE_SOURCE_MEAN_FREE_PATHS, TableFlow, from_afar, lobe_source_distance};
 pub use single_scattering::{
@@ -62,7 +62,8 @@ pub struct BeamTableSettings {
     pub walks: u32,
     /// Diffuse walks a patch for the late light's near field (≥ 1), shared by the channels;
     /// times `(ℓ/h)²` on patches narrower than the medium's longest transport mean free path
-    /// `ℓ`, at most 4× ([`late_walks_for`]).
+    /// `ℓ`, at most 4×, and times `order/32` in a medium walked past 32 scatterings
+    /// ([`late_walks_for`]: marble's 64 take twice as many).
     pub late_walks: u32,
     /// How many walks a beam walk becomes once it scatters more than
     /// [`lobe_source_distance`] from where it entered (≥ 1; 1: none;
@@ -82,8 +83,9 @@ pub struct BeamTableSettings {
     /// its light back by its entry, 0.093 → 0.074 in relative L1 at 4000 patches against
     /// Mitsuba (`docs/translucent.md`, "Walks in a medium that barely absorbs go on").
     /// Higher is closer and slower to build: the marble bunny lit from behind at 4000 patches
-    /// scores 0.117 / 0.103 / 0.098 at 32 / 64 / 128, its table taking 1.0 / 1.5 / 2.2× as
-    /// long (`docs/translucent.md`, "Light that left an object and came back in").
+    /// scores 0.111 / 0.092 at 32 / 64 (the mean of three table seeds; `docs/translucent.md`,
+    /// "Marble walks to 64 scatterings"), the `translucent` example's room's table taking
+    /// 1.0 / 1.6× as long.
     pub max_last_order: u32,
     /// Keep the mean direction each entry's light leaves along ([`BeamTable::early_leaving`],
     /// 12 more floats an entry): what the exit lobes are fitted to
@@ -132,13 +134,14 @@ impl Default for BeamTableSettings {
             late_walks: 3072,
             far_splits: 16,
             last_order: 16,
-            // Skin's red halves in 16 scatterings, marble's (0.999) in ~700: 32 took the
-            // marble torus from behind 0.0979 → 0.0798 at 4000 patches (seed 0, against one
-            // render) and kept the other marble cases within their seeds' spread; 64 did
-            // little more there (0.0750) and cost the ball's marble (front 0.045 → 0.053);
-            // skin at 32 took its ball from behind 0.094 → 0.122. The room's table at 20 k
-            // takes 1.3× as long on 2 threads (its marble bunny walked 32).
-            max_last_order: 32,
+            // Skin's red halves in 16 scatterings, marble's (0.999) in ~700. Marble at 4000
+            // patches, 32 → 64 with twice the late walks (`late_walks_for`), from behind: the
+            // bunny 0.111 → 0.092 (the mean of three table seeds), the torus 0.0679 → 0.0578,
+            // the ball 0.0667 → 0.0595; from the front the bunny 0.0579 → 0.0559, the ball
+            // 0.0475 → 0.0491, the torus 0.0386 → 0.0416 (`docs/translucent.md`, "Marble
+            // walks to 64 scatterings"). Skin at 32 took its ball from behind 0.094 → 0.122:
+            // it stops at 16.
+            max_last_order: 64,
             exit_directions: false,
             single_scattering_to_pixels: true,
             seed: 0,

@@ -589,46 +589,57 @@ fn the_exit_lobes_threshold_is_two_patch_sizes_and_never_under_two_mean_free_pat
 /// The late light's diffuse walks scale with the patches in a square transport mean free
 /// path (`late_walks_for`): `late_walks` for a patch as wide as the medium's longest transport mean
 /// free path or wider, four times as many at half that width, never more than
-/// `MAX_LATE_WALK_SCALE` times, and `late_walks` for a size or a path that is not a number.
+/// `MAX_LATE_WALK_SCALE` times, and `late_walks` for a size or a path that is not a number;
+/// and with the walks' last order past `LATE_WALKS_ORDER` (32), by `order/32`: twice as many
+/// for marble's 64, as many for skin's 16.
 #[test]
 fn the_late_lights_walks_scale_with_the_patches_in_a_square_mean_free_path() {
-    use crate::translucency::beam_table::{MAX_LATE_WALK_SCALE, late_walks_for};
+    use crate::translucency::beam_table::{LATE_WALKS_ORDER, MAX_LATE_WALK_SCALE, late_walks_for};
     let l = 1.3e-3;
-    assert_eq!(late_walks_for(3072, l, l), 3072);
-    assert_eq!(late_walks_for(3072, 3.0 * l, l), 3072);
-    assert_eq!(late_walks_for(3072, l / 2.0f32.sqrt(), l), 6144);
-    assert_eq!(late_walks_for(3072, l / 2.0, l), 12288);
-    assert_eq!(late_walks_for(3072, l / 10.0, l), (3072.0 * MAX_LATE_WALK_SCALE) as u32);
+    assert_eq!(late_walks_for(3072, l, l, 16), 3072);
+    assert_eq!(late_walks_for(3072, 3.0 * l, l, 16), 3072);
+    assert_eq!(late_walks_for(3072, l / 2.0f32.sqrt(), l, 16), 6144);
+    assert_eq!(late_walks_for(3072, l / 2.0, l, 16), 12288);
+    assert_eq!(late_walks_for(3072, l / 10.0, l, 16), (3072.0 * MAX_LATE_WALK_SCALE) as u32);
     for (h, l) in [(f32::NAN, l), (l, f32::NAN), (0.0, l), (l, 0.0), (f32::INFINITY, l)] {
-        assert_eq!(late_walks_for(3072, h, l), 3072, "h {h}, ℓ {l}");
+        assert_eq!(late_walks_for(3072, h, l, 16), 3072, "h {h}, ℓ {l}");
     }
+    // The last order: none below 32 (nor at 0), twice at 64, both scales together.
+    assert_eq!(LATE_WALKS_ORDER, 32);
+    assert_eq!(late_walks_for(3072, l, l, 0), 3072);
+    assert_eq!(late_walks_for(3072, l, l, 32), 3072);
+    assert_eq!(late_walks_for(3072, 3.0 * l, l, 64), 6144);
+    assert_eq!(late_walks_for(3072, l, l, 48), 4608);
+    assert_eq!(late_walks_for(3072, l / 2.0, l, 64), 24576);
 }
 
 /// Walks go on past `last_order` in a medium that barely absorbs (`last_order_for`): until
 /// half the light would be absorbed at the highest single-scattering albedo, held within
 /// `last_order` – `max_last_order`. Skin's red halves in 16 scatterings (α 0.9585), so skin
-/// keeps the 16 its figures were measured at; marble, skin2 and a medium that does not absorb
-/// (Spectralon) take the most; ketchup, which halves sooner, the least; a `max_last_order`
-/// below `last_order` is `last_order`.
+/// keeps the 16 its figures were measured at; marble, whole milk and a medium that does not
+/// absorb (Spectralon) take the most, 64; skin2 its 58; ketchup, which halves sooner, the
+/// least; a `max_last_order` below `last_order` is `last_order`.
 #[test]
 fn walks_in_a_barely_absorbing_medium_go_on_until_half_their_light_is_absorbed() {
     use crate::translucency::TranslucentPreset as P;
     let settings = BeamTableSettings::default();
-    assert_eq!((settings.last_order, settings.max_last_order), (16, 32));
+    assert_eq!((settings.last_order, settings.max_last_order), (16, 64));
     let order = |preset: P| settings.last_order_for(&preset.medium());
     assert_eq!(order(P::Skin1), 16);
     assert_eq!(order(P::Ketchup), 16);
-    for preset in [P::Marble, P::Skin2, P::Spectralon, P::Wholemilk] {
-        assert_eq!(order(preset), 32, "{preset:?}");
+    for preset in [P::Marble, P::Spectralon, P::Wholemilk] {
+        assert_eq!(order(preset), 64, "{preset:?}");
     }
-    // α 0.98 halves in 34.3 scatterings: 34 under a cap of 64.
+    // Skin2's red (α 0.9882) halves in 58.4 scatterings.
+    assert_eq!(order(P::Skin2), 58);
+    // α 0.98 halves in 34.3 scatterings: 34 under a cap of 64, 32 under one of 32.
     let medium = crate::translucency::TranslucentMedium {
         absorption: Vec3::splat(0.02),
         reduced_scattering: Vec3::splat(0.98),
         ..P::Marble.medium()
     };
-    assert_eq!(BeamTableSettings { max_last_order: 64, ..settings }.last_order_for(&medium), 34);
-    assert_eq!(settings.last_order_for(&medium), 32);
+    assert_eq!(settings.last_order_for(&medium), 34);
+    assert_eq!(BeamTableSettings { max_last_order: 32, ..settings }.last_order_for(&medium), 32);
     let capped_below = BeamTableSettings { max_last_order: 4, ..settings };
     assert_eq!(capped_below.last_order_for(&P::Marble.medium()), 16);
 }
