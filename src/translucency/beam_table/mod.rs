@@ -109,8 +109,9 @@ pub struct BeamTableSettings {
     /// by ~±0.005 from the front (`docs/translucent.md`): what a variant must beat.
     pub seed: u32,
     /// The most translucent patches a scene may have for a table to be built (its precompute
-    /// and memory grow with them: ~0.05 s a translucent patch on one core in release, ~15 kB
-    /// a patch); a scene with more keeps the profile's `K`, with one warning
+    /// and memory grow with them: ~0.07 s a translucent patch on one core in release with
+    /// marble walked to 64 scatterings, ~15 kB a patch); a scene with more keeps the
+    /// profile's `K`, with one warning
     /// ([`TransportReport::beam_table_skipped`](super::transport::TransportReport::beam_table_skipped)).
     pub max_patches: u32,
 }
@@ -146,8 +147,9 @@ impl Default for BeamTableSettings {
             single_scattering_to_pixels: true,
             seed: 0,
             // 3.3× the `translucent` example's room at a 20 000 budget (1224 translucent
-            // patches, 18 MB): by its measured rate about 12 s on 16 cores and 100 s on 2
-            // in release, ~60 MB.
+            // patches, 17 MB): by its measured rate (41.5 s on 2 threads in release since
+            // marble walks to 64 scatterings) about 140 s on 2 and, by the docs' 2 : 16 core
+            // ratio, ~30 s on 16 (not measured), ~60 MB.
             max_patches: 4096,
         }
     }
