@@ -66,8 +66,8 @@ struct Cli {
     exit_lobes: bool,
     /// With the beam table, lean the light that crossed an object towards the camera about
     /// its silhouette: diffusion's flux along the surface (`TransportSettings::tangential_flux`,
-    /// opt-in; closer for the marble bunny lit from behind, not for skin)
-    #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
+    /// on by default; it leans marble-like media, never skin: `tangential_flux_mode_weight`)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     tangential_flux: bool,
     /// Headless: swing the spot during the warm-up frames, as in a window, so that every frame
     /// injects and iterates anew (for timing; the shots still fix it in front and behind)

@@ -78,8 +78,8 @@ pub struct Cli {
     pub flow_law_takes_all: bool,
     /// With the beam table, lean the light a translucent pixel shows down the exitance's
     /// gradient along the surface (P1's flux along it; `TransportSettings::tangential_flux`,
-    /// off by default; method suffix `_tangential` when on)
-    #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
+    /// on by default; method suffix `_tangential` when on)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub tangential_flux: bool,
     /// Walks from each patch (shared by the channels) for `--scattering walks|beam-walks`
     /// (default 256), or a direction for `--scattering beam-table` (default the plugin's,

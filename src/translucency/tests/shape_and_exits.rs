@@ -504,6 +504,22 @@ fn the_flux_along_the_surface_keeps_the_exitance_and_leans_down_the_gradient() {
     assert!(tangential_flux_weight(1.01 / 1.49, 1.49, 1.0, 0.001) < 0.03 * 0.001 / (3.0 * 1.49));
     assert_eq!(tangential_flux_weight(alpha, f64::NAN, 1.0, 0.001), 0.0);
     assert_eq!(tangential_flux_weight(alpha, extinction, 1.0, 0.0), 0.0);
+    // Only where the flow's law does not lean already (the mode's decay ν ≤ 0.1: all; ≥ 0.3:
+    // none): skin1's red (α 0.74/0.772, ν 0.35) takes none, skin2's red (α 1.09/1.103, ν 0.19)
+    // a share, marble's blue (α 3.0/3.0071, ν 0.084) all.
+    use crate::translucency::diffusion::tangential_flux_mode_weight;
+    assert_eq!(tangential_flux_weight(0.74 / 0.772, 0.772, 1.0, 0.001), 0.0);
+    assert_eq!(tangential_flux_mode_weight(3.0 / 3.0071), 1.0);
+    let skin2_red = tangential_flux_mode_weight(1.09 / 1.103);
+    assert!(skin2_red > 0.3 && skin2_red < 0.7, "{skin2_red}");
+    // From ν 0.39 (α 0.95) to none (α 1): rising, within [0, 1].
+    let mut last = 0.0;
+    for k in 0..=100 {
+        let w = tangential_flux_mode_weight(0.95 + 0.0005 * k as f64);
+        assert!((0.0..=1.0).contains(&w) && w >= last, "at α {}: {w} after {last}", 0.95 + 0.0005 * k as f64);
+        last = w;
+    }
+    assert_eq!(last, 1.0);
     assert_eq!(tangential_flux_factor(0.0, 1.0, 0.5, 3.0), 1.0);
     assert_eq!(tangential_flux_factor(1.0, 1.0, 0.5, f32::NAN), 1.0);
 

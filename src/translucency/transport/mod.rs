@@ -348,12 +348,16 @@ pub struct TransportSettings {
     /// ([`tangential_flux_weight`](super::diffusion::tangential_flux_weight),
     /// [`ExitLaw::tangential`]; the gradient a plane fitted to the exitance of the patches the
     /// gather takes about the pixel). Light that crossed an object lit from behind flows along
-    /// its surface at the silhouette and leaves towards the camera. Off by default (per frame;
-    /// the transport is the same): against light-traced references at 4000 patches it takes
-    /// marble lit from behind closer (the Stanford bunny 0.113 → 0.103 in relative L1, a
-    /// torus 0.068 → 0.059, a 1 cm ball 0.069 → 0.062) but skin further (the ball from behind
-    /// 0.072 → 0.078, at 1000 patches 0.078 → 0.092): skin's light already leans by its flow's
-    /// law and the exit lobes (`docs/translucent.md`).
+    /// its surface at the silhouette and leaves towards the camera. Only in a channel whose
+    /// flow's law hardly leans ([`tangential_flux_mode_weight`](super::diffusion::tangential_flux_mode_weight):
+    /// the mode's decay `ν` at most 0.1 takes all of it, 0.3 and more none): marble, milk, not
+    /// skin, whose light already leans by its flow's law and the exit lobes (with the whole
+    /// term the skin ball from behind went 0.072 → 0.078 at 4000 patches). On by default
+    /// since 2026-12-07 (per frame; the transport is the same): against light-traced
+    /// references at 4000 patches, marble lit from behind 0.087 → 0.079 in relative L1 on the
+    /// Stanford bunny, a torus 0.058 → 0.051, a 1 cm ball 0.060 → 0.061; from the front within
+    /// ±0.002; skin exactly as without it (`docs/translucent.md`, "The flux along the surface
+    /// by default").
     pub tangential_flux: bool,
 }
 
@@ -363,8 +367,9 @@ impl Default for TransportSettings {
     /// memory, +3 % in the test room's); form factors down to 1e-5 (a
     /// patch of 1/1000 of a room's wall area seen face-on from 5 wall widths away); clusters
     /// 4 patches wide linked as one beyond 3 radii; each object's own random walks and each
-    /// beam's incidence, a beam table and its exit lobes (all measured closer to light-traced
-    /// references; see `docs/translucent.md` for what each costs and changes).
+    /// beam's incidence, a beam table, its exit lobes and the flux along the surface where the
+    /// flow's law does not lean (all measured closer to light-traced references; see
+    /// `docs/translucent.md` for what each costs and changes).
     fn default() -> Self {
         Self {
             kernel: DiffusionKernel::ScaledDipole,
@@ -380,7 +385,7 @@ impl Default for TransportSettings {
             beam_table: Some(super::beam_table::BeamTableSettings::default()),
             exit_lobes: true,
             flow_law_takes_all: true,
-            tangential_flux: false,
+            tangential_flux: true,
         }
     }
 }
