@@ -6,6 +6,7 @@
 //! ```text
 //! cargo run --example translucent_precompute -- [--budgets 1000,5000] [--kernel scaled-dipole|burley|dipole]
 //!     [--cutoff 1e-5] [--shape-energy-dropped 1e-6] [--out docs/translucent-precompute.csv]
+//!     [--beam-table [--walks N] [--far-splits N] [--max-last-order N] [--late-walks N]]
 //! ```
 //!
 //! CSV header: `patches,budget,precompute_s,memory_mb,form_factor_entries,scattering_entries,
@@ -79,6 +80,11 @@ struct Cli {
     /// (`BeamTableSettings::max_last_order`; default the plugin's)
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
     max_last_order: Option<u32>,
+    /// With `--beam-table`: diffuse walks a patch for its late light, before
+    /// `beam_table::late_walks_for` scales them (`BeamTableSettings::late_walks`; default the
+    /// plugin's)
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    late_walks: Option<u32>,
     /// Also turn the spot this many frames by 0.75° each about the vertical through the
     /// objects (the `translucent` example's swing at 60 frames a second) and report on stderr
     /// each frame's products and distance from the converged exitance, warm-started from the
@@ -180,6 +186,7 @@ iterations,solve_ms,threads,shadow_ray_injection_ms";
                     walks: cli.walks.unwrap_or(BeamTableSettings::default().walks),
                     far_splits: cli.far_splits.unwrap_or(BeamTableSettings::default().far_splits),
                     max_last_order: cli.max_last_order.unwrap_or(BeamTableSettings::default().max_last_order),
+                    late_walks: cli.late_walks.unwrap_or(BeamTableSettings::default().late_walks),
                     ..default()
                 },
                 None,
