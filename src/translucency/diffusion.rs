@@ -141,11 +141,18 @@ pub fn boundary_coefficient(eta: f64) -> f64 {
     (1.0 + f_dr) / (1.0 - f_dr)
 }
 
+/// The absorbing half-space's mode's decay per transport mean free path, `ν = √(3(1 − α))`,
+/// for the reduced albedo `alpha` (held to [0, 1]): 0 without absorption, 1 where a mean free
+/// path is a diffusion length.
+pub fn half_space_mode_decay(alpha: f64) -> f64 {
+    (3.0 * (1.0 - alpha.clamp(0.0, 1.0))).sqrt()
+}
+
 /// The share `g = 1 − √(3(1 − α))` of the light arriving from elsewhere that is in the
 /// diffusion mode, for the reduced albedo `alpha`: all of it for no absorption, none where a
 /// mean free path is a diffusion length.
 pub fn diffusion_mode_share(alpha: f64) -> f64 {
-    (1.0 - (3.0 * (1.0 - alpha.clamp(0.0, 1.0))).sqrt()).max(0.0)
+    (1.0 - half_space_mode_decay(alpha)).max(0.0)
 }
 
 /// Unpolarised Fresnel reflectance of a smooth boundary, light arriving from the side of index
@@ -230,8 +237,7 @@ pub fn surface_albedo(alpha: f64) -> f64 {
 /// with the same `eta`.
 pub fn deep_exit_law(alpha: f64, eta: f64) -> [f32; 4] {
     let alpha = alpha.clamp(0.0, 1.0);
-    let decay = (3.0 * (1.0 - alpha)).sqrt();
-    let nu = decay.min(0.9);
+    let nu = half_space_mode_decay(alpha).min(0.9);
     let unnormalised = [alpha as f32, nu as f32, 1.0, 0.0];
     // 2 ∫ f(μ) μ dμ by the midpoint rule (f is smooth).
     let n = 512;
@@ -308,7 +314,7 @@ pub const TANGENTIAL_FLUX_MODE_DECAY_NONE: f64 = 0.3;
 /// while marble (ν ≤ 0.084, a flow's law that hardly leans) gains wherever light crossed it
 /// (`docs/translucent.md`, "The flux along the surface").
 pub fn tangential_flux_mode_weight(alpha: f64) -> f64 {
-    let nu = (3.0 * (1.0 - alpha.clamp(0.0, 1.0))).sqrt();
+    let nu = half_space_mode_decay(alpha);
     let t = ((TANGENTIAL_FLUX_MODE_DECAY_NONE - nu)
         / (TANGENTIAL_FLUX_MODE_DECAY_NONE - TANGENTIAL_FLUX_MODE_DECAY_ALL))
         .clamp(0.0, 1.0);
