@@ -20,7 +20,7 @@ use super::{
     translucent_shadow_map::MarchedMedium,
     lights::{light_numbers, lights_reaching},
     transport::{
-        DirectLight, EnergyTransport, PatchLight, SceneRays, TransportReport,
+        DirectLight, EnergyTransport, PatchLight, PatchSurface, SceneRays, TransportReport,
         TransportSettings, direct_light,
     },
 };
@@ -249,6 +249,7 @@ impl TranslucencyStatus {
 
 /// One precomputed static scene: its patches, transport and visibility, and what the gather
 /// needs.
+#[derive(Clone)]
 pub struct TranslucencyScene {
     /// The patches.
     pub patches: Patches,
@@ -274,6 +275,11 @@ pub struct TranslucencyScene {
     /// A sphere about every patch ([`Patches::bounding_sphere`]): the lights that cannot reach
     /// it are left out of the injection.
     pub bounds: (Vec3, f32),
+    /// Per object, its surface (`Patch::object` indexes it).
+    pub surfaces: Vec<PatchSurface>,
+    /// The settings the transport was built with and its exit laws and incidence weights
+    /// derived with ([`TransportSettings::derived`]).
+    pub settings: TransportSettings,
 }
 
 /// What the render world takes each frame.

@@ -132,7 +132,9 @@ pub(crate) fn run_precompute(
     }
     let mut list: Vec<_> = participants.iter().collect();
     list.sort_by_key(|p| p.0);
-    // The signature: entities, meshes, transforms, media and albedos.
+    // The signature: entities, meshes, transforms, media, albedos and the settings the
+    // transport is built with (not those only derived from it, `TransportSettings::derived`,
+    // which `derive_again` takes on the scene already built).
     let mut signature = vec![
         settings.patch_budget as u64,
         hash_f32s([
@@ -144,10 +146,6 @@ pub(crate) fn run_precompute(
             settings.transport.object_exit_share as u32 as f32,
             settings.transport.shape_diffusion as u32 as f32,
             settings.transport.shape_energy_dropped,
-            settings.transport.deep_exit_law as u32 as f32,
-            settings.transport.exit_lobes as u32 as f32,
-            settings.transport.flow_law_takes_all as u32 as f32,
-            settings.transport.tangential_flux as u32 as f32,
         ]),
         // The beam table's settings (none: all zero).
         hash_f32s(settings.transport.beam_table.map_or([0.0; 10], |t| {
@@ -372,9 +370,8 @@ pub(crate) fn run_precompute(
                     table.max_patches
                 ));
             }
-            transport.incidence = EnergyTransport::incidence_weights(&surfaces, &transport_settings);
+            let exit_laws = derived_from(&mut transport, &patches, &surfaces, &transport_settings);
             let albedo = super::transport::patch_albedos(&patches, &surfaces);
-            let exit_laws = transport.exit_laws(&patches, &surfaces, &transport_settings);
             let source_depths = EnergyTransport::source_depths(&patches, &surfaces);
             let marched = match transport.beam_table.as_ref() {
                 Some(table) if table.settings.single_scattering_to_pixels => {
@@ -384,7 +381,20 @@ pub(crate) fn run_precompute(
                 _ => Vec::new(),
             };
             let bounds = patches.bounding_sphere();
-            (TranslucencyScene { patches, transport, rays, albedo, exit_laws, source_depths, entities, marched, bounds }, notes, from_cache)
+            let scene = TranslucencyScene {
+                patches,
+                transport,
+                rays,
+                albedo,
+                exit_laws,
+                source_depths,
+                entities,
+                marched,
+                bounds,
+                surfaces,
+                settings: transport_settings,
+            };
+            (scene, notes, from_cache)
         }));
         *status = TranslucencyStatus::Precomputing {
             since: Instant::now(),
@@ -406,7 +416,42 @@ pub(crate) fn run_precompute(
         };
         frame.scene = Some((state.generation, Arc::new(scene)));
     }
+    derive_again(&settings.transport, &mut state, &mut frame);
     frame.settings = settings.clone();
+}
+
+/// Sets `transport`'s incidence weights for `settings` and returns each patch's exit law: what
+/// a scene derives from its transport, on a build, a load from the cache, or a change of
+/// [`TransportSettings::derived`].
+fn derived_from(
+    transport: &mut EnergyTransport,
+    patches: &super::patches::Patches,
+    surfaces: &[PatchSurface],
+    settings: &TransportSettings,
+) -> Vec<super::transport::ExitLaw> {
+    transport.incidence = EnergyTransport::incidence_weights(surfaces, settings);
+    transport.exit_laws(patches, surfaces, settings)
+}
+
+/// Where [`TransportSettings::derived`] changed since the scene was derived, derives its exit
+/// laws and incidence weights again on the transport already built, as a new generation of the
+/// scene (a copy of it on the main thread, not timed; the GPU takes it whole and the lights
+/// are injected again). Toggling one of these in a
+/// tuning panel rebuilt the whole transport before (tens of seconds at a 20 k budget, the
+/// meshes shaded by Bevy meanwhile), and `beam_incidence` was not seen at all until a rebuild.
+fn derive_again(settings: &TransportSettings, state: &mut Precompute, frame: &mut TranslucencyFrame) {
+    let Some((_, scene)) = &frame.scene else {
+        return;
+    };
+    if scene.settings.derived() == settings.derived() {
+        return;
+    }
+    let mut scene = TranslucencyScene::clone(scene);
+    scene.settings = scene.settings.with_derived_from(settings);
+    scene.exit_laws = derived_from(&mut scene.transport, &scene.patches, &scene.surfaces, &scene.settings);
+    state.generation += 1;
+    state.direct_signature.clear();
+    frame.scene = Some((state.generation, Arc::new(scene)));
 }
 
 /// The widest patch a translucent object may have: a third of the radius within which its

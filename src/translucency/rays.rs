@@ -13,6 +13,7 @@ use obvhs_glam::Vec3A;
 use super::patches::PatchObject;
 
 /// Visibility between points: the scene's triangles in a BVH.
+#[derive(Clone)]
 pub struct SceneRays {
     bvh: CwBvh,
     triangles: Vec<Triangle>,

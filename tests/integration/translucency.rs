@@ -1786,6 +1786,59 @@ fn a_kept_transport_is_read_back_instead_of_built_again() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Settings that only shape how the patches' light leaves them and how a beam enters
+/// (`TransportSettings::derived`) are derived again on the transport already built when they
+/// change: the same transport (its report, build time included), no frame back to Bevy's
+/// shading, and the laws a build with those settings derives.
+#[test]
+fn exit_law_settings_are_derived_again_without_a_precompute() {
+    use bevy_mesostructure::translucency::{
+        TranslucencyFrame, TranslucencyPlugin, TranslucencySettings, TranslucencyStatus, transport::ExitLaw,
+    };
+    if !gpu_or_skip() {
+        return;
+    }
+    let app_with = |deep_exit_law: bool, beam_incidence: bool| {
+        let mut app = bare_app_with(|app| {
+            app.add_plugins(TranslucencyPlugin);
+        });
+        small_translucent_ball(&mut app, 16);
+        let mut settings = app.world_mut().resource_mut::<TranslucencySettings>();
+        settings.transport.deep_exit_law = deep_exit_law;
+        settings.transport.beam_incidence = beam_incidence;
+        sun(&mut app, Vec3::new(-1.0, -1.0, -1.0), 2000.0);
+        run_until_ready(&mut app);
+        app
+    };
+    let scene_of = |app: &App| app.world().resource::<TranslucencyFrame>().scene.clone().expect("a scene");
+    let mut app = app_with(false, true);
+    let (generation, built) = scene_of(&app);
+    assert!(built.exit_laws.iter().all(|l| *l == ExitLaw::default()), "Lambert's law without the deep law");
+    assert!(built.transport.incidence.iter().all(Option::is_some), "the ball's beams weighted by their incidence");
+    {
+        let mut settings = app.world_mut().resource_mut::<TranslucencySettings>();
+        settings.transport.deep_exit_law = true;
+        settings.transport.beam_incidence = false;
+    }
+    for frame in 0..3 {
+        run(&mut app, 1);
+        assert!(
+            matches!(app.world().resource::<TranslucencyStatus>(), TranslucencyStatus::Ready { .. }),
+            "frame {frame}: still ready, not back to Bevy's shading for a precompute"
+        );
+    }
+    let (generation_after, derived) = scene_of(&app);
+    assert!(generation_after > generation, "a new generation of the scene for the GPU to take");
+    assert_eq!(derived.transport.report, built.transport.report, "the same transport, not built again");
+    assert!(derived.transport.incidence.iter().all(Option::is_none), "no incidence weight with beam_incidence off");
+    assert!(derived.exit_laws.iter().any(|l| *l != ExitLaw::default()), "the deep law on the ball's patches");
+    // What a build with those settings derives, to the bit.
+    let fresh = app_with(true, false);
+    let (_, fresh) = scene_of(&fresh);
+    assert_eq!(derived.exit_laws, fresh.exit_laws);
+    assert_eq!(derived.transport.incidence, fresh.transport.incidence);
+}
+
 /// An app with the translucency plugin (300 patches, no beam table) and a white 5 cm
 /// translucent ball at the origin, seen from 25 cm by a `size`² HDR-less, untonemapped
 /// camera: the target it draws to.

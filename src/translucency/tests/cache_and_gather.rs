@@ -90,6 +90,20 @@ fn the_cache_gives_back_the_same_transport_and_rejects_anything_else() {
         .map(|(o, s)| (o.0.as_slice(), o.1.as_slice(), *s))
         .collect();
     assert_ne!(base, crate::translucency::cache::scene_key(&keyed, 200, &without));
+    // The settings only derived from a built transport (the exit laws', the beams'
+    // incidence) keep its key: the plugin derives them again on the transport it has.
+    let toggled = TransportSettings {
+        deep_exit_law: !settings.deep_exit_law,
+        exit_lobes: !settings.exit_lobes,
+        flow_law_takes_all: !settings.flow_law_takes_all,
+        tangential_flux: !settings.tangential_flux,
+        beam_incidence: !settings.beam_incidence,
+        ..settings
+    };
+    assert_eq!(base, crate::translucency::cache::scene_key(&keyed, 200, &toggled));
+    assert!(toggled.derived().iter().zip(settings.derived()).all(|(a, b)| *a != b), "all five are derived");
+    assert_eq!(settings.with_derived_from(&toggled), toggled);
+    assert_eq!(toggled.with_derived_from(&settings), settings);
 }
 
 /// The gather's grid keeps each member's own cell beside it (the pass takes a member only

@@ -390,6 +390,28 @@ impl Default for TransportSettings {
     }
 }
 
+impl TransportSettings {
+    /// The settings that act only on what a scene derives from its built transport — each
+    /// patch's exit law ([`EnergyTransport::exit_laws`]) and each object's incidence weight
+    /// ([`EnergyTransport::incidence_weights`]) — not on `K`, `F` or the beam table: the
+    /// plugin derives those again when these change, without a precompute.
+    pub fn derived(&self) -> [bool; 5] {
+        [self.deep_exit_law, self.exit_lobes, self.flow_law_takes_all, self.tangential_flux, self.beam_incidence]
+    }
+
+    /// `self` with [`derived`](Self::derived)'s settings taken from `other`.
+    pub fn with_derived_from(self, other: &Self) -> Self {
+        Self {
+            deep_exit_law: other.deep_exit_law,
+            exit_lobes: other.exit_lobes,
+            flow_law_takes_all: other.flow_law_takes_all,
+            tangential_flux: other.tangential_flux,
+            beam_incidence: other.beam_incidence,
+            ..self
+        }
+    }
+}
+
 /// What building the transport kept and dropped, and what it cost.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TransportReport {
