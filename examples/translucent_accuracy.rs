@@ -434,6 +434,7 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
                 max_last_order: cli.max_last_order.unwrap_or(BeamTableSettings::default().max_last_order),
                 exit_directions: cli.exit_axis == Axis::Lobe,
                 single_scattering_to_pixels: !cli.single_scattering_in_table,
+                diffuse_columns_walked: cli.diffuse_columns_walked,
                 seed: cli.table_seed,
                 ..default()
             };
@@ -553,9 +554,12 @@ fn method_of(cli: &Cli, shape: Shape) -> (TransportSettings, GatherMethod, Strin
     // `_gaussself`: the shape solve's self term from Gauss's identity on a closed object
     // (`shape_diffusion::boundary_correction`; rows before it took the curvature's `−ρH/4`).
     let gauss_self = if cli.shape_diffusion { "_gaussself" } else { "" };
+    // `_diffusewalked`: diffuse light entering a tabled patch leaves by its late light's
+    // diffuse walks (`--diffuse-columns-walked true`; rows before 2026-12-08 took `K`).
+    let diffuse_walked = if table && cli.diffuse_columns_walked { "_diffusewalked" } else { "" };
     let bounces = cli.bounces.map_or(String::new(), |n| format!("_bounces{n}"));
     let method = format!(
-        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{projected}{tangential}{gauss_self}{bounces}{}{}",
+        "patches_{:?}{gather_name}{slab}{diffuse}{oriented}{flat}{lambert}{kept}{walked}{ss_oracle}{exit_name}{flow_all}{centroid}{bounced}{lit_bounced}{projected}{tangential}{gauss_self}{diffuse_walked}{bounces}{}{}",
         cli.kernel,
         if cli.pixels_on_mesh && shape == Shape::Ball { "_onmesh" } else { "" },
         if cli.pixel_samples > 1 { format!("_px{}", cli.pixel_samples) } else { String::new() }

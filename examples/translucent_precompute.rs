@@ -177,7 +177,7 @@ iterations,solve_ms,threads,shadow_ray_injection_ms";
             + 8 * transport.form_factors.entries()
             + 20 * transport.scattering.entries();
         if cli.beam_table {
-            let table = BeamTable::build(
+            let (table, diffuse) = BeamTable::build_walked(
                 &patches,
                 &surfaces,
                 &rays,
@@ -201,6 +201,16 @@ iterations,solve_ms,threads,shadow_ray_injection_ms";
                 table.late.entries(),
                 (8 * (n + 1) + 16 * entries + 12 * table.late_share.len()) as f32 / 1e6,
                 table.seconds,
+            );
+            // `K` as the plugin keeps it with the table: the tabled patches' columns walked.
+            let sort_start = Instant::now();
+            let walked = diffuse.scattering(&table, &transport.scattering);
+            eprintln!(
+                "budget {budget}: K's {} entries, with the tabled patches' columns walked {} \
+                 (`BeamTableSettings::diffuse_columns_walked`, put in place in {:.2} s)",
+                transport.scattering.entries(),
+                walked.entries(),
+                sort_start.elapsed().as_secs_f32(),
             );
         }
         let inject_start = Instant::now();

@@ -81,6 +81,12 @@ pub struct Cli {
     /// on by default; method suffix `_tangential` when on)
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub tangential_flux: bool,
+    /// With `--scattering beam-table`, diffuse light entering a tabled patch (the light that
+    /// left and came back in) leaves by the late light's own diffuse walks, not the profile's
+    /// `K` (`BeamTableSettings::diffuse_columns_walked`, on by default; method suffix
+    /// `_diffusewalked` when on)
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub diffuse_columns_walked: bool,
     /// Walks from each patch (shared by the channels) for `--scattering walks|beam-walks`
     /// (default 256), or a direction for `--scattering beam-table` (default the plugin's,
     /// `BeamTableSettings::default().walks`)

@@ -371,7 +371,12 @@ pub fn plugin_picture(
                     bins
                 })
                 .collect();
-            let table = BeamTable::build(&patches, &surfaces, &rays, &transport.scattering, table_settings, Some(&only));
+            let (table, diffuse) =
+                BeamTable::build_walked(&patches, &surfaces, &rays, &transport.scattering, table_settings, Some(&only));
+            // As the plugin's transport: diffuse light entering a tabled patch by its walks.
+            if table_settings.diffuse_columns_walked {
+                transport.scattering = diffuse.scattering(&table, &transport.scattering);
+            }
             eprintln!("  beam table: {} patch-directions walked in {:.2} s", only.iter().map(Vec::len).sum::<usize>(), table.seconds);
             // From here on the plugin's own CPU oracle: the direct light into the table, the
             // solve, the gather with single scattering's law.

@@ -54,8 +54,10 @@ impl Hash {
 /// `last_order`, `BeamTableSettings::max_last_order`; 10: a beam's walks enter by projected
 /// area, none through a sample that faces away from it; 11: the shape solve's self term from
 /// Gauss's identity, `shape_diffusion::boundary_correction`; 12: the late light's walks
-/// scaled by `order/32` in a medium walked past 32 scatterings, `late_walks_for`).
-const REVISION: u32 = 12;
+/// scaled by `order/32` in a medium walked past 32 scatterings, `late_walks_for`; 13: `K`'s
+/// columns on tabled patches from their late light's diffuse walks,
+/// `BeamTableSettings::diffuse_columns_walked`).
+const REVISION: u32 = 13;
 
 /// The cache key of a scene: its objects (world-space positions, indices, surface), the
 /// patch budget, the transport settings, the crate's version and [`REVISION`].
@@ -272,7 +274,9 @@ pub fn save(path: &Path, patches: &Patches, transport: &EnergyTransport) -> io::
                 let s = &t.settings;
                 // The two flags share one word (bit 0 the exit directions, bit 1 single
                 // scattering left to the pixels): files written before bit 1 read as before.
-                let flags = u32::from(s.exit_directions) | u32::from(s.single_scattering_to_pixels) << 1;
+                let flags = u32::from(s.exit_directions)
+                    | u32::from(s.single_scattering_to_pixels) << 1
+                    | u32::from(s.diffuse_columns_walked) << 2;
                 w.u32s(&[s.cosines, s.azimuths, s.walks, s.late_walks, s.last_order, flags, s.seed, s.far_splits, s.max_last_order])?;
                 w.u32s(&t.slots)?;
                 w.f32s(t.media.iter().flat_map(|m| m.to_array()).collect::<Vec<_>>().into_iter())?;
@@ -431,6 +435,7 @@ fn read_beam_table<R: Read>(r: &mut Reader<R>, n: usize) -> io::Result<Option<Be
         max_last_order,
         exit_directions: flags & 1 != 0,
         single_scattering_to_pixels: flags & 2 != 0,
+        diffuse_columns_walked: flags & 4 != 0,
         seed,
         // Not kept: it decides whether a table is built, not what it holds.
         max_patches: BeamTableSettings::default().max_patches,

@@ -2456,9 +2456,14 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         // held). 256 beam walks split in 4 far from their entry (before, 384 unsplit: 0.0535,
         // 0.1582, 0.0753), in 16 since 2026-11-29 (in 4: 0.0609, 0.1436, 0.0713 with marble's
         // walks to 32 scatterings; about the normal 0.2751).
-        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0620, [1.032, 1.029, 1.022]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1261, [0.988, 0.962, 1.012]),
-        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0715, [0.998, 0.999, 0.993]),
+        // Light that came back in leaves by the patches' diffuse walks since 2026-12-08
+        // (`BeamTableSettings::diffuse_columns_walked`; by the profile's `K`: 0.0620, [1.032,
+        // 1.029, 1.022]; 0.1261, [0.988, 0.962, 1.012]; 0.0715, [0.998, 0.999, 0.993]; marble
+        // from behind 0.1069, [0.998, 0.977, 0.962]; about the normal 0.2607, [0.881, 0.840,
+        // 0.813]).
+        (TranslucentPreset::Skin1, "skin1", "front", front, true, beam_table, 0.0620, [1.034, 1.030, 1.022]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table, 0.1290, [1.002, 0.983, 1.030]),
+        (TranslucentPreset::Marble, "marble", "front", front, true, beam_table, 0.0716, [0.999, 1.000, 0.995]),
         // Marble lit from behind, against the mesh light tracer (two renders of 3.2·10⁷
         // photons a channel, seeds 1 and 2: a pair differs by 0.031): short of the issue's
         // 0.08 and too dark, most on the ears and the head (the exact transport given out by
@@ -2470,9 +2475,9 @@ fn a_translucent_bunny_matches_mitsuba_as_documented() {
         // (at 32: 0.1204, [0.978, 0.946, 0.919]; front 0.0736); the flux along the surface
         // in marble since 2026-12-07, late (without: 0.1133, [0.983, 0.962, 0.946]; front
         // 0.0733).
-        (TranslucentPreset::Marble, "marble", "back", back, true, beam_table, 0.1069, [0.998, 0.977, 0.962]),
+        (TranslucentPreset::Marble, "marble", "back", back, true, beam_table, 0.1040, [1.000, 0.983, 0.970]),
         // The table with the deep law about the normal, as before the flow.
-        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2607, [0.881, 0.840, 0.813]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, true, beam_table_normal, 0.2640, [0.896, 0.861, 0.829]),
     ];
     for (preset, name, lighting, how, object_exit_share, oracles, rel_l1, ratio) in cases {
         let label = format!(
@@ -2544,17 +2549,20 @@ fn a_translucent_torus_matches_mitsuba_as_documented() {
     // 0.0609, 0.0901, 0.0501, 0.1323, 0.0637, 0.0965, 0.0852). Marble at 64 scatterings on
     // twice the late walks since 2026-12-07 (at 32: 0.0506, [1.005, 1.008, 1.008]; 0.1133,
     // [0.938, 0.909, 0.902]); the flux along the surface in marble since 2026-12-07, late
-    // (without: 0.0538, [1.003, 1.004, 1.005]; 0.1063, [0.946, 0.918, 0.905]).
+    // (without: 0.0538, [1.003, 1.004, 1.005]; 0.1063, [0.946, 0.918, 0.905]). Light that
+    // came back in across the hole leaves by the patches' diffuse walks since 2026-12-08
+    // (`BeamTableSettings::diffuse_columns_walked`; by the profile's `K`: 0.0546, 0.0921,
+    // 0.0480, 0.0910, 0.0554, 0.0993, 0.0709).
     let cases = [
-        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0546, [0.976, 0.993, 1.007]),
-        (TranslucentPreset::Skin1, "skin1", "back", back, 0.0921, [1.020, 1.011, 0.996]),
-        (TranslucentPreset::Marble, "marble", "front", front, 0.0480, [0.996, 0.998, 0.999]),
-        (TranslucentPreset::Marble, "marble", "back", back, 0.0910, [0.960, 0.933, 0.920]),
-        (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0554, [0.979, 0.994, 1.004]),
-        (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.0993, [1.002, 0.998, 0.989]),
+        (TranslucentPreset::Skin1, "skin1", "front", front, 0.0546, [0.976, 0.994, 1.007]),
+        (TranslucentPreset::Skin1, "skin1", "back", back, 0.0928, [1.021, 1.012, 0.995]),
+        (TranslucentPreset::Marble, "marble", "front", front, 0.0480, [0.997, 0.998, 0.999]),
+        (TranslucentPreset::Marble, "marble", "back", back, 0.0900, [0.961, 0.935, 0.922]),
+        (TranslucentPreset::Skin1, "skin1", "front_point0.05", point(FRONT_LIGHT), 0.0553, [0.980, 0.994, 1.004]),
+        (TranslucentPreset::Skin1, "skin1", "back_point0.05", point(BACK_LIGHT), 0.0996, [1.003, 0.999, 0.989]),
         // A point light in the hole, 3 mm above the middle (inside the bounds: a cube of
         // maps; 0.325 with the one orthographic map before).
-        (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.0709, [0.975, 0.994, 1.014]),
+        (TranslucentPreset::Skin1, "skin1", "hole_point0.003", SceneLighting::Point(Vec3::new(0.0, 0.003, 0.0)), 0.0709, [0.977, 0.997, 1.014]),
     ];
     table_holds_as_documented(&view, "torus", "torus", cases);
 }
@@ -2580,11 +2588,14 @@ fn a_translucent_ball_over_a_floor_matches_mitsuba_as_documented() {
     // (medium, the plugin's floor albedo, relative L1, mean ratio r/g/b): measured (marble at
     // 64 scatterings since 2026-12-07; at 32: 0.0600, [1.028, 1.027, 1.026]; 0.2914, [0.732,
     // 0.731, 0.731]; the flux along the surface in marble since 2026-12-07, late: without it
-    // 0.0624, [1.031, 1.031, 1.031]; 0.2901, [0.735, 0.736, 0.736]).
+    // 0.0624, [1.031, 1.031, 1.031]; 0.2901, [0.735, 0.736, 0.736]). The floor's light
+    // enters the ball by its patches' diffuse walks since 2026-12-08
+    // (`BeamTableSettings::diffuse_columns_walked`; by the profile's `K`: skin 0.0381,
+    // [0.994, 1.003, 1.031], marble 0.0649, [1.036, 1.036, 1.035]).
     let cases = [
-        (TranslucentPreset::Skin1, "skin1", 0.8, 0.0381, [0.994, 1.003, 1.031]),
+        (TranslucentPreset::Skin1, "skin1", 0.8, 0.0391, [0.998, 1.015, 1.051]),
         (TranslucentPreset::Skin1, "skin1", 0.0, 0.2728, [0.718, 0.742, 0.778]),
-        (TranslucentPreset::Marble, "marble", 0.8, 0.0649, [1.036, 1.036, 1.035]),
+        (TranslucentPreset::Marble, "marble", 0.8, 0.0658, [1.038, 1.038, 1.037]),
         (TranslucentPreset::Marble, "marble", 0.0, 0.2904, [0.737, 0.738, 0.739]),
     ];
     for (preset, name, floor, rel_l1, ratio) in cases {

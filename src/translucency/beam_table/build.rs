@@ -4,7 +4,7 @@
 use bevy::{platform::collections::HashMap, prelude::*};
 
 use super::{
-    BeamTable, BeamTableSettings, SEED_STRIDE,
+    BeamTable, BeamTableSettings, DiffuseColumns, SEED_STRIDE,
     directions::bin_direction,
     flow::{ExitLean, LeanSums, from_afar, from_source, lobe_source_distance},
     single_scattering::law_gives_single_scattering,
@@ -178,7 +178,7 @@ type Moments = HashMap<u32, [Vec4; 3]>;
 
 /// One patch's late column and, per direction walked, its early column, their moments and
 /// its late share.
-type PatchColumns = (Option<Column>, Vec<(u32, Column, Moments, Vec3)>, LeanSums);
+type PatchColumns = (Option<Column>, Vec<(u32, Column, Moments, Vec3)>, LeanSums, Column);
 
 impl BeamTable {
     /// The table of `patches`' translucent ones (`surfaces[o]` object `o`'s), `profile` the
@@ -193,12 +193,26 @@ impl BeamTable {
         settings: BeamTableSettings,
         only: Option<&[Vec<u32>]>,
     ) -> Self {
+        Self::build_walked(patches, surfaces, rays, profile, settings, only).0
+    }
+
+    /// [`build`](Self::build), and the late light's diffuse walks' early columns where
+    /// [`BeamTableSettings::diffuse_columns_walked`] (else empty): what
+    /// [`DiffuseColumns::scattering`] puts in `K`'s place.
+    pub fn build_walked(
+        patches: &Patches,
+        surfaces: &[PatchSurface],
+        rays: &SceneRays,
+        profile: &SparseMatrix<Vec3>,
+        settings: BeamTableSettings,
+        only: Option<&[Vec<u32>]>,
+    ) -> (Self, DiffuseColumns) {
         let start = std::time::Instant::now();
         let p = &patches.patches;
         let n = p.len();
         if let Some(reason) = settings.invalid_reason() {
             warn!("translucency: {reason} (got {settings:?}); no beam table");
-            return Self { settings, slots: vec![u32::MAX; n], ..default() };
+            return (Self { settings, slots: vec![u32::MAX; n], ..default() }, DiffuseColumns::default());
         }
         let medium_of = |j: usize| tabled_medium(surfaces, p[j].object);
         let marched = marched_objects(patches, surfaces);
@@ -233,14 +247,15 @@ impl BeamTable {
         let columns: Vec<PatchColumns> = parallel_rows(tabled.len(), |slot| {
             let j = tabled[slot];
             let Some((medium, units_per_mm)) = medium_of(j) else {
-                return (None, Vec::new(), LeanSums::default());
+                return (None, Vec::new(), LeanSums::default(), Column::default());
             };
             let walked: Vec<u32> = match only {
                 Some(only) => only.get(j).cloned().unwrap_or_default(),
                 None => (0..bins).collect(),
             };
-            if walked.is_empty() {
-                return (None, Vec::new(), LeanSums::default());
+            // Without a direction to walk, the diffuse walks still give the patch's column.
+            if walked.is_empty() && !settings.diffuse_columns_walked {
+                return (None, Vec::new(), LeanSums::default(), Column::default());
             }
             let column_of = ColumnWalks {
                 patches,
@@ -266,7 +281,7 @@ impl BeamTable {
             };
             let diffuse_entering =
                 (1.0 - diffuse_fresnel_reflectance(medium.index_of_refraction as f64)) as f32;
-            let late = column_of.late_light(
+            let (late, diffuse_early) = column_of.late_light(
                 &profile_columns[j],
                 diffuse_entering,
                 late_walks_for(
@@ -300,17 +315,25 @@ impl BeamTable {
                     (bin, column, moments, share)
                 })
                 .collect::<Vec<_>>();
-            (late.map(|l| l.0), directions, lean)
+            (late.map(|l| l.0), directions, lean, diffuse_early)
         });
         let mut early_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
         // With the exit directions, each early entry's at the same (row, column): sorted as
         // `early`'s rows are, their values line up with its.
         let mut leaving_rows: Vec<Vec<(u32, [Vec4; 3])>> = vec![Vec::new(); n];
         let mut late_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
+        let mut diffuse_rows: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); n];
+        let mut diffuse_walked = vec![false; tabled.len()];
         let mut late_share = vec![Vec3::ZERO; tabled.len() * bins as usize];
         // Each object's lean, pooled over its patches' walks.
         let mut object_leans: HashMap<u32, LeanSums> = HashMap::default();
-        for (slot, (late, directions, lean)) in columns.into_iter().enumerate() {
+        for (slot, (late, directions, lean, diffuse_early)) in columns.into_iter().enumerate() {
+            diffuse_walked[slot] = settings.diffuse_columns_walked && (late.is_some() || !diffuse_early.is_empty());
+            for (i, v) in diffuse_early.into_iter().filter(|_| settings.diffuse_columns_walked) {
+                if v != Vec3::ZERO {
+                    diffuse_rows[i as usize].push((slot as u32, v));
+                }
+            }
             object_leans.entry(p[tabled[slot]].object).or_default().add(&lean);
             for (bin, column, moments, share) in directions {
                 late_share[slot * bins as usize + bin as usize] = share;
@@ -337,7 +360,7 @@ impl BeamTable {
                 }
             }
         }
-        Self {
+        let table = Self {
             settings,
             slots,
             early: SparseMatrix::from_rows(early_rows),
@@ -350,7 +373,8 @@ impl BeamTable {
                 .map(|&j| object_leans.get(&p[j].object).map_or_else(ExitLean::default, LeanSums::lean))
                 .collect(),
             seconds: start.elapsed().as_secs_f32(),
-        }
+        };
+        (table, DiffuseColumns { early: SparseMatrix::from_rows(diffuse_rows), walked: diffuse_walked })
     }
 }
 
@@ -544,12 +568,12 @@ impl ColumnWalks<'_> {
         profile_column: &[(u32, Vec3)],
         diffuse_entering: f32,
         late_walks: u32,
-    ) -> Option<(Column, Vec3)> {
+    ) -> (Option<(Column, Vec3)>, Column) {
         let p = &self.patches.patches;
         let seed = (u64::MAX - self.j as u64).wrapping_sub(self.seed_offset);
         let (early, _, remaining, _) = self.walk(WalkLaunch::Diffuse, late_walks, seed, false);
         if remaining == Vec3::ZERO {
-            return None;
+            return (None, early);
         }
         let flux = |v: Vec3, i: u32| v * p[i as usize].area;
         let per_entered = 1.0 / diffuse_entering.max(1e-6);
@@ -579,6 +603,6 @@ impl ColumnWalks<'_> {
         let inside = remaining * p[self.j].area;
         let scale = Vec3::select(late_flux.cmpgt(inside), inside / late_flux.max(Vec3::splat(1e-30)), Vec3::ONE);
         column.values_mut().for_each(|v| *v *= scale);
-        Some((column, remaining))
+        (Some((column, remaining)), early)
     }
 }

@@ -104,6 +104,14 @@ pub struct BeamTableSettings {
     /// [`MAX_MARCHED_OBJECTS`](super::MAX_MARCHED_OBJECTS) translucent objects, it keeps it
     /// for all but the largest that many ([`marched_objects`], with a warning).
     pub single_scattering_to_pixels: bool,
+    /// Light that enters a tabled patch diffusely — what left the object and came back in
+    /// (the bounce's `K F B`), a floor's, any light the table does not carry — leaves by the
+    /// late light's own diffuse walks through their last order and the late light after
+    /// them ([`DiffuseColumns`]), in place of the profile's `K` column: the walks are
+    /// already taken for the late light's near field, so it costs no walk. The profile
+    /// carried the skin bunny's light that came back in 5 – 8 % short on its far side
+    /// (`docs/translucent.md`, "Light that came back in, walked").
+    pub diffuse_columns_walked: bool,
     /// Offsets every walk's seed (0: the tables the docs' figures come from). Tables of
     /// different seeds differ by their walks' noise alone, which moves the accuracy figures
     /// by ~±0.005 from the front (`docs/translucent.md`): what a variant must beat.
@@ -145,6 +153,7 @@ impl Default for BeamTableSettings {
             max_last_order: 64,
             exit_directions: false,
             single_scattering_to_pixels: true,
+            diffuse_columns_walked: true,
             seed: 0,
             // 3.3× the `translucent` example's room at a 20 000 budget (1224 translucent
             // patches, 17 MB): by its measured rate (41.5 s on 2 threads in release since
@@ -191,6 +200,59 @@ impl BeamTableSettings {
 /// How far apart [`BeamTableSettings::seed`]s put the walks' seeds (a prime above any
 /// patch's directions' seeds, `patch · bins + bin`, at a budget's patches).
 const SEED_STRIDE: u64 = 1_000_003;
+
+/// Per tabled patch, the exitance its late light's diffuse walks leave through their last
+/// order, per unit of light that got in ([`BeamTableSettings::diffuse_columns_walked`]):
+/// with the table's late column (its share 1 for these walks' own remainder) the whole
+/// response of the patch to diffuse light.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DiffuseColumns {
+    /// Rows: the patch the light leaves by; columns: the entry patch's slot.
+    pub early: SparseMatrix<Vec3>,
+    /// Per slot, whether its walks were taken (an entry without a valid sample keeps `K`).
+    pub walked: Vec<bool>,
+}
+
+impl DiffuseColumns {
+    /// `K` with each walked tabled patch's column replaced by `(1 − F_dr)` (the diffuse
+    /// Fresnel transmittance of its medium, as `K`'s columns hold) times its walks' early
+    /// column plus its late column: exitance per unit irradiance, as `K`.
+    pub fn scattering(&self, table: &BeamTable, profile: &SparseMatrix<Vec3>) -> SparseMatrix<Vec3> {
+        let rows = profile.rows();
+        let walked = |j: usize| table.slot(j).is_some_and(|s| self.walked.get(s as usize).copied().unwrap_or(false));
+        let patch_of = table.slot_patches();
+        let got_in: Vec<f32> = table
+            .media
+            .iter()
+            .map(|m| (1.0 - super::diffusion::diffuse_fresnel_reflectance(m.w as f64)) as f32)
+            .collect();
+        let mut by_row: Vec<Vec<(u32, Vec3)>> = (0..rows)
+            .map(|i| profile.row(i).filter(|&(j, _)| !walked(j)).map(|(j, v)| (j as u32, v)).collect())
+            .collect();
+        for matrix in [&self.early, &table.late] {
+            for (i, row) in by_row.iter_mut().enumerate().take(matrix.rows()) {
+                for (slot, v) in matrix.row(i) {
+                    let j = patch_of[slot] as usize;
+                    if walked(j) && v != Vec3::ZERO {
+                        row.push((j as u32, v * got_in[slot]));
+                    }
+                }
+            }
+        }
+        // A column's early and late entries on one row add up.
+        for row in &mut by_row {
+            row.sort_by_key(|e| e.0);
+            row.dedup_by(|later, kept| {
+                let same = later.0 == kept.0;
+                if same {
+                    kept.1 += later.1;
+                }
+                same
+            });
+        }
+        SparseMatrix::from_rows(by_row)
+    }
+}
 
 /// The beam table of one scene's translucent patches.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -557,13 +557,24 @@ impl EnergyTransport {
             .filter(|q| super::beam_table::build::tabled_medium(surfaces, q.object).is_some())
             .count();
         let too_many = settings.beam_table.filter(|t| translucent > t.max_patches as usize).map(|_| translucent);
-        let beam_table = settings.beam_table.filter(|_| too_many.is_none()).map(|table| {
-            super::beam_table::BeamTable::build(patches, surfaces, rays, &k.matrix, table, None)
-        });
+        let (beam_table, scattering) = match settings.beam_table.filter(|_| too_many.is_none()) {
+            Some(table) => {
+                let (table, diffuse) =
+                    super::beam_table::BeamTable::build_walked(patches, surfaces, rays, &k.matrix, table, None);
+                // Diffuse light entering a tabled patch leaves by its walks, not the profile.
+                let scattering = if table.settings.diffuse_columns_walked {
+                    diffuse.scattering(&table, &k.matrix)
+                } else {
+                    k.matrix
+                };
+                (Some(table), scattering)
+            }
+            None => (None, k.matrix),
+        };
         let report = TransportReport {
             form_factor_entries: f.matrix.entries(),
             clusters: f.cluster_means.rows(),
-            scattering_entries: k.matrix.entries(),
+            scattering_entries: scattering.entries(),
             rays: f.rays_cast,
             dropped_form_factor_mean: f.dropped.iter().sum::<f32>() / n.max(1) as f32,
             dropped_form_factor_max: f.dropped.iter().copied().fold(0.0, f32::max),
@@ -578,7 +589,7 @@ impl EnergyTransport {
             seconds: start.elapsed().as_secs_f32(),
         };
         Self {
-            scattering: k.matrix,
+            scattering,
             form_factors: f.matrix,
             cluster_means: f.cluster_means,
             single_scattering: k.single_scattering,
