@@ -692,9 +692,8 @@ fn diffuse_light_entering_a_tabled_patch_leaves_by_its_walks() {
         let oracle = object_exit_share(&medium, 0.001, &entries, &rays, 4096, 11).expect("a valid medium");
         let (by_walks, by_profile) = (given_back(&walked) / got_in, given_back(&profile.scattering) / got_in);
         eprintln!("{name}: walked {by_walks}, the profile's {by_profile}, the oracle's {oracle}");
-        // On the cube, red's late light (a third of red outlasts the walks' 16 orders) keeps
-        // the profile's total, which is 0.085 over the oracle's: the late column is the
-        // profile's less its near field. Everywhere else the walks'.
+        // On the cube, red's late light keeps the profile's total, 0.085 over the oracle's:
+        // the late column is the profile's less its near field. Everywhere else the walks'.
         let red_by_profile = name == "cube";
         let expected = if red_by_profile { oracle.with_x(by_profile.x) } else { oracle };
         assert!(
