@@ -373,10 +373,9 @@ pub fn plugin_picture(
                 .collect();
             let (table, diffuse) =
                 BeamTable::build_walked(&patches, &surfaces, &rays, &transport.scattering, table_settings, Some(&only));
-            // As the plugin's transport: diffuse light entering a tabled patch by its walks.
-            if table_settings.diffuse_columns_walked {
-                transport.scattering = diffuse.scattering(&table, &transport.scattering);
-            }
+            // As the plugin's transport: diffuse light entering a tabled patch by its walks
+            // (`K` unchanged with `diffuse_columns_walked` off).
+            transport.scattering = diffuse.scattering(&table, &transport.scattering);
             eprintln!("  beam table: {} patch-directions walked in {:.2} s", only.iter().map(Vec::len).sum::<usize>(), table.seconds);
             // From here on the plugin's own CPU oracle: the direct light into the table, the
             // solve, the gather with single scattering's law.

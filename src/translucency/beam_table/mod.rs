@@ -216,8 +216,12 @@ pub struct DiffuseColumns {
 impl DiffuseColumns {
     /// `K` with each walked tabled patch's column replaced by `(1 − F_dr)` (the diffuse
     /// Fresnel transmittance of its medium, as `K`'s columns hold) times its walks' early
-    /// column plus its late column: exitance per unit irradiance, as `K`.
+    /// column plus its late column: exitance per unit irradiance, as `K`. Where no column
+    /// was walked (the setting off), `K` as it was.
     pub fn scattering(&self, table: &BeamTable, profile: &SparseMatrix<Vec3>) -> SparseMatrix<Vec3> {
+        if !self.walked.contains(&true) {
+            return profile.clone();
+        }
         let rows = profile.rows();
         let walked = |j: usize| table.slot(j).is_some_and(|s| self.walked.get(s as usize).copied().unwrap_or(false));
         let patch_of = table.slot_patches();

@@ -369,13 +369,8 @@ fn a_beam_tables_seed_changes_its_walks_alone() {
 #[test]
 fn a_thin_parts_columns_give_out_no_more_than_got_in() {
     let medium = TranslucentPreset::Skin1.medium();
-    let plate = mesh_object(Cuboid::new(2.0, 0.05, 2.0).mesh().build(), Transform::IDENTITY);
-    let objects = [plate];
-    let views = views_of(&objects);
-    let patches = resample_into_patches(&views, 400);
-    let rays = SceneRays::new(&views);
-    let surfaces = [PatchSurface::Translucent { medium, world_units_per_mm: 0.1, oriented_dipole: false }];
-    let transport = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings { beam_table: None, ..default() });
+    let LitCube { patches, surfaces, rays, transport, .. } =
+        LitCube::cuboid(Vec3::new(2.0, 0.05, 2.0), medium, 0.1, 400);
     let p = &patches.patches;
     let settings = BeamTableSettings { walks: 128, late_walks: 512, ..default() };
     // The lit face's patches, each walked in the beam straight down.
@@ -439,7 +434,12 @@ struct LitCube {
 impl LitCube {
     /// `medium` at `world_units_per_mm`, in `budget` patches.
     fn new(medium: TranslucentMedium, world_units_per_mm: f32, budget: usize) -> Self {
-        let cube = mesh_object(Cuboid::new(2.0, 2.0, 2.0).mesh().build(), Transform::IDENTITY);
+        Self::cuboid(Vec3::splat(2.0), medium, world_units_per_mm, budget)
+    }
+
+    /// [`new`](Self::new) for a cuboid of `size` (world units) about the origin.
+    fn cuboid(size: Vec3, medium: TranslucentMedium, world_units_per_mm: f32, budget: usize) -> Self {
+        let cube = mesh_object(Cuboid::from_size(size).mesh().build(), Transform::IDENTITY);
         let objects = [cube];
         let views = views_of(&objects);
         let patches = resample_into_patches(&views, budget);
@@ -664,17 +664,8 @@ fn diffuse_light_entering_a_tabled_patch_leaves_by_its_walks() {
     };
     let medium = TranslucentPreset::Skin1.medium();
     for (name, size) in [("cube", Vec3::splat(0.02)), ("plate", Vec3::new(0.02, 0.002, 0.02))] {
-        let objects = [mesh_object(Cuboid::from_size(size).mesh().build(), Transform::IDENTITY)];
-        let views = views_of(&objects);
-        let patches = resample_into_patches(&views, 120);
-        let rays = SceneRays::new(&views);
-        let surfaces = [PatchSurface::Translucent { medium, world_units_per_mm: 0.001, oriented_dipole: false }];
-        let profile = EnergyTransport::build(&patches, &surfaces, &rays, &TransportSettings { beam_table: None, ..default() });
+        let LitCube { patches, surfaces, rays, transport: profile, top } = LitCube::cuboid(size, medium, 0.001, 120);
         let p = &patches.patches;
-        let top = (0..p.len())
-            .filter(|&i| p[i].normal.y > 0.99)
-            .min_by(|&a, &b| p[a].centre.xz().length().total_cmp(&p[b].centre.xz().length()))
-            .expect("a top patch");
         // Only the top patch's walks matter here: the others walk no direction.
         let only = vec![Vec::new(); p.len()];
         let settings = BeamTableSettings { late_walks: 4096, ..default() };

@@ -561,12 +561,9 @@ impl EnergyTransport {
             Some(table) => {
                 let (table, diffuse) =
                     super::beam_table::BeamTable::build_walked(patches, surfaces, rays, &k.matrix, table, None);
-                // Diffuse light entering a tabled patch leaves by its walks, not the profile.
-                let scattering = if table.settings.diffuse_columns_walked {
-                    diffuse.scattering(&table, &k.matrix)
-                } else {
-                    k.matrix
-                };
+                // Diffuse light entering a tabled patch leaves by its walks, not the profile
+                // (`K` unchanged with `diffuse_columns_walked` off).
+                let scattering = diffuse.scattering(&table, &k.matrix);
                 (Some(table), scattering)
             }
             None => (None, k.matrix),
