@@ -203,14 +203,14 @@ iterations,solve_ms,threads,shadow_ray_injection_ms";
                 table.seconds,
             );
             // `K` as the plugin keeps it with the table: the tabled patches' columns walked.
-            let sort_start = Instant::now();
+            let walked_start = Instant::now();
             let walked = diffuse.scattering(&table, &transport.scattering);
             eprintln!(
                 "budget {budget}: K's {} entries, with the tabled patches' columns walked {} \
                  (`BeamTableSettings::diffuse_columns_walked`, put in place in {:.2} s)",
                 transport.scattering.entries(),
                 walked.entries(),
-                sort_start.elapsed().as_secs_f32(),
+                walked_start.elapsed().as_secs_f32(),
             );
         }
         let inject_start = Instant::now();
